@@ -1,0 +1,43 @@
+#include "core/math.h"
+
+#include <glm/gtc/matrix_transform.hpp>
+
+namespace specula {
+
+Aabb Aabb::transformed(const mat4& m) const {
+  Aabb out;
+  if (empty()) return out;
+  for (int i = 0; i < 8; ++i) {
+    const vec3 corner((i & 1) ? max.x : min.x, (i & 2) ? max.y : min.y, (i & 4) ? max.z : min.z);
+    out.grow(vec3(m * vec4(corner, 1.0f)));
+  }
+  return out;
+}
+
+bool is_finite(const mat4& m) {
+  for (int c = 0; c < 4; ++c)
+    if (!is_finite(m[c])) return false;
+  return true;
+}
+
+mat4 compose_trs(const vec3& translation, const quat& rotation, const vec3& scale) {
+  mat4 m = glm::mat4_cast(rotation);
+  m[0] *= scale.x;
+  m[1] *= scale.y;
+  m[2] *= scale.z;
+  m[3] = vec4(translation, 1.0f);
+  return m;
+}
+
+quat rotation_looking_along(const vec3& direction, const vec3& up) {
+  const vec3 forward = glm::normalize(direction);
+  vec3 reference = up;
+  if (std::abs(glm::dot(forward, glm::normalize(up))) > 0.999f) reference = vec3(0, 0, 1);
+  const vec3 right = glm::normalize(glm::cross(forward, reference));
+  const vec3 true_up = glm::cross(right, forward);
+  // Columns of the rotation: +X = right, +Y = up, +Z = -forward.
+  mat3 basis(right, true_up, -forward);
+  return glm::normalize(glm::quat_cast(basis));
+}
+
+} // namespace specula

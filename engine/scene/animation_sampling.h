@@ -1,0 +1,38 @@
+#pragma once
+/// \file
+/// Sampling keyframe tracks (Animation, CameraPath) and validating them for loaders.
+
+#include "scene/components/animation.h"
+#include "scene/components/camera.h"
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+namespace specula {
+
+/// Track value at time t: clamped to the first/last key outside the keys' range; Step holds the
+/// previous key; Linear lerps vectors and slerps rotations (shortest arc). Tracks must be
+/// non-empty and valid (validate_animation).
+[[nodiscard]] vec3 sample(const Keyframes<vec3>& track, float t);
+[[nodiscard]] quat sample(const Keyframes<quat>& track, float t);
+/// Writes the interpolated vertex set into `out` (resized to the keys' vertex count).
+void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3>& out);
+
+/// The time to sample at after advancing by `dt`: time + speed·dt, wrapped into [0, duration]
+/// when looping (duration 0: always 0).
+[[nodiscard]] float advance_time(float time, float speed, float dt, float duration, bool loop);
+
+/// Camera position and look-at on the path at time t (linear between keys, clamped).
+[[nodiscard]] CameraPath::Key sample(const CameraPath& path, float t);
+
+/// Throws specula::Error(context, field, ...) for: times not finite or not strictly increasing,
+/// a values count different from the times count, non-finite values, zero-length rotations,
+/// vertex keys whose size differs from `vertex_count` (pass 0 when there is no mesh: any vertex
+/// track is then an error), non-finite speed.
+void validate_animation(const Animation& animation, std::size_t vertex_count,
+                        const std::string& context, const std::string& field);
+void validate_camera_path(const CameraPath& path, const std::string& context,
+                          const std::string& field);
+
+} // namespace specula

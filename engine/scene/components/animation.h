@@ -1,0 +1,45 @@
+#pragma once
+#include "core/math.h"
+
+#include <vector>
+
+namespace specula {
+
+enum class Interpolation { Step, Linear }; ///< Linear = lerp for vectors, slerp for rotations
+
+template <typename V>
+struct Keyframes {
+  std::vector<float> times; ///< seconds, strictly increasing
+  std::vector<V> values;    ///< one per time
+  Interpolation interpolation = Interpolation::Linear;
+  [[nodiscard]] bool empty() const { return times.empty(); }
+  friend bool operator==(const Keyframes&, const Keyframes&) = default;
+};
+
+/// Keyframed TRS tracks (applied to Transform) and vertex animation (applied to Mesh: each key is
+/// a full set of positions, as many as the mesh's vertices). animation_system samples at
+/// `time + speed * t`; with `loop`, time wraps to the track's duration.
+struct Animation {
+  Keyframes<vec3> translation;
+  Keyframes<quat> rotation;
+  Keyframes<vec3> scale;
+  Keyframes<std::vector<vec3>> vertices;
+  float time = 0.0f;
+  float speed = 1.0f;
+  bool loop = true;
+
+  /// The last key time over all tracks (0 when there are none).
+  [[nodiscard]] float duration() const;
+  friend bool operator==(const Animation&, const Animation&) = default;
+};
+
+inline float Animation::duration() const {
+  float d = 0.0f;
+  if (!translation.empty()) d = glm::max(d, translation.times.back());
+  if (!rotation.empty()) d = glm::max(d, rotation.times.back());
+  if (!scale.empty()) d = glm::max(d, scale.times.back());
+  if (!vertices.empty()) d = glm::max(d, vertices.times.back());
+  return d;
+}
+
+} // namespace specula

@@ -1,0 +1,33 @@
+#pragma once
+#include "core/math.h"
+
+#include <vector>
+
+namespace specula {
+
+/// A pinhole camera in world space.
+struct Camera {
+  vec3 position{0.0f, 0.0f, 5.0f};
+  vec3 look_at{0.0f};
+  vec3 up{0.0f, 1.0f, 0.0f};
+  float vertical_fov = glm::radians(45.0f); ///< radians
+  float aspect = 1.0f;                      ///< width / height
+  friend bool operator==(const Camera&, const Camera&) = default;
+};
+
+/// An optional camera path for benchmarks: animation_system moves the entity's Camera along it
+/// (linear position and look-at), looping.
+struct CameraPath {
+  struct Key {
+    float time = 0.0f;
+    vec3 position{0.0f};
+    vec3 look_at{0.0f};
+    friend bool operator==(const Key&, const Key&) = default;
+  };
+  std::vector<Key> keys;
+  float time = 0.0f;
+  bool loop = true;
+  friend bool operator==(const CameraPath&, const CameraPath&) = default;
+};
+
+} // namespace specula

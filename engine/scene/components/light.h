@@ -1,0 +1,20 @@
+#pragma once
+#include "core/math.h"
+
+namespace specula {
+
+/// A punctual light (the KHR_lights_punctual model). Position and direction come from the entity's
+/// WorldTransform: the light sits at its origin and points along its -Z axis.
+/// Point and spot intensity is in candela (W/sr-like), directional in lux.
+struct Light {
+  enum class Type { Point, Directional, Spot };
+  Type type = Type::Point;
+  vec3 color{1.0f};
+  float intensity = 1.0f;
+  float range = 0.0f;                      ///< 0: unlimited
+  float inner_cone = 0.0f;                 ///< spot, radians
+  float outer_cone = glm::radians(45.0f);  ///< spot, radians
+  friend bool operator==(const Light&, const Light&) = default;
+};
+
+} // namespace specula

@@ -1,0 +1,45 @@
+#pragma once
+#include "core/math.h"
+#include "geometry/triangle_mesh.h"
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace specula {
+
+/// Where a mesh came from, so scenes write back losslessly (docs/scene-format.md).
+struct MeshSource {
+  enum class Kind { Inline, File, Primitive };
+  Kind kind = Kind::Inline;
+  /// Kind::File: the path as written in the scene file (relative to it) and, for glTF, the mesh
+  /// index inside the file (-1: the whole file merged).
+  std::string path;
+  int gltf_mesh = -1;
+  /// Kind::Primitive: "sphere", "box", "plane", "cylinder" or "cone" with its parameters.
+  std::string primitive;
+  vec3 size{1.0f};             ///< box: edge lengths; plane: x/z lengths (y ignored)
+  float radius = 1.0f;         ///< sphere, cylinder, cone
+  float height = 1.0f;         ///< cylinder, cone
+  std::uint32_t segments = 32; ///< sphere, cylinder, cone: around the axis
+  std::uint32_t rings = 16;    ///< sphere: from pole to pole; plane: subdivisions per side
+  friend bool operator==(const MeshSource&, const MeshSource&) = default;
+};
+
+/// Handle to shared triangle geometry (several entities may point at one TriangleMesh).
+/// A deforming entity (vertex Animation) gets its own `deformed_positions`, written by
+/// animation_system; `deformed_tick` says when they last changed.
+struct Mesh {
+  std::shared_ptr<const TriangleMesh> geometry;
+  MeshSource source;
+  std::vector<vec3> deformed_positions;
+  std::uint64_t deformed_tick = 0;
+
+  /// The positions to trace: the deformed ones when present, else the shared geometry's.
+  [[nodiscard]] const std::vector<vec3>& positions() const {
+    return deformed_positions.empty() ? geometry->positions : deformed_positions;
+  }
+};
+
+} // namespace specula

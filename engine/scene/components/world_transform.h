@@ -1,0 +1,18 @@
+#pragma once
+#include "core/math.h"
+
+#include <cstdint>
+
+namespace specula {
+
+/// Written by transform_system: the entity's object-to-world matrix, and whether it changed in
+/// the latest tick (the acceleration and cache-invalidation systems react to `moved`).
+struct WorldTransform {
+  mat4 world_from_object{1.0f};
+  /// True when world_from_object changed in the last tick (or the entity is new).
+  bool moved = true;
+  /// Tick in which world_from_object last changed.
+  std::uint64_t moved_tick = 0;
+};
+
+} // namespace specula

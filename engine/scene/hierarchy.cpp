@@ -1,0 +1,95 @@
+#include "scene/hierarchy.h"
+
+#include "core/error.h"
+#include "scene/components/name.h"
+#include "scene/components/parent.h"
+#include "scene/components/transform.h"
+#include "scene/components/world_transform.h"
+
+#include <unordered_map>
+#include <vector>
+
+namespace specula {
+namespace {
+
+std::string describe(ecs::Registry& registry, ecs::Entity e) {
+  const Name* name = registry.try_get<Name>(e);
+  std::string s = "entity " + std::to_string(e.index);
+  if (name != nullptr && !name->value.empty()) s += " '" + name->value + "'";
+  return s;
+}
+
+} // namespace
+
+std::size_t update_world_transforms(ecs::Registry& registry, std::uint64_t tick,
+                                    const std::string& context) {
+  // Order entities so that every parent precedes its children: depth by walking up the chain
+  // (memoised), then a counting sort by depth. O(n) for any hierarchy shape.
+  std::vector<ecs::Entity> entities = registry.view<Transform>().entities();
+  std::unordered_map<std::uint32_t, std::uint32_t> depth;
+  depth.reserve(entities.size());
+  std::uint32_t max_depth = 0;
+  std::vector<ecs::Entity> chain;
+  for (const ecs::Entity e : entities) {
+    chain.clear();
+    ecs::Entity cur = e;
+    std::uint32_t base = 0;
+    while (true) {
+      if (auto it = depth.find(cur.index); it != depth.end()) {
+        base = it->second + 1;
+        break;
+      }
+      const Parent* parent = registry.try_get<Parent>(cur);
+      chain.push_back(cur);
+      if (parent == nullptr || parent->entity.is_null()) break;
+      if (!registry.valid(parent->entity))
+        throw Error(context, describe(registry, cur) + " has a parent that no longer exists");
+      if (!registry.has<Transform>(parent->entity))
+        throw Error(context, describe(registry, cur) + " has a parent without a transform");
+      if (chain.size() > entities.size())
+        throw Error(context, describe(registry, e) + " is part of a parent cycle");
+      cur = parent->entity;
+    }
+    for (std::size_t i = chain.size(); i-- > 0;) {
+      depth[chain[i].index] = base;
+      max_depth = std::max(max_depth, base);
+      ++base;
+    }
+  }
+  std::vector<std::vector<ecs::Entity>> by_depth(std::size_t(max_depth) + 1);
+  for (const ecs::Entity e : entities) by_depth[depth[e.index]].push_back(e);
+
+  std::size_t moved = 0;
+  for (const auto& level : by_depth) {
+    for (const ecs::Entity e : level) {
+      const mat4 local = registry.get<Transform>(e).parent_from_local();
+      mat4 world = local;
+      bool parent_moved = false;
+      if (const Parent* parent = registry.try_get<Parent>(e);
+          parent != nullptr && !parent->entity.is_null()) {
+        const WorldTransform& pw = registry.get<WorldTransform>(parent->entity);
+        world = pw.world_from_object * local;
+        parent_moved = pw.moved && pw.moved_tick == tick;
+      }
+      WorldTransform* wt = registry.try_get<WorldTransform>(e);
+      if (wt == nullptr) {
+        wt = &registry.emplace<WorldTransform>(e);
+        wt->world_from_object = world;
+        wt->moved = true;
+        wt->moved_tick = tick;
+        ++moved;
+        continue;
+      }
+      const bool changed = parent_moved || wt->world_from_object != world;
+      wt->moved = changed;
+      if (changed) {
+        wt->world_from_object = world;
+        wt->moved_tick = tick;
+        ++moved;
+      }
+    }
+  }
+  return moved;
+}
+
+} // namespace specula

@@ -1,0 +1,21 @@
+#pragma once
+/// \file
+/// World transforms from the Transform/Parent hierarchy. Used by transform_system each tick and
+/// by loaders once after loading.
+
+#include "ecs/registry.h"
+
+#include <cstdint>
+#include <string>
+
+namespace specula {
+
+/// Recomputes WorldTransform for every entity with a Transform (adding WorldTransform where
+/// missing), parents before children. Sets `moved` (and `moved_tick = tick`) on exactly the
+/// entities whose world matrix differs from the previous one, or that are new. Returns the number
+/// of moved entities. Throws specula::Error when a Parent is stale, has no Transform, or forms a
+/// cycle (`context` names the scene for the message).
+std::size_t update_world_transforms(ecs::Registry& registry, std::uint64_t tick,
+                                    const std::string& context = "scene");
+
+} // namespace specula

@@ -1,0 +1,72 @@
+#pragma once
+/// \file
+/// A scene: the ECS registry holding every entity, plus the render settings from the file.
+/// load_scene() reads any supported format; save_scene_json() writes Specula's JSON format.
+
+#include "core/math.h"
+#include "ecs/registry.h"
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+namespace specula {
+
+/// Defaults a scene file may set; command-line options override them.
+struct RenderSettings {
+  std::uint32_t width = 1024;
+  std::uint32_t height = 1024;
+  std::uint32_t max_depth = 5;
+  vec3 background{0.0f};
+  friend bool operator==(const RenderSettings&, const RenderSettings&) = default;
+};
+
+struct Scene {
+  ecs::Registry registry;
+  RenderSettings settings;
+  /// The file the scene was read from (empty for scenes built in code).
+  std::filesystem::path source;
+};
+
+/// Largest image side, triangle count and entity count any loader accepts (absurd sizes are
+/// errors, not allocations).
+inline constexpr std::uint32_t kMaxImageSide = 16384;
+inline constexpr std::uint64_t kMaxTriangles = 100'000'000;
+inline constexpr std::uint64_t kMaxEntities = 10'000'000;
+
+/// Reads a scene by extension: .json (Specula), .gltf/.glb (glTF 2.0), .obj/.ply/.off/.stl (one
+/// mesh). Adds the default camera and light when the file has none (add_defaults), and computes
+/// world transforms. Throws specula::Error naming the file and the problem.
+[[nodiscard]] Scene load_scene(const std::filesystem::path& path);
+
+/// Marks the entity added by add_defaults, so the writer leaves it out of the saved file.
+struct DefaultTag {};
+
+/// When the scene has no Camera, adds one framing the world bounds: looking at the bounds' centre
+/// from the +Z side, raised 20° above it, at the distance where the bounding sphere fills the
+/// vertical field of view (45°), aspect from settings. When it has no Light, adds a point light
+/// at the camera position with intensity radius² (so a surface at the bounds' centre gets
+/// irradiance ≈ 1). Both carry DefaultTag.
+void add_defaults(Scene& scene);
+
+/// World-space bounds of every mesh entity (world transforms must be current).
+[[nodiscard]] Aabb world_bounds(ecs::Registry& registry);
+
+/// What `specula info` prints.
+struct SceneSummary {
+  std::size_t entities = 0;
+  std::size_t mesh_entities = 0;
+  std::size_t unique_meshes = 0;
+  std::uint64_t triangles = 0; ///< placed (instanced meshes count once per entity)
+  std::size_t materials = 0;   ///< distinct Material values
+  std::size_t lights = 0;
+  std::size_t cameras = 0;
+  std::size_t reflective = 0;  ///< entities with reflectivity > 0
+  std::size_t refractive = 0;  ///< entities with transmission > 0
+  std::size_t ray_cache_cubes = 0;
+  std::size_t animated = 0;
+  Aabb bounds;
+};
+[[nodiscard]] SceneSummary summarize(Scene& scene);
+
+} // namespace specula

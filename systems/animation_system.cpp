@@ -1,0 +1,35 @@
+#include "systems/animation_system.h"
+
+#include "scene/animation_sampling.h"
+#include "scene/components/animation.h"
+#include "scene/components/camera.h"
+#include "scene/components/mesh.h"
+#include "scene/components/transform.h"
+
+namespace specula {
+
+void animation_system(ecs::Registry& registry, const FrameContext& ctx) {
+  const auto dt = static_cast<float>(ctx.dt);
+  registry.view<Animation>().each([&](ecs::Entity e, Animation& anim) {
+    anim.time = advance_time(anim.time, anim.speed, dt, anim.duration(), anim.loop);
+    if (Transform* t = registry.try_get<Transform>(e)) {
+      if (!anim.translation.empty()) t->translation = sample(anim.translation, anim.time);
+      if (!anim.rotation.empty()) t->rotation = sample(anim.rotation, anim.time);
+      if (!anim.scale.empty()) t->scale = sample(anim.scale, anim.time);
+    }
+    if (!anim.vertices.empty()) {
+      if (Mesh* mesh = registry.try_get<Mesh>(e)) {
+        sample(anim.vertices, anim.time, mesh->deformed_positions);
+        mesh->deformed_tick = ctx.tick;
+      }
+    }
+  });
+  registry.view<CameraPath, Camera>().each([&](CameraPath& path, Camera& camera) {
+    path.time = advance_time(path.time, 1.0f, dt, path.keys.back().time, path.loop);
+    const CameraPath::Key key = sample(path, path.time);
+    camera.position = key.position;
+    camera.look_at = key.look_at;
+  });
+}
+
+} // namespace specula

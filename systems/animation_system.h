@@ -1,0 +1,12 @@
+#pragma once
+#include "ecs/registry.h"
+#include "systems/frame_context.h"
+
+namespace specula {
+
+/// Advances every Animation by ctx.dt and writes the sampled tracks into the entity's Transform
+/// (only the tracks it has) and, for vertex tracks, into Mesh::deformed_positions (stamping
+/// deformed_tick = ctx.tick). Advances every CameraPath and moves its entity's Camera.
+void animation_system(ecs::Registry& registry, const FrameContext& ctx);
+
+} // namespace specula

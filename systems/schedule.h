@@ -1,0 +1,31 @@
+#pragma once
+/// \file
+/// The schedule: the one place that knows the order of systems in a frame.
+
+#include "ecs/registry.h"
+#include "systems/frame_context.h"
+
+#include <string_view>
+#include <vector>
+
+namespace specula {
+
+/// Runs the frame's systems in a fixed order on each tick:
+///   1. animation_system  (Animation → Transform, Mesh deformations; CameraPath → Camera)
+///   2. transform_system  (Transform/Parent → WorldTransform, moved flags)
+/// Later stages (acceleration, cache invalidation, render) are appended here as they land.
+class Schedule {
+public:
+  /// Advances time by dt seconds and runs every system once. Returns the context it ran with.
+  FrameContext tick(ecs::Registry& registry, double dt);
+
+  /// The systems' names in run order (for logs, the editor and tests).
+  [[nodiscard]] static std::vector<std::string_view> system_names();
+
+  [[nodiscard]] const FrameContext& last() const { return ctx_; }
+
+private:
+  FrameContext ctx_;
+};
+
+} // namespace specula
