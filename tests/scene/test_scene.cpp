@@ -1,0 +1,1 @@
+// placeholder: tests arrive with this module's implementation
