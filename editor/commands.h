@@ -1,0 +1,33 @@
+#pragma once
+/// \file
+/// The `specula` program's headless subcommands. Each returns the process exit code:
+/// 0 success, 1 bad input (specula::kExitBadInput), 2 unavailable (specula::kExitUnavailable).
+
+#include <cstdint>
+#include <iosfwd>
+#include <string>
+
+namespace specula::cli {
+
+struct InfoOptions {
+  std::string scene;
+  bool json = false;
+};
+
+struct RenderOptions {
+  std::string scene;
+  std::string backend = "embree"; ///< embree | native | vulkan
+  std::string mode = "whitted";   ///< cast | whitted | path | shadow
+  std::uint32_t width = 0;        ///< 0: the scene's settings
+  std::uint32_t height = 0;       ///< 0: the scene's settings
+  std::uint32_t frames = 1;
+  std::uint32_t threads = 0;      ///< 0: every hardware thread
+  std::string cache = "off";      ///< off | face resolution (power of two)
+  std::string out;                ///< PNG path, empty: none
+  std::string stats;              ///< stats JSON path, empty: none
+};
+
+int run_info(const InfoOptions& options, std::ostream& out);
+int run_render(const RenderOptions& options, std::ostream& out);
+
+} // namespace specula::cli

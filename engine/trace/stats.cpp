@@ -1,0 +1,140 @@
+#include "trace/stats.h"
+
+#include "core/error.h"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <fstream>
+
+namespace specula {
+namespace {
+
+using nlohmann::json;
+
+constexpr RayKind kKinds[] = {RayKind::Primary, RayKind::Shadow, RayKind::Reflection,
+                              RayKind::Refraction};
+
+template <typename T>
+T read(const json& object, const char* key, const std::string& name, const std::string& path) {
+  const auto it = object.find(key);
+  if (it == object.end()) throw Error(name, path + "." + key, "missing");
+  try {
+    return it->get<T>();
+  } catch (const json::exception&) {
+    throw Error(name, path + "." + key, "has the wrong type");
+  }
+}
+
+} // namespace
+
+const char* ray_kind_name(RayKind kind) {
+  switch (kind) {
+  case RayKind::Primary: return "primary";
+  case RayKind::Shadow: return "shadow";
+  case RayKind::Reflection: return "reflection";
+  case RayKind::Refraction: return "refraction";
+  }
+  return "unknown";
+}
+
+std::uint64_t RayCounts::total() const {
+  std::uint64_t t = 0;
+  for (const std::uint64_t c : count) t += c;
+  return t;
+}
+
+RayCounts& RayCounts::operator+=(const RayCounts& o) {
+  for (int i = 0; i < kRayKindCount; ++i) count[i] += o.count[i];
+  return *this;
+}
+
+std::string stats_to_json(const RunStats& stats) {
+  const RunSettings& s = stats.settings;
+  json settings = {{"scene", s.scene},   {"backend", s.backend}, {"mode", s.mode},
+                   {"width", s.width},   {"height", s.height},   {"frames", s.frames},
+                   {"threads", s.threads}, {"max_depth", s.max_depth},
+                   {"cache", s.cache_resolution == 0 ? json("off") : json(s.cache_resolution)}};
+  json frames = json::array();
+  double total_ms = 0.0;
+  RayCounts total_rays;
+  CacheCounts total_cache;
+  for (const FrameStats& f : stats.frames) {
+    json rays = json::object();
+    json rates = json::object();
+    for (const RayKind k : kKinds) {
+      rays[ray_kind_name(k)] = f.rays[k];
+      rates[ray_kind_name(k)] = f.ms > 0.0 ? double(f.rays[k]) / (f.ms * 1e3) : 0.0;
+    }
+    rates["total"] = f.ms > 0.0 ? double(f.rays.total()) / (f.ms * 1e3) : 0.0;
+    frames.push_back({{"ms", f.ms},
+                      {"rays", rays},
+                      {"mrays_per_s", rates},
+                      {"cache", {{"lookups", f.cache.lookups}, {"hits", f.cache.hits}}}});
+    total_ms += f.ms;
+    total_rays += f.rays;
+    total_cache.lookups += f.cache.lookups;
+    total_cache.hits += f.cache.hits;
+  }
+  std::vector<double> ms;
+  for (const FrameStats& f : stats.frames) ms.push_back(f.ms);
+  std::sort(ms.begin(), ms.end());
+  const double median =
+      ms.empty() ? 0.0
+                 : (ms.size() % 2 ? ms[ms.size() / 2] : 0.5 * (ms[ms.size() / 2 - 1] + ms[ms.size() / 2]));
+  json summary = {{"frames", stats.frames.size()},
+                  {"total_ms", total_ms},
+                  {"median_ms", median},
+                  {"rays", total_rays.total()},
+                  {"mrays_per_s", total_ms > 0.0 ? double(total_rays.total()) / (total_ms * 1e3) : 0.0},
+                  {"cache_hit_rate", total_cache.lookups > 0
+                                         ? double(total_cache.hits) / double(total_cache.lookups)
+                                         : 0.0}};
+  return json{{"settings", settings}, {"frames", frames}, {"summary", summary}}.dump(2) + "\n";
+}
+
+RunStats stats_from_json(const std::string& text, const std::string& name) {
+  json root;
+  try {
+    root = json::parse(text);
+  } catch (const json::parse_error& e) {
+    throw Error(name, std::string("malformed JSON: ") + e.what());
+  }
+  if (!root.is_object()) throw Error(name, "the stats file must hold a JSON object");
+  RunStats stats;
+  const json settings = read<json>(root, "settings", name, "");
+  RunSettings& s = stats.settings;
+  s.scene = read<std::string>(settings, "scene", name, "settings");
+  s.backend = read<std::string>(settings, "backend", name, "settings");
+  s.mode = read<std::string>(settings, "mode", name, "settings");
+  s.width = read<std::uint32_t>(settings, "width", name, "settings");
+  s.height = read<std::uint32_t>(settings, "height", name, "settings");
+  s.frames = read<std::uint32_t>(settings, "frames", name, "settings");
+  s.threads = read<std::uint32_t>(settings, "threads", name, "settings");
+  s.max_depth = read<std::uint32_t>(settings, "max_depth", name, "settings");
+  const json cache = read<json>(settings, "cache", name, "settings");
+  s.cache_resolution = cache.is_string() ? 0u : read<std::uint32_t>(settings, "cache", name, "settings");
+  const json frames = read<json>(root, "frames", name, "");
+  if (!frames.is_array()) throw Error(name, "frames", "must be an array");
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const std::string at = "frames[" + std::to_string(i) + "]";
+    FrameStats f;
+    f.ms = read<double>(frames[i], "ms", name, at);
+    const json rays = read<json>(frames[i], "rays", name, at);
+    for (const RayKind k : kKinds) f.rays[k] = read<std::uint64_t>(rays, ray_kind_name(k), name, at + ".rays");
+    const json c = read<json>(frames[i], "cache", name, at);
+    f.cache.lookups = read<std::uint64_t>(c, "lookups", name, at + ".cache");
+    f.cache.hits = read<std::uint64_t>(c, "hits", name, at + ".cache");
+    stats.frames.push_back(f);
+  }
+  return stats;
+}
+
+void write_stats_file(const RunStats& stats, const std::filesystem::path& path) {
+  std::ofstream out(path, std::ios::binary);
+  if (!out) throw Error(path.string(), "cannot open the stats file for writing");
+  out << stats_to_json(stats);
+  if (!out.flush()) throw Error(path.string(), "cannot write the stats file");
+}
+
+} // namespace specula

@@ -1,0 +1,71 @@
+#pragma once
+/// \file
+/// Per-frame statistics written by `specula render --stats FILE.json` (docs/stats-format.md).
+/// Other tools read these names: keep them.
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace specula {
+
+/// Why a ray was traced: every secondary ray knows it (ray-cache cubes intercept reflection and
+/// refraction rays that leave an object).
+enum class RayKind : std::uint8_t { Primary = 0, Shadow = 1, Reflection = 2, Refraction = 3 };
+inline constexpr int kRayKindCount = 4;
+[[nodiscard]] const char* ray_kind_name(RayKind kind);
+
+struct RayCounts {
+  std::uint64_t count[kRayKindCount] = {};
+  [[nodiscard]] std::uint64_t& operator[](RayKind k) { return count[static_cast<int>(k)]; }
+  [[nodiscard]] std::uint64_t operator[](RayKind k) const { return count[static_cast<int>(k)]; }
+  [[nodiscard]] std::uint64_t total() const;
+  RayCounts& operator+=(const RayCounts& o);
+  friend bool operator==(const RayCounts&, const RayCounts&) = default;
+};
+
+struct CacheCounts {
+  std::uint64_t lookups = 0;
+  std::uint64_t hits = 0;
+  friend bool operator==(const CacheCounts&, const CacheCounts&) = default;
+};
+
+struct FrameStats {
+  double ms = 0.0; ///< wall-clock time of the frame
+  RayCounts rays;
+  CacheCounts cache;
+  friend bool operator==(const FrameStats&, const FrameStats&) = default;
+};
+
+/// The settings a run used, echoed into the stats file so results can be reproduced.
+struct RunSettings {
+  std::string scene;
+  std::string backend;
+  std::string mode;
+  std::uint32_t width = 0;
+  std::uint32_t height = 0;
+  std::uint32_t frames = 1;
+  std::uint32_t threads = 0;
+  std::uint32_t max_depth = 5;
+  std::uint32_t cache_resolution = 0; ///< 0: cache off
+  friend bool operator==(const RunSettings&, const RunSettings&) = default;
+};
+
+struct RunStats {
+  RunSettings settings;
+  std::vector<FrameStats> frames;
+  friend bool operator==(const RunStats&, const RunStats&) = default;
+};
+
+/// JSON text of the stats (docs/stats-format.md): {"settings": {...}, "frames": [{"ms", "rays":
+/// {"primary", "shadow", "reflection", "refraction"}, "mrays_per_s": {...}, "cache": {"lookups",
+/// "hits"}}, ...], "summary": {...}}.
+[[nodiscard]] std::string stats_to_json(const RunStats& stats);
+/// Parses what stats_to_json writes (derived fields are recomputed, not read). Throws
+/// specula::Error(name, field, ...) on malformed input.
+[[nodiscard]] RunStats stats_from_json(const std::string& text, const std::string& name);
+/// Writes stats_to_json to a file; throws specula::Error when it cannot.
+void write_stats_file(const RunStats& stats, const std::filesystem::path& path);
+
+} // namespace specula
