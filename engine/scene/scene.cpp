@@ -118,7 +118,9 @@ void add_defaults(Scene& scene) {
     reg.emplace<WorldTransform>(e, wt);
     Light light;
     light.type = Light::Type::Point;
-    light.intensity = radius * radius;
+    // Irradiance I/d² at the bounds' centre is 1 whatever the scene's scale.
+    const float d = glm::length(camera.position - center);
+    light.intensity = std::max(d * d, 1e-12f);
     reg.emplace<Light>(e, light);
     reg.emplace<DefaultTag>(e);
   }

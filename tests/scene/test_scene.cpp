@@ -1,1 +1,163 @@
-// placeholder: tests arrive with this module's implementation
+// load_scene dispatch, default camera/light, summaries.
+
+#include "core/error.h"
+#include "scene/components.h"
+#include "scene/hierarchy.h"
+#include "scene/scene.h"
+
+#include <glm/gtc/matrix_transform.hpp>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+namespace specula {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string error_of(const fs::path& path) {
+  try {
+    (void)load_scene(path);
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+/// A mesh entity with a unit box's 8 corners (two triangles suffice for bounds).
+ecs::Entity add_box(Scene& scene, const vec3& center, const vec3& half) {
+  auto mesh = std::make_shared<TriangleMesh>();
+  for (int i = 0; i < 8; ++i)
+    mesh->positions.push_back(vec3(i & 1 ? 1 : -1, i & 2 ? 1 : -1, i & 4 ? 1 : -1));
+  mesh->triangles = {uvec3(0, 1, 2), uvec3(5, 6, 7)};
+  const ecs::Entity e = scene.registry.create();
+  Transform t;
+  t.translation = center;
+  t.scale = half;
+  scene.registry.emplace<Transform>(e, t);
+  scene.registry.emplace<Mesh>(e, Mesh{mesh, {}, {}, 0});
+  scene.registry.emplace<Material>(e);
+  return e;
+}
+
+/// Whether p is inside the camera's view frustum (pinhole, vertical fov, aspect).
+bool in_frustum(const Camera& c, const vec3& p) {
+  const mat4 view = glm::lookAt(c.position, c.look_at, c.up);
+  const vec3 q = vec3(view * vec4(p, 1.0f));
+  if (q.z >= 0.0f) return false;
+  const float tan_half = std::tan(0.5f * c.vertical_fov);
+  return std::abs(q.y) <= -q.z * tan_half * 1.0001f && std::abs(q.x) <= -q.z * tan_half * c.aspect * 1.0001f;
+}
+
+TEST(Scene, MissingFileNamesTheFile) {
+  const std::string msg = error_of("/nonexistent/dir/scene.json");
+  EXPECT_NE(msg.find("/nonexistent/dir/scene.json"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("not found"), std::string::npos) << msg;
+}
+
+TEST(Scene, UnknownExtensionIsRejectedByName) {
+  const fs::path path = fs::temp_directory_path() / "specula_test_scene.xyz";
+  std::ofstream(path) << "hello";
+  const std::string msg = error_of(path);
+  fs::remove(path);
+  EXPECT_NE(msg.find("specula_test_scene.xyz"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("'.xyz'"), std::string::npos) << msg;
+}
+
+TEST(Scene, DirectoryIsNotAScene) {
+  const std::string msg = error_of(fs::temp_directory_path());
+  EXPECT_NE(msg.find("directory"), std::string::npos) << msg;
+}
+
+TEST(Scene, DefaultCameraFramesEveryCornerOfTheBounds) {
+  for (const vec3 half : {vec3(1.0f), vec3(10.0f, 0.1f, 0.1f), vec3(0.1f, 5.0f, 0.1f), vec3(1e4f), vec3(1e-3f)}) {
+    Scene scene;
+    scene.settings.width = 640;
+    scene.settings.height = 360;
+    add_box(scene, vec3(3, -2, 7), half);
+    update_world_transforms(scene.registry, 0);
+    add_defaults(scene);
+    ASSERT_EQ(scene.registry.count<Camera>(), 1u);
+    Camera camera;
+    scene.registry.view<Camera>().each([&](const Camera& c) { camera = c; });
+    EXPECT_NEAR(camera.aspect, 640.0f / 360.0f, 1e-6f);
+    const Aabb b = world_bounds(scene.registry);
+    for (int i = 0; i < 8; ++i) {
+      const vec3 corner(i & 1 ? b.max.x : b.min.x, i & 2 ? b.max.y : b.min.y, i & 4 ? b.max.z : b.min.z);
+      EXPECT_TRUE(in_frustum(camera, corner)) << "half extent " << half.x << "," << half.y << "," << half.z
+                                             << " corner " << i;
+    }
+  }
+}
+
+TEST(Scene, DefaultLightIsAddedOnlyWhenThereIsNone) {
+  Scene scene;
+  add_box(scene, vec3(0), vec3(1));
+  update_world_transforms(scene.registry, 0);
+  add_defaults(scene);
+  EXPECT_EQ(scene.registry.count<Light>(), 1u);
+  EXPECT_EQ(scene.registry.count<DefaultTag>(), 2u);
+  add_defaults(scene); // idempotent
+  EXPECT_EQ(scene.registry.count<Light>(), 1u);
+  EXPECT_EQ(scene.registry.count<Camera>(), 1u);
+
+  Scene lit;
+  add_box(lit, vec3(0), vec3(1));
+  const ecs::Entity light = lit.registry.create();
+  lit.registry.emplace<Transform>(light);
+  lit.registry.emplace<Light>(light);
+  update_world_transforms(lit.registry, 0);
+  add_defaults(lit);
+  EXPECT_EQ(lit.registry.count<Light>(), 1u);
+  EXPECT_EQ(lit.registry.count<Camera>(), 1u);
+  EXPECT_EQ(lit.registry.count<DefaultTag>(), 1u);
+}
+
+TEST(Scene, DefaultLightGivesUnitIrradianceAtTheCentre) {
+  Scene scene;
+  add_box(scene, vec3(0), vec3(2));
+  update_world_transforms(scene.registry, 0);
+  add_defaults(scene);
+  vec3 light_pos{0.0f};
+  float intensity = 0.0f;
+  scene.registry.view<Light, WorldTransform>().each([&](const Light& l, const WorldTransform& wt) {
+    light_pos = vec3(wt.world_from_object[3]);
+    intensity = l.intensity;
+  });
+  const float d = glm::length(light_pos - world_bounds(scene.registry).center());
+  const float radius = 0.5f * glm::length(world_bounds(scene.registry).extent());
+  EXPECT_NEAR(intensity / (d * d), 1.0f, 1e-4f); // E = I / d²
+  EXPECT_GT(d, radius);                          // the light is outside the scene
+}
+
+TEST(Scene, SummaryCountsPlacedTrianglesAndDistinctMaterials) {
+  Scene scene;
+  const ecs::Entity a = add_box(scene, vec3(0), vec3(1));
+  const ecs::Entity b = add_box(scene, vec3(5, 0, 0), vec3(1));
+  scene.registry.get<Mesh>(b).geometry = scene.registry.get<Mesh>(a).geometry; // instanced
+  Material mirror;
+  mirror.reflectivity = 1.0f;
+  scene.registry.get<Material>(b) = mirror;
+  update_world_transforms(scene.registry, 0);
+  const SceneSummary s = summarize(scene);
+  EXPECT_EQ(s.mesh_entities, 2u);
+  EXPECT_EQ(s.unique_meshes, 1u);
+  EXPECT_EQ(s.triangles, 4u);
+  EXPECT_EQ(s.materials, 2u);
+  EXPECT_EQ(s.reflective, 1u);
+  EXPECT_FLOAT_EQ(s.bounds.max.x, 6.0f);
+  EXPECT_FLOAT_EQ(s.bounds.min.x, -1.0f);
+}
+
+TEST(Scene, RotationLookingAlongTurnsMinusZTowardsTheDirection) {
+  for (const vec3 dir : {vec3(1, 0, 0), vec3(0, 0, -1), vec3(0, 0, 1), vec3(0, -1, 0), vec3(1, 2, 3)}) {
+    const quat q = rotation_looking_along(dir);
+    const vec3 forward = q * vec3(0, 0, -1);
+    EXPECT_NEAR(glm::dot(forward, glm::normalize(dir)), 1.0f, 1e-5f);
+    EXPECT_NEAR(glm::length(q), 1.0f, 1e-5f);
+  }
+}
+
+} // namespace
+} // namespace specula

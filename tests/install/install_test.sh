@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Installs the build tree into a scratch prefix, then configures, builds and runs an outside
+# project that finds Specula with find_package(Specula).
+set -euo pipefail
+build_dir=$1
+source_dir=$2
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+cmake --install "$build_dir" --prefix "$work/prefix" >/dev/null
+test -f "$work/prefix/lib/cmake/Specula/SpeculaConfig.cmake"
+test -f "$work/prefix/include/specula/ecs/registry.h"
+cmake -S "$source_dir/tests/install/consumer" -B "$work/build" -G Ninja \
+      -DCMAKE_PREFIX_PATH="$work/prefix" -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build "$work/build" >/dev/null
+"$work/build/consumer"
