@@ -2,27 +2,29 @@
 /// \file
 /// The registry: entities, their components, views over them, and per-world resources.
 ///
-/// Rules (docs/ecs.md has the full list; tests/ecs tests each one):
-/// 1. A handle is {index, generation}. destroy() bumps the generation: every copy of the handle
-///    is then stale — valid() is false, has()/try_get() answer false/nullptr, get()/emplace()
-///    on it are bugs (SPECULA_ASSERT). A recycled slot never revives an old handle.
+/// Rules (docs/ecs.md states them in full; tests/ecs/test_ecs.cpp tests each one):
+/// 1. A handle is {index, generation}. destroy() (and clear()) bumps the slot's generation: every
+///    copy of the handle is then stale — valid() is false, has()/try_get()/remove() answer
+///    false/nullptr/false, destroy() is a no-op, and get()/emplace()/emplace_or_replace() on it
+///    are bugs (SPECULA_ASSERT). A recycled slot never revives an old handle: a slot whose
+///    generation would wrap around is retired instead of recycled.
 /// 2. Component references stay valid when components of any type are added to any entity (pages
-///    never move). Removing T from any entity may move one other T (the pool's last), so after a
-///    remove<T> or destroy(), re-fetch T references you hold for other entities.
-/// 3. view<A, B...>().each(f) walks the smallest of the pools backwards. Inside f you may:
-///    - remove components from, or destroy, the entity being visited;
-///    - add components (any type) to any entity, and create entities: entities that join the
-///      view during the walk are not visited in this walk;
-///    You may not remove viewed components from, or destroy, *other* entities that are still
-///    ahead in the walk: collect them and do it after the walk.
+///    never move). Removing T from any entity (remove<T>, destroy, clear) moves at most one other
+///    T — the pool's last — keeping its value and owner; re-fetch T references you hold for other
+///    entities after such a removal.
+/// 3. view<A, B...>().each(f) first snapshots the entities in the view (walking the smallest of
+///    the pools backwards), then calls f for each snapshotted entity that is still in the view
+///    when its turn comes. So f may do anything to the registry: entities that join the view
+///    during the walk are never visited; entities that leave it before their turn are skipped;
+///    every other entity is visited exactly once. References f received dangle once f removes
+///    that component from, or destroys, the visited entity.
 /// 4. Resources are one value per type per registry (caches, shared geometry libraries), never
-///    statics.
+///    statics; clear() and the destructor destroy them after the components.
 
 #include "core/assert.h"
 #include "ecs/entity.h"
 #include "ecs/storage.h"
 
-#include <any>
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
@@ -55,16 +57,16 @@ class View {
   static_assert(sizeof...(Ts) > 0, "a view needs at least one component type");
 
 public:
-  /// Calls f(entity, Ts&...) or f(Ts&...) for every entity with all of Ts (rule 3 above).
+  /// Calls f(entity, Ts&...) or f(Ts&...) for every entity that has all of Ts when each() begins
+  /// and still has them when its turn comes (rule 3). Costs one snapshot allocation per call.
   template <typename F>
   void each(F&& f) {
-    const PoolBase* lead = smallest();
-    // Backwards over the lead pool: a removal at the current position swaps in an element that
-    // was already visited, and entities added during the walk sit beyond the start position.
-    for (std::size_t i = lead->size(); i-- > 0;) {
-      if (i >= lead->size()) continue; // the walk's own removals shrank the pool
-      const Entity e = lead->entities()[i];
-      if (!(std::get<Pool<Ts>*>(pools_)->contains(e) && ...)) continue;
+    // The snapshot is what makes the walk well-defined whatever f does: entities added during
+    // the walk are not in it, and removals cannot shuffle unvisited entities out of reach (a
+    // swap-and-pop inside a pool being walked directly would).
+    const std::vector<Entity> walk = entities();
+    for (const Entity e : walk) {
+      if (!contains_all(e)) continue; // left the view (or was destroyed) earlier in the walk
       if constexpr (std::is_invocable_v<F, Entity, Ts&...>) {
         f(e, std::get<Pool<Ts>*>(pools_)->get(e)...);
       } else {
@@ -79,16 +81,17 @@ public:
   [[nodiscard]] std::size_t size() const {
     std::size_t n = 0;
     for (const Entity e : smallest()->entities())
-      if ((std::get<Pool<Ts>*>(pools_)->contains(e) && ...)) ++n;
+      if (contains_all(e)) ++n;
     return n;
   }
 
-  /// A snapshot of the entities in the view, in walk order.
+  /// A snapshot of the entities in the view, in walk order (the smallest pool, backwards).
   [[nodiscard]] std::vector<Entity> entities() const {
     std::vector<Entity> out;
     const auto lead = smallest()->entities();
+    out.reserve(lead.size());
     for (std::size_t i = lead.size(); i-- > 0;)
-      if ((std::get<Pool<Ts>*>(pools_)->contains(lead[i]) && ...)) out.push_back(lead[i]);
+      if (contains_all(lead[i])) out.push_back(lead[i]);
     return out;
   }
 
@@ -96,6 +99,9 @@ private:
   friend class Registry;
   explicit View(Pool<Ts>*... pools) : pools_(pools...) {}
 
+  [[nodiscard]] bool contains_all(Entity e) const {
+    return (std::get<Pool<Ts>*>(pools_)->contains(e) && ...);
+  }
   [[nodiscard]] const PoolBase* smallest() const {
     const PoolBase* best = std::get<0>(pools_);
     ((best = std::get<Pool<Ts>*>(pools_)->size() < best->size() ? std::get<Pool<Ts>*>(pools_) : best),
@@ -111,21 +117,38 @@ public:
   Registry() = default;
   Registry(const Registry&) = delete;
   Registry& operator=(const Registry&) = delete;
-  Registry(Registry&&) noexcept = default;
-  Registry& operator=(Registry&&) noexcept = default;
+  /// The moved-from registry is empty (no entities, pools or resources) and usable.
+  Registry(Registry&& other) noexcept
+      : pools_(std::exchange(other.pools_, {})), slots_(std::exchange(other.slots_, {})),
+        free_(std::exchange(other.free_, {})), alive_(std::exchange(other.alive_, 0)),
+        resources_(std::exchange(other.resources_, {})) {}
+  /// Destroys this registry's entities and resources first; `other` is left empty.
+  Registry& operator=(Registry&& other) noexcept {
+    if (this != &other) {
+      clear();
+      pools_ = std::exchange(other.pools_, {});
+      slots_ = std::exchange(other.slots_, {});
+      free_ = std::exchange(other.free_, {});
+      alive_ = std::exchange(other.alive_, 0);
+      resources_ = std::exchange(other.resources_, {});
+    }
+    return *this;
+  }
   ~Registry() { clear(); }
 
-  /// A new entity with no components. Reuses destroyed slots with a bumped generation.
+  /// A new entity with no components. Reuses a destroyed slot (most recently freed first) under
+  /// its bumped generation, so the new handle differs from every handle the slot had before.
   [[nodiscard]] Entity create() {
     if (!free_.empty()) {
       const std::uint32_t index = free_.back();
       free_.pop_back();
+      slots_[index].live = true;
       ++alive_;
-      return Entity{index, generations_[index]};
+      return Entity{index, slots_[index].generation};
     }
-    const auto index = static_cast<std::uint32_t>(generations_.size());
+    const auto index = static_cast<std::uint32_t>(slots_.size());
     SPECULA_ASSERT(index != null_entity.index);
-    generations_.push_back(0);
+    slots_.push_back(Slot{0, true});
     ++alive_;
     return Entity{index, 0};
   }
@@ -133,27 +156,29 @@ public:
   /// Removes all of e's components and makes every handle to it stale. No-op on stale handles.
   void destroy(Entity e) {
     if (!valid(e)) return;
-    for (auto& pool : pools_)
-      if (pool) pool->remove(e);
-    ++generations_[e.index];
-    free_.push_back(e.index);
-    --alive_;
+    // By index: a component destructor may create pools of new types, growing pools_.
+    for (std::size_t i = 0; i < pools_.size(); ++i)
+      if (pools_[i]) pools_[i]->remove(e);
+    release_slot(e.index);
   }
 
+  /// Whether e names a live entity (false for null_entity and stale handles).
   [[nodiscard]] bool valid(Entity e) const {
-    return e.index < generations_.size() && generations_[e.index] == e.generation &&
-           !e.is_null();
+    return e.index < slots_.size() && slots_[e.index].live && slots_[e.index].generation == e.generation;
   }
   /// Number of live entities.
   [[nodiscard]] std::size_t alive() const { return alive_; }
 
-  /// Calls f(Entity) for every live entity, in slot order.
+  /// Calls f(Entity) for every entity live when the call begins and still live when its turn
+  /// comes, in slot order; entities created by f are not visited.
   template <typename F>
   void each_entity(F&& f) const {
-    std::vector<bool> is_free(generations_.size(), false);
-    for (const std::uint32_t i : free_) is_free[i] = true;
-    for (std::uint32_t i = 0; i < generations_.size(); ++i)
-      if (!is_free[i]) f(Entity{i, generations_[i]});
+    std::vector<Entity> walk;
+    walk.reserve(alive_);
+    for (std::uint32_t i = 0; i < slots_.size(); ++i)
+      if (slots_[i].live) walk.push_back(Entity{i, slots_[i].generation});
+    for (const Entity e : walk)
+      if (valid(e)) f(e);
   }
 
   template <typename T, typename... Args>
@@ -165,7 +190,7 @@ public:
   T& emplace_or_replace(Entity e, Args&&... args) {
     SPECULA_ASSERT(valid(e));
     Pool<T>& p = pool<T>();
-    if (p.contains(e)) return p.get(e) = T{std::forward<Args>(args)...};
+    if (p.contains(e)) return p.get(e) = make_component<T>(std::forward<Args>(args)...);
     return p.emplace(e, std::forward<Args>(args)...);
   }
   /// Removes T from e; returns whether it had one (false for stale handles).
@@ -210,13 +235,14 @@ public:
     return View<Ts...>(&pool<Ts>()...);
   }
 
-  /// Destroys every entity and resource.
+  /// Destroys every entity (every handle becomes stale, as with destroy()), then every resource.
+  /// Pools stay allocated, so views taken before remain usable (and empty).
   void clear() {
-    for (auto& pool : pools_)
-      if (pool) pool->clear();
-    generations_.clear();
-    free_.clear();
-    alive_ = 0;
+    for (std::size_t i = 0; i < pools_.size(); ++i)
+      if (pools_[i]) pools_[i]->clear();
+    // Keep the generations: resetting them would let create() hand out handles equal to old ones.
+    for (std::uint32_t i = 0; i < slots_.size(); ++i)
+      if (slots_[i].live) release_slot(i);
     resources_.clear();
   }
 
@@ -264,8 +290,28 @@ private:
     return id < pools_.size() && pools_[id] && pools_[id]->contains(e);
   }
 
+  /// Marks a live slot dead and bumps its generation, making its handles stale. A slot at the
+  /// last generation is retired (never handed out again): bumping would wrap to 0 and revive
+  /// the slot's oldest handles.
+  void release_slot(std::uint32_t index) {
+    Slot& slot = slots_[index];
+    SPECULA_ASSERT(slot.live);
+    slot.live = false;
+    --alive_;
+    if (slot.generation == kLastGeneration) return;
+    ++slot.generation;
+    free_.push_back(index);
+  }
+
+  static constexpr std::uint32_t kLastGeneration = 0xFFFFFFFFu;
+  struct Slot {
+    std::uint32_t generation = 0;
+    bool live = false;
+  };
+
   std::vector<std::unique_ptr<PoolBase>> pools_;
-  std::vector<std::uint32_t> generations_;
+  std::vector<Slot> slots_;
+  /// Dead, non-retired slots; create() takes from the back.
   std::vector<std::uint32_t> free_;
   std::size_t alive_ = 0;
   std::vector<std::shared_ptr<void>> resources_;

@@ -8,15 +8,28 @@
 #include "core/assert.h"
 #include "ecs/entity.h"
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <new>
 #include <span>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
 namespace specula::ecs {
+
+/// Builds a T from args the way the registry does everywhere: braces for aggregates (plain
+/// structs need no constructor), parentheses otherwise, so that `std::vector<int>` from (3, 0)
+/// means three zeros rather than the list {3, 0}.
+template <typename T, typename... Args>
+[[nodiscard]] T make_component(Args&&... args) {
+  if constexpr (std::is_aggregate_v<T>)
+    return T{std::forward<Args>(args)...};
+  else
+    return T(std::forward<Args>(args)...);
+}
 
 /// Type-erased part of a pool: membership and removal (what Registry::destroy needs).
 class PoolBase {
@@ -28,36 +41,44 @@ public:
   PoolBase& operator=(const PoolBase&) = delete;
   virtual ~PoolBase() = default;
 
+  /// Whether this exact handle (index and generation) has a component here.
   [[nodiscard]] bool contains(Entity e) const {
     return e.index < sparse_.size() && sparse_[e.index] != kAbsent && dense_[sparse_[e.index]] == e;
   }
   [[nodiscard]] std::size_t size() const { return dense_.size(); }
   [[nodiscard]] std::span<const Entity> entities() const { return dense_; }
   /// Position of e in entities(); e must be contained.
-  [[nodiscard]] std::uint32_t position(Entity e) const { return sparse_[e.index]; }
+  [[nodiscard]] std::uint32_t position(Entity e) const {
+    SPECULA_ASSERT(contains(e));
+    return sparse_[e.index];
+  }
   /// Removes e's component; returns false when e had none.
   virtual bool remove(Entity e) = 0;
   virtual void clear() = 0;
 
 protected:
-  std::uint32_t insert_entity(Entity e) {
+  /// Makes room for e in sparse and one more entry in dense, so that insert_entity cannot throw
+  /// once the component is constructed (a constructed component is never orphaned).
+  void reserve_entity(Entity e) {
     if (e.index >= sparse_.size()) sparse_.resize(std::size_t(e.index) + 1, kAbsent);
+    // Geometric growth by hand: reserve(size() + 1) would reallocate on every insertion.
+    if (dense_.size() == dense_.capacity()) dense_.reserve(std::max<std::size_t>(8, 2 * dense_.size()));
+  }
+  /// Appends e to dense; reserve_entity(e) must have been called.
+  std::uint32_t insert_entity(Entity e) noexcept {
     const auto pos = static_cast<std::uint32_t>(dense_.size());
     sparse_[e.index] = pos;
-    dense_.push_back(e);
+    dense_.push_back(e); // capacity reserved: no allocation, no throw
     return pos;
   }
-  /// Swap-and-pop of e from dense; returns (removed position, last position) for the caller to
-  /// move component data the same way.
-  std::pair<std::uint32_t, std::uint32_t> erase_entity(Entity e) {
+  /// Swap-and-pop of e from dense (the last entity takes e's position).
+  void erase_entity(Entity e) noexcept {
     const std::uint32_t pos = sparse_[e.index];
-    const auto last = static_cast<std::uint32_t>(dense_.size() - 1);
-    const Entity moved = dense_[last];
+    const Entity moved = dense_.back();
     dense_[pos] = moved;
     sparse_[moved.index] = pos;
     sparse_[e.index] = kAbsent;
     dense_.pop_back();
-    return {pos, last};
   }
 
   std::vector<std::uint32_t> sparse_;
@@ -70,15 +91,18 @@ class Pool final : public PoolBase {
 public:
   static constexpr std::size_t kPageSize = 256;
 
+  Pool() = default;
   ~Pool() override { clear(); }
 
+  /// Constructs e's T from args (see make_component). e must not have one yet. If T's
+  /// constructor throws, the pool is unchanged (it may keep a new empty page).
   template <typename... Args>
   T& emplace(Entity e, Args&&... args) {
-    SPECULA_ASSERT(!contains(e));
-    const std::uint32_t pos = static_cast<std::uint32_t>(dense_.size());
-    if (pos / kPageSize >= pages_.size()) pages_.push_back(std::make_unique<Page>());
-    // Construct first: if T's constructor throws, the pool is unchanged.
-    T* slot = ::new (static_cast<void*>(address(pos))) T{std::forward<Args>(args)...};
+    SPECULA_ASSERT(!e.is_null() && !contains(e));
+    const auto pos = static_cast<std::uint32_t>(dense_.size());
+    reserve_entity(e);
+    if (pos / kPageSize >= pages_.size()) pages_.push_back(std::make_unique_for_overwrite<Page>());
+    T* slot = ::new (storage(pos)) T(make_component<T>(std::forward<Args>(args)...));
     insert_entity(e);
     return *slot;
   }
@@ -96,18 +120,27 @@ public:
     return contains(e) ? address(sparse_[e.index]) : nullptr;
   }
   /// Component at position i of entities().
-  [[nodiscard]] T& at(std::uint32_t i) { return *address(i); }
+  [[nodiscard]] T& at(std::uint32_t i) {
+    SPECULA_ASSERT(i < dense_.size());
+    return *address(i);
+  }
 
+  /// Removes e's T by moving the last T into its place (that one T changes address; its value
+  /// and owner are unchanged). Returns false when e has no T.
   bool remove(Entity e) override {
     if (!contains(e)) return false;
-    const auto [pos, last] = erase_entity(e);
-    T* hole = address(pos);
+    const std::uint32_t pos = sparse_[e.index];
+    const auto last = static_cast<std::uint32_t>(dense_.size() - 1);
     T* tail = address(last);
-    if (pos != last) *hole = std::move(*tail);
-    tail->~T();
+    // Move the data before touching membership: if the move assignment throws, e still owns
+    // its (partly assigned) component and the last entity still owns its own.
+    if (pos != last) *address(pos) = std::move(*tail);
+    erase_entity(e);
+    tail->~T(); // after erase, so a destructor that looks at the pool sees e's T gone
     return true;
   }
 
+  /// Destroys every T (in position order).
   void clear() override {
     for (std::uint32_t i = 0; i < dense_.size(); ++i) address(i)->~T();
     for (const Entity e : dense_) sparse_[e.index] = kAbsent;
@@ -118,9 +151,12 @@ private:
   struct Page {
     alignas(T) std::byte bytes[sizeof(T) * kPageSize];
   };
-  [[nodiscard]] T* address(std::uint32_t i) const {
-    return std::launder(reinterpret_cast<T*>(pages_[i / kPageSize]->bytes) + i % kPageSize);
+  /// Raw storage of position i (no T need live there yet).
+  [[nodiscard]] void* storage(std::uint32_t i) const {
+    return pages_[i / kPageSize]->bytes + sizeof(T) * (i % kPageSize);
   }
+  /// The live T at position i.
+  [[nodiscard]] T* address(std::uint32_t i) const { return std::launder(static_cast<T*>(storage(i))); }
 
   std::vector<std::unique_ptr<Page>> pages_;
 };
