@@ -6,6 +6,7 @@ Binary files are generated rather than hand-edited so their content can be read 
   cube_binary.stl       unit cube [0,1]^3, 12 facets (36 corners, 8 distinct positions)
   truncated_binary.stl  header claims 12 facets, the file holds 5
   binary_garbage.stl    300 pseudo-random bytes (neither ASCII nor size-consistent binary STL)
+  out_of_range_index_binary.ply  binary triangle referring to vertex 7 of 3
 """
 import os
 import struct
@@ -34,6 +35,14 @@ def ply_cube():
     return header.encode("ascii") + body
 
 
+def ply_out_of_range():
+    header = ("ply\nformat binary_little_endian 1.0\n"
+              "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+              "element face 1\nproperty list uchar int vertex_indices\nend_header\n")
+    body = struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0) + struct.pack("<B3i", 3, 0, 1, 7)
+    return header.encode("ascii") + body
+
+
 def stl_facet(t):
     ps = [CUBE_POSITIONS[i] for i in t]
     u = [ps[1][k] - ps[0][k] for k in range(3)]
@@ -57,6 +66,7 @@ def garbage(n, seed=12345):
 
 
 write("cube_binary.ply", ply_cube())
+write("out_of_range_index_binary.ply", ply_out_of_range())
 write("cube_binary.stl", stl_binary(CUBE_TRIANGLES, len(CUBE_TRIANGLES)))
 write("truncated_binary.stl", stl_binary(CUBE_TRIANGLES[:5], len(CUBE_TRIANGLES)))
 g = garbage(300)
