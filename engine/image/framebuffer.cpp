@@ -1,0 +1,39 @@
+#include "image/framebuffer.h"
+
+#include "core/assert.h"
+#include "core/error.h"
+
+#include <algorithm>
+#include <string>
+
+namespace specula {
+
+namespace {
+
+std::uint32_t checked_side(std::uint32_t side, const char* name) {
+  if (side == 0 || side > kMaxFramebufferSide) {
+    throw Error(std::string("framebuffer ") + name + " " + std::to_string(side) +
+                " is outside [1, " + std::to_string(kMaxFramebufferSide) + "]");
+  }
+  return side;
+}
+
+} // namespace
+
+Framebuffer::Framebuffer(std::uint32_t width, std::uint32_t height, vec3 fill)
+    : width_(checked_side(width, "width")), height_(checked_side(height, "height")),
+      pixels_(std::size_t{width} * height, fill) {}
+
+vec3& Framebuffer::at(std::uint32_t x, std::uint32_t y) {
+  SPECULA_ASSERT(x < width_ && y < height_);
+  return pixels_[std::size_t{y} * width_ + x];
+}
+
+const vec3& Framebuffer::at(std::uint32_t x, std::uint32_t y) const {
+  SPECULA_ASSERT(x < width_ && y < height_);
+  return pixels_[std::size_t{y} * width_ + x];
+}
+
+void Framebuffer::fill(vec3 value) { std::fill(pixels_.begin(), pixels_.end(), value); }
+
+} // namespace specula

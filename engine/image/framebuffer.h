@@ -1,0 +1,49 @@
+#pragma once
+/// \file
+/// Framebuffer: a width × height grid of linear RGB radiance, the image type every renderer
+/// writes and every metric and image file reader or writer takes.
+
+#include "core/math.h"
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace specula {
+
+/// Largest framebuffer side. Equal to kMaxImageSide (scene/scene.h), repeated here so the image
+/// module does not depend on scenes: a larger side is an absurd request, not an allocation.
+inline constexpr std::uint32_t kMaxFramebufferSide = 16384;
+
+/// Linear (scene-referred) RGB, row-major, row 0 at the top (the order of PNG and EXR scan lines
+/// with increasing y). Values are unbounded floats; writers decide how to encode them.
+class Framebuffer {
+public:
+  /// Throws specula::Error when a side is 0 or larger than kMaxFramebufferSide.
+  Framebuffer(std::uint32_t width, std::uint32_t height, vec3 fill = vec3(0.0f));
+
+  [[nodiscard]] std::uint32_t width() const noexcept { return width_; }
+  [[nodiscard]] std::uint32_t height() const noexcept { return height_; }
+  [[nodiscard]] std::size_t pixel_count() const noexcept { return pixels_.size(); }
+
+  /// Pixel (x, y); out-of-range coordinates are a bug (SPECULA_ASSERT).
+  [[nodiscard]] vec3& at(std::uint32_t x, std::uint32_t y);
+  [[nodiscard]] const vec3& at(std::uint32_t x, std::uint32_t y) const;
+
+  /// Every pixel, row-major (index y * width + x).
+  [[nodiscard]] std::span<vec3> pixels() noexcept { return pixels_; }
+  [[nodiscard]] std::span<const vec3> pixels() const noexcept { return pixels_; }
+
+  void fill(vec3 value);
+
+  /// Same size and bit-identical pixels (+0 and -0 compare equal, NaN never does).
+  friend bool operator==(const Framebuffer& a, const Framebuffer& b) = default;
+
+private:
+  std::uint32_t width_;
+  std::uint32_t height_;
+  std::vector<vec3> pixels_;
+};
+
+} // namespace specula

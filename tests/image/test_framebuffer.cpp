@@ -1,0 +1,74 @@
+// Framebuffer: size validation, row-major layout, fill and equality.
+
+#include "core/error.h"
+#include "image/framebuffer.h"
+#include "image/srgb.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+namespace specula {
+namespace {
+
+TEST(Framebuffer, HasRequestedSizeAndFill) {
+  const Framebuffer image(7, 3, vec3(0.25f, 0.5f, 2.0f));
+  EXPECT_EQ(image.width(), 7u);
+  EXPECT_EQ(image.height(), 3u);
+  EXPECT_EQ(image.pixel_count(), 21u);
+  for (const vec3& p : image.pixels()) EXPECT_EQ(p, vec3(0.25f, 0.5f, 2.0f));
+}
+
+TEST(Framebuffer, RowMajorTopRowFirst) {
+  Framebuffer image(4, 3);
+  image.at(1, 2) = vec3(1.0f, 2.0f, 3.0f);
+  EXPECT_EQ(image.pixels()[2 * 4 + 1], vec3(1.0f, 2.0f, 3.0f));
+  image.fill(vec3(5.0f));
+  EXPECT_EQ(image.at(1, 2), vec3(5.0f));
+}
+
+TEST(Framebuffer, RejectsZeroAndAbsurdSides) {
+  EXPECT_THROW(Framebuffer(0, 10), Error);
+  EXPECT_THROW(Framebuffer(10, 0), Error);
+  EXPECT_THROW(Framebuffer(kMaxFramebufferSide + 1, 1), Error);
+  EXPECT_THROW(Framebuffer(1, kMaxFramebufferSide + 1), Error);
+  try {
+    Framebuffer image(1, 100000);
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("100000"), std::string::npos) << e.what();
+  }
+  EXPECT_NO_THROW(Framebuffer(kMaxFramebufferSide, 1));
+}
+
+TEST(Framebuffer, EqualityComparesSizeAndPixels) {
+  Framebuffer a(2, 2, vec3(0.5f));
+  Framebuffer b(2, 2, vec3(0.5f));
+  EXPECT_EQ(a, b);
+  b.at(1, 1).g = 0.5000001f;
+  EXPECT_NE(a, b);
+  EXPECT_NE(Framebuffer(2, 1), Framebuffer(1, 2));
+}
+
+// The transfer functions the PNG code and the metrics rely on.
+TEST(Srgb, TransferFunctionsInvertEachOtherAndClamp) {
+  for (int i = 0; i <= 1000; ++i) {
+    const float v = static_cast<float>(i) / 1000.0f;
+    EXPECT_NEAR(srgb_to_linear(linear_to_srgb(v)), v, 2e-6f);
+    if (i > 0) {
+      const float prev = static_cast<float>(i - 1) / 1000.0f;
+      EXPECT_GT(linear_to_srgb(v), linear_to_srgb(prev)); // strictly increasing
+    }
+  }
+  // The two pieces meet at the breakpoint (continuity of the exact piecewise OETF).
+  const float knee = 0.0031308f;
+  EXPECT_NEAR(12.92f * knee, 1.055f * std::pow(knee, 1.0f / 2.4f) - 0.055f, 1e-6f);
+  EXPECT_EQ(linear_to_srgb(-1.0f), 0.0f);
+  EXPECT_NEAR(linear_to_srgb(7.0f), 1.0f, 1e-6f);
+  EXPECT_EQ(linear_to_srgb(std::numeric_limits<float>::quiet_NaN()), 0.0f);
+  EXPECT_NEAR(linear_to_srgb(std::numeric_limits<float>::infinity()), 1.0f, 1e-6f);
+}
+
+} // namespace
+} // namespace specula
