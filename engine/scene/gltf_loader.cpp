@@ -86,6 +86,9 @@ constexpr std::array<std::string_view, 6> kSupportedRequiredExtensions = {
 constexpr std::uint64_t kMaxAccessorElements = 3 * kMaxTriangles;
 /// Most positions all vertex-animation keys of one mesh entity may hold together (768 MiB).
 constexpr std::uint64_t kMaxMorphKeyPositions = std::uint64_t(1) << 26;
+/// Most elements of an accessor without a bufferView (zeros, usually patched by sparse values)
+/// when nothing else bounds its count: such an accessor costs memory but no file bytes.
+constexpr std::uint64_t kMaxUnbackedElements = std::uint64_t(1) << 24;
 
 std::string index_field(std::string_view array, std::size_t index) {
   return std::string(array) + "[" + std::to_string(index) + "]";
@@ -285,8 +288,11 @@ std::span<const unsigned char> view_bytes(const Context& ctx, int index, const s
   return {data.data() + view.byteOffset, view.byteLength};
 }
 
+/// Checks accessors[index] for a use that wants `types` and `allowed` components, and exactly
+/// `expected_count` elements when that is not 0 (checked before anything is allocated).
 AccessorInfo accessor_info(const Context& ctx, int index, const std::string& user,
-                           std::initializer_list<int> types, Components allowed) {
+                           std::initializer_list<int> types, Components allowed,
+                           std::size_t expected_count) {
   const auto& accessors = ctx.model.accessors;
   if (index < 0 || static_cast<std::size_t>(index) >= accessors.size())
     ctx.fail(user, "accessor index " + std::to_string(index) + " is out of range (the file has " +
@@ -328,9 +334,14 @@ AccessorInfo accessor_info(const Context& ctx, int index, const std::string& use
   info.normalized = a.normalized;
 
   if (a.count == 0) ctx.fail(where, "count is 0 (glTF requires at least 1)");
-  if (a.count > kMaxAccessorElements)
+  if (expected_count != 0 && a.count != expected_count)
+    ctx.fail(where, "count is " + std::to_string(a.count) + ", expected " +
+                        std::to_string(expected_count) + " (one per vertex)");
+  const std::uint64_t limit =
+      a.bufferView < 0 && expected_count == 0 ? kMaxUnbackedElements : kMaxAccessorElements;
+  if (a.count > limit)
     ctx.fail(where, "count " + std::to_string(a.count) + " is absurdly large (limit " +
-                        std::to_string(kMaxAccessorElements) + ")");
+                        std::to_string(limit) + ")");
   info.count = a.count;
   const auto element_size = static_cast<std::size_t>(size * info.components);
 
@@ -445,8 +456,8 @@ void apply_sparse(const Context& ctx, int index, const AccessorInfo& info, std::
 /// The accessor's elements as floats, `components` per element.
 std::vector<float> read_floats(const Context& ctx, int index, const std::string& user,
                                std::initializer_list<int> types, Components allowed,
-                               AccessorInfo* info_out = nullptr) {
-  const AccessorInfo info = accessor_info(ctx, index, user, types, allowed);
+                               std::size_t expected_count = 0) {
+  const AccessorInfo info = accessor_info(ctx, index, user, types, allowed, expected_count);
   const auto k = static_cast<std::size_t>(info.components);
   const auto size = static_cast<std::size_t>(component_size(info.component_type));
   std::vector<float> out(info.count * k, 0.0f);
@@ -460,13 +471,13 @@ std::vector<float> read_floats(const Context& ctx, int index, const std::string&
     for (std::size_t c = 0; c < k; ++c)
       out[element * k + c] = read_component(p + c * size, info.component_type, info.normalized);
   });
-  if (info_out != nullptr) *info_out = info;
   return out;
 }
 
 std::vector<vec3> read_vec3s(const Context& ctx, int index, const std::string& user,
-                             Components allowed) {
-  const std::vector<float> f = read_floats(ctx, index, user, {TINYGLTF_TYPE_VEC3}, allowed);
+                             Components allowed, std::size_t expected_count = 0) {
+  const std::vector<float> f =
+      read_floats(ctx, index, user, {TINYGLTF_TYPE_VEC3}, allowed, expected_count);
   std::vector<vec3> out(f.size() / 3);
   for (std::size_t i = 0; i < out.size(); ++i) out[i] = vec3(f[3 * i], f[3 * i + 1], f[3 * i + 2]);
   return out;
@@ -474,7 +485,7 @@ std::vector<vec3> read_vec3s(const Context& ctx, int index, const std::string& u
 
 std::vector<std::uint32_t> read_indices(const Context& ctx, int index, const std::string& user) {
   const AccessorInfo info =
-      accessor_info(ctx, index, user, {TINYGLTF_TYPE_SCALAR}, Components::UnsignedIndex);
+      accessor_info(ctx, index, user, {TINYGLTF_TYPE_SCALAR}, Components::UnsignedIndex, 0);
   const auto size = static_cast<std::size_t>(component_size(info.component_type));
   std::vector<std::uint32_t> out(info.count, 0);
   if (info.data != nullptr)
@@ -570,35 +581,23 @@ void append_primitive(const Context& ctx, const tinygltf::Primitive& prim, const
   const std::size_t n = base.size();
 
   if (const auto it = prim.attributes.find("NORMAL"); it != prim.attributes.end()) {
-    mesh.normals = read_vec3s(ctx, it->second, attr + "NORMAL", Components::AnyNumber);
-    if (mesh.normals.size() != n)
-      ctx.fail(attr + "NORMAL", std::to_string(mesh.normals.size()) + " normals for " +
-                                    std::to_string(n) + " positions");
+    mesh.normals = read_vec3s(ctx, it->second, attr + "NORMAL", Components::AnyNumber, n);
   }
   if (const auto it = prim.attributes.find("TEXCOORD_0"); it != prim.attributes.end()) {
-    const std::vector<float> f =
-        read_floats(ctx, it->second, attr + "TEXCOORD_0", {TINYGLTF_TYPE_VEC2}, Components::AnyNumber);
-    if (f.size() / 2 != n)
-      ctx.fail(attr + "TEXCOORD_0", std::to_string(f.size() / 2) + " texture coordinates for " +
-                                        std::to_string(n) + " positions");
+    const std::vector<float> f = read_floats(ctx, it->second, attr + "TEXCOORD_0",
+                                             {TINYGLTF_TYPE_VEC2}, Components::AnyNumber, n);
     mesh.uvs.resize(n);
     for (std::size_t i = 0; i < n; ++i) mesh.uvs[i] = vec2(f[2 * i], f[2 * i + 1]);
   } else {
     all_have_uvs = false;
   }
 
-  // Morph targets: every primitive of a mesh has the same number (glTF 2.0 §3.7.2.2).
-  const bool first = part.geometry.positions.empty();
-  if (!first && prim.targets.size() != part.target_offsets.size())
-    ctx.fail(field + ".targets", "primitives of one mesh must have the same number of morph targets");
+  // Morph targets (build_mesh_parts checked that every primitive has the same number).
   std::vector<std::vector<vec3>> offsets(prim.targets.size());
   for (std::size_t t = 0; t < prim.targets.size(); ++t) {
     const std::string target_field = field + index_field(".targets", t) + ".POSITION";
     if (const auto it = prim.targets[t].find("POSITION"); it != prim.targets[t].end()) {
-      offsets[t] = read_vec3s(ctx, it->second, target_field, Components::AnyNumber);
-      if (offsets[t].size() != n)
-        ctx.fail(target_field, std::to_string(offsets[t].size()) + " offsets for " +
-                                   std::to_string(n) + " positions");
+      offsets[t] = read_vec3s(ctx, it->second, target_field, Components::AnyNumber, n);
       for (const vec3& d : offsets[t])
         if (!is_finite(d)) ctx.fail(target_field, "morph target offset is not finite (NaN or Inf)");
     } else {
@@ -677,6 +676,11 @@ std::vector<MeshPart> build_mesh_parts(const Context& ctx, int mesh_index, bool 
   const std::string mesh_field = index_field("meshes", static_cast<std::size_t>(mesh_index));
   const tinygltf::Mesh& mesh = meshes[static_cast<std::size_t>(mesh_index)];
   if (mesh.primitives.empty()) ctx.fail(mesh_field + ".primitives", "mesh has no primitives");
+  // Morph weights apply to every primitive alike, so all have the same targets (glTF §3.7.2.2).
+  for (std::size_t p = 1; p < mesh.primitives.size(); ++p)
+    if (mesh.primitives[p].targets.size() != mesh.primitives[0].targets.size())
+      ctx.fail(mesh_field + index_field(".primitives", p) + ".targets",
+               "primitives of one mesh must have the same number of morph targets");
 
   std::vector<MeshPart> parts;
   std::vector<bool> all_have_uvs;
@@ -1234,7 +1238,8 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
 
     Animation node_animation;
     if (node_anim != nullptr) node_animation = node_anim->trs;
-    bool node_deforms = false;
+    bool node_deforms = false;          // the node's own entity carries vertex keys
+    std::size_t node_vertex_count = 0; // vertices of the mesh on the node's own entity
 
     if (node.skin >= 0 && !warned_skin) {
       ctx.warn(field + ": skins are not supported; skinned meshes stay in their bind pose");
@@ -1297,6 +1302,7 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
           if (deforms) reg.emplace<Animation>(target, std::move(part_animation));
         } else {
           node_deforms = deforms;
+          node_vertex_count = part.geometry.vertex_count();
         }
       }
     }
@@ -1304,10 +1310,8 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
     reg.emplace<Kinematics>(e, node_deforms ? Kinematics{Kinematics::Type::Free} : rigid);
     if (!node_animation.translation.empty() || !node_animation.rotation.empty() ||
         !node_animation.scale.empty() || !node_animation.vertices.empty()) {
-      validate_animation(node_animation, node_animation.vertices.empty()
-                                             ? 0
-                                             : node_animation.vertices.values.front().size(),
-                         ctx.file, field + ".animation");
+      // Each track was checked where it was read (naming its channel); this checks the whole.
+      validate_animation(node_animation, node_vertex_count, ctx.file, field + ".animation");
       reg.emplace<Animation>(e, std::move(node_animation));
     }
 

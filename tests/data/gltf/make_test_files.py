@@ -335,6 +335,24 @@ def write_bad_files():
     g.doc["nodes"][0]["matrix"] = [1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]
     g.write_gltf("bad_singular_matrix.gltf")
 
+    g = small_triangle(Gltf())
+    normals = g.accessor([0, 0, 1] * 2, "VEC3", target=ARRAY_BUFFER)  # 2 normals, 3 vertices
+    g.doc["meshes"][0]["primitives"][0]["attributes"]["NORMAL"] = normals
+    g.write_gltf("bad_normal_count.gltf")
+
+    g = small_triangle(Gltf())
+    times = g.accessor([0, 2, 1], "SCALAR")
+    values = g.accessor([0, 0, 0, 1, 0, 0, 2, 0, 0], "VEC3")
+    g.doc["animations"] = [{"samplers": [{"input": times, "output": values}], "channels": [
+        {"sampler": 0, "target": {"node": 0, "path": "translation"}}]}]
+    g.write_gltf("bad_animation_times.gltf")
+
+    g = small_triangle(Gltf())
+    g.doc["extensionsUsed"] = ["KHR_lights_punctual"]
+    g.doc["extensions"] = {"KHR_lights_punctual": {"lights": [{"type": "point"}]}}
+    g.doc["nodes"][0]["extensions"] = {"KHR_lights_punctual": {"light": 3}}
+    g.write_gltf("bad_light_index.gltf")
+
 
 def main():
     write_hierarchy()
