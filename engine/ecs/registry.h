@@ -264,11 +264,14 @@ public:
     const std::size_t id = detail::type_id<T>();
     return id < resources_.size() ? static_cast<const T*>(resources_[id].get()) : nullptr;
   }
+  /// The T resource, which must exist (SPECULA_ASSERT).
   template <typename T>
   [[nodiscard]] T& resource() {
-    T* r = try_resource<T>();
-    SPECULA_ASSERT(r != nullptr);
-    return *r;
+    const std::size_t id = detail::type_id<T>();
+    // Indexing directly, not through try_resource: with assertions off, a null branch inlined
+    // into callers trips -Wnull-dereference.
+    SPECULA_ASSERT(id < resources_.size() && resources_[id] != nullptr);
+    return *static_cast<T*>(resources_[id].get());
   }
   template <typename T>
   [[nodiscard]] T& resource_or_default() {

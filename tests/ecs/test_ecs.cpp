@@ -598,7 +598,9 @@ TEST(EcsResources, AreOnePerTypePerRegistry) {
   EXPECT_EQ(same.frames, 10);
 
   a.set_resource<std::string>("library");
-  EXPECT_EQ(*std::as_const(a).try_resource<std::string>(), "library");
+  const std::string* library = std::as_const(a).try_resource<std::string>();
+  ASSERT_NE(library, nullptr);
+  EXPECT_EQ(*library, "library");
   EXPECT_EQ(a.resource<FrameCounter>().frames, 3) << "types do not share slots";
   EXPECT_EQ(b.try_resource<std::string>(), nullptr);
 
