@@ -1,0 +1,173 @@
+#!/usr/bin/env python3
+"""Writes samples/scenes/mirror_spheres_{0,1,2,4,8,16,32}.json.
+
+The test scenes of Ruff, Clua and Fernandes, "Ray-caching textures" (2013), Fig. 5 and Table I:
+one reflective sphere facing the camera and N more reflective spheres placed behind the camera,
+so that they are visible only through the front sphere's reflection. As in the paper, only the
+front sphere carries a ray-cache cube; the hidden spheres are traced conventionally.
+
+Layout (all in metres, +Y up, the camera looks down -Z):
+  * the front ("mirror") sphere, radius 1, rests on the ground at the origin;
+  * the camera sits at z = 6, slightly above the sphere's centre, looking at it (30 deg fov);
+  * hidden sphere slots lie on a shell of radius 12 around the front sphere's centre, in 4 rows
+    (elevation 0, 8, 16, 24 deg) of 8 columns (azimuth -49 .. +49 deg in 14 deg steps), all
+    behind the camera; a scene with N hidden spheres takes the N slots nearest the middle of the
+    grid, so the sets are nested (the 4 of mirror_spheres_4 are among the 8 of mirror_spheres_8).
+tests/scene/test_json_scene.cpp checks that every hidden sphere lies outside the camera frustum,
+that the front sphere lies inside it, and that no two spheres (or a sphere and the camera) meet.
+
+Python 3 standard library only. Run from anywhere:  python3 samples/scenes/make_mirror_spheres.py
+"""
+
+import argparse
+import colorsys
+import math
+import os
+
+COUNTS = [0, 1, 2, 4, 8, 16, 32]
+LINE_WIDTH = 100
+
+FRONT_CENTER = (0.0, 1.0, 0.0)
+FRONT_RADIUS = 1.0
+CAMERA_POSITION = (0.0, 1.6, 6.0)
+SHELL_RADIUS = 12.0
+HIDDEN_RADIUS = 0.6
+ROWS, COLUMNS = 4, 8
+ELEVATION_STEP_DEG = 8.0
+AZIMUTH_STEP_DEG = 14.0
+
+
+def rounded(v, digits=4):
+    """Short decimals keep the files readable; the loader reads them exactly as written."""
+    r = round(v, digits)
+    return 0.0 if r == 0 else r
+
+
+def slots():
+    """All hidden-sphere slots as (row, column, centre), nearest the grid's middle first."""
+    out = []
+    for row in range(ROWS):
+        elevation = math.radians(row * ELEVATION_STEP_DEG)
+        for col in range(COLUMNS):
+            azimuth = math.radians((col - (COLUMNS - 1) / 2) * AZIMUTH_STEP_DEG)
+            center = (
+                FRONT_CENTER[0] + SHELL_RADIUS * math.sin(azimuth) * math.cos(elevation),
+                FRONT_CENTER[1] + SHELL_RADIUS * math.sin(elevation),
+                FRONT_CENTER[2] + SHELL_RADIUS * math.cos(azimuth) * math.cos(elevation),
+            )
+            middle_distance = abs(col - (COLUMNS - 1) / 2) + abs(row - (ROWS - 1) / 2)
+            out.append((middle_distance, row, col, tuple(rounded(c) for c in center)))
+    out.sort()
+    return [(row, col, center) for _, row, col, center in out]
+
+
+def hidden_color(row, col):
+    """A distinct hue per slot, so each hidden sphere can be told apart in the reflection."""
+    hue = ((row * COLUMNS + col) * 0.381966) % 1.0  # golden-ratio steps spread the hues
+    return [rounded(c, 3) for c in colorsys.hsv_to_rgb(hue, 0.65, 0.85)]
+
+
+def scene(count, cache_resolution):
+    entities = [
+        {
+            "name": "camera",
+            "camera": {
+                "position": list(CAMERA_POSITION),
+                "look_at": list(FRONT_CENTER),
+                "vertical_fov_deg": 30,
+            },
+        },
+        {
+            "name": "light",
+            "transform": {"translation": [3, 10, 4]},
+            "light": {"type": "point", "color": [1, 1, 1], "intensity": 150},
+        },
+        {
+            "name": "ground",
+            "mesh": {"primitive": "plane", "size": 60},
+            "material": {"base_color": [0.55, 0.55, 0.5]},
+        },
+        {
+            "name": "mirror sphere",
+            "transform": {"translation": list(FRONT_CENTER)},
+            "mesh": {"primitive": "sphere", "radius": FRONT_RADIUS, "segments": 64, "rings": 32},
+            "material": {"base_color": [0.9, 0.9, 0.9], "reflectivity": 0.9},
+            "ray_cache": {"resolution": cache_resolution},
+        },
+    ]
+    for i, (row, col, center) in enumerate(slots()[:count]):
+        entities.append(
+            {
+                "name": "hidden sphere %d" % i,
+                "transform": {"translation": list(center)},
+                "mesh": {"primitive": "sphere", "radius": HIDDEN_RADIUS, "segments": 32, "rings": 16},
+                "material": {"base_color": hidden_color(row, col), "reflectivity": 0.5},
+            }
+        )
+    return {
+        "format": "specula-scene",
+        "version": 1,
+        "settings": {"width": 1024, "height": 1024, "max_depth": 5, "background": [0.3, 0.4, 0.55]},
+        "entities": entities,
+    }
+
+
+def scalar(v):
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, float) and v.is_integer():
+        return str(int(v))
+    return repr(v)
+
+
+def depth(v):
+    """Nesting depth: 0 for a scalar, 1 for a container of scalars, and so on."""
+    if isinstance(v, dict):
+        return 1 + max((depth(x) for x in v.values()), default=0)
+    if isinstance(v, list):
+        return 1 + max((depth(x) for x in v), default=0)
+    return 0
+
+
+def one_line(v):
+    if isinstance(v, dict):
+        return "{" + ", ".join(scalar(k) + ": " + one_line(x) for k, x in v.items()) + "}"
+    if isinstance(v, list):
+        return "[" + ", ".join(one_line(x) for x in v) + "]"
+    return scalar(v)
+
+
+def dump(v, indent=0, column=0):
+    """JSON in the layout of Specula's writer: values nested at most two deep stay on one line
+    when they fit in LINE_WIDTH columns (`column` is where v starts on its line)."""
+    if not isinstance(v, (dict, list)) or not v:
+        return one_line(v)
+    if depth(v) <= 2 and column + len(one_line(v)) <= LINE_WIDTH:
+        return one_line(v)
+    items = list(v.items()) if isinstance(v, dict) else [(None, x) for x in v]
+    open_, close = ("{", "}") if isinstance(v, dict) else ("[", "]")
+    lines = []
+    for k, x in items:
+        key = "" if k is None else scalar(k) + ": "
+        lines.append(" " * (indent + 2) + key + dump(x, indent + 2, indent + 2 + len(key)))
+    return open_ + "\n" + ",\n".join(lines) + "\n" + " " * indent + close
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--out", default=os.path.dirname(os.path.abspath(__file__)),
+                        help="output folder (default: this script's folder)")
+    parser.add_argument("--cache-resolution", type=int, default=128,
+                        help="ray-cache cube face resolution of the front sphere (power of two)")
+    args = parser.parse_args()
+    for count in COUNTS:
+        path = os.path.join(args.out, "mirror_spheres_%d.json" % count)
+        with open(path, "w", encoding="utf-8", newline="\n") as f:
+            f.write(dump(scene(count, args.cache_resolution)) + "\n")
+        print(path)
+
+
+if __name__ == "__main__":
+    main()
