@@ -1,8 +1,9 @@
-// The `specula` program: headless subcommands over the engine (info, render). Bad input ends
+// The `specula` program: headless subcommands over the engine (info, render, compare). Bad input ends
 // with a message naming the file and the problem and exit code 1; a feature this build lacks
 // ends with exit code 2.
 
 #include "commands.h"
+#include "compare_command.h"
 #include "core/error.h"
 #include "scene/scene.h"
 
@@ -42,6 +43,13 @@ int main(int argc, char** argv) {
   render_cmd->add_option("--out", render.out, "Write the last frame as an sRGB PNG");
   render_cmd->add_option("--stats", render.stats, "Write per-frame statistics as JSON");
 
+  cli::CompareOptions compare;
+  CLI::App* compare_cmd = app.add_subcommand("compare", "Compare two images: RMSE, PSNR and mean FLIP");
+  compare_cmd->add_option("a", compare.a, "Reference image (.png or .exr)")->required();
+  compare_cmd->add_option("b", compare.b, "Test image (.png or .exr)")->required();
+  compare_cmd->add_option("--heatmap", compare.heatmap, "Write the FLIP error map as a magma PNG");
+  compare_cmd->add_flag("--json", compare.json, "Print the metrics as JSON");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -52,6 +60,7 @@ int main(int argc, char** argv) {
   try {
     if (info_cmd->parsed()) return cli::run_info(info, std::cout);
     if (render_cmd->parsed()) return cli::run_render(render, std::cout);
+    if (compare_cmd->parsed()) return cli::run_compare(compare, std::cout);
   } catch (const Error& e) {
     std::cerr << "specula: error: " << e.what() << "\n";
     return kExitBadInput;

@@ -1,6 +1,8 @@
 #include "systems/schedule.h"
 
+#include "systems/acceleration_system.h"
 #include "systems/animation_system.h"
+#include "systems/render_system.h"
 #include "systems/transform_system.h"
 
 namespace specula {
@@ -14,6 +16,8 @@ struct Stage {
 constexpr Stage kStages[] = {
     {"animation", &animation_system},
     {"transform", &transform_system},
+    {"acceleration", &acceleration_system},
+    {"render", &render_system},
 };
 
 } // namespace

@@ -13,7 +13,9 @@ namespace specula {
 /// Runs the frame's systems in a fixed order on each tick:
 ///   1. animation_system  (Animation → Transform, Mesh deformations; CameraPath → Camera)
 ///   2. transform_system  (Transform/Parent → WorldTransform, moved flags)
-/// Later stages (acceleration, cache invalidation, render) are appended here as they land.
+///   3. acceleration_system (moved/deformed entities → acceleration structures)
+///   4. render_system     (the frame, on the backend chosen by prepare_rendering)
+/// Cache invalidation will sit between 3 and 4. Stages 3–4 do nothing until a backend is prepared.
 class Schedule {
 public:
   /// Advances time by dt seconds and runs every system once. Returns the context it ran with.

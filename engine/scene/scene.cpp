@@ -66,6 +66,18 @@ Scene load_scene(const std::filesystem::path& path) {
   return scene;
 }
 
+std::optional<Camera> active_camera(ecs::Registry& registry) {
+  std::optional<Camera> best;
+  std::uint32_t best_index = 0;
+  registry.view<Camera>().each([&](ecs::Entity e, const Camera& c) {
+    if (!best || e.index < best_index) {
+      best = c;
+      best_index = e.index;
+    }
+  });
+  return best;
+}
+
 Aabb world_bounds(ecs::Registry& registry) {
   Aabb bounds;
   registry.view<Mesh, WorldTransform>().each([&](const Mesh& mesh, const WorldTransform& wt) {

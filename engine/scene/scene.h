@@ -5,9 +5,11 @@
 
 #include "core/math.h"
 #include "ecs/registry.h"
+#include "scene/components/camera.h"
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 
 namespace specula {
@@ -48,6 +50,10 @@ struct DefaultTag {};
 /// at the camera position with intensity distance² (so a surface at the bounds' centre facing it
 /// gets irradiance 1, at any scale). Both carry DefaultTag.
 void add_defaults(Scene& scene);
+
+/// The camera to render from: the Camera of the live entity with the lowest slot index (so the
+/// choice does not depend on iteration order). Empty when the scene has none.
+[[nodiscard]] std::optional<Camera> active_camera(ecs::Registry& registry);
 
 /// World-space bounds of every mesh entity (world transforms must be current).
 [[nodiscard]] Aabb world_bounds(ecs::Registry& registry);

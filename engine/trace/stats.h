@@ -32,7 +32,8 @@ struct CacheCounts {
 };
 
 struct FrameStats {
-  double ms = 0.0; ///< wall-clock time of the frame
+  double ms = 0.0;       ///< wall-clock time of the whole frame (every system of the tick)
+  double trace_ms = 0.0; ///< of which tracing the image (render_system)
   RayCounts rays;
   CacheCounts cache;
   friend bool operator==(const FrameStats&, const FrameStats&) = default;

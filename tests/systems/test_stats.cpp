@@ -13,6 +13,7 @@ RunStats sample_stats() {
   for (int i = 0; i < 3; ++i) {
     FrameStats f;
     f.ms = 10.0 + i;
+    f.trace_ms = 8.0 + i;
     f.rays[RayKind::Primary] = 512 * 400;
     f.rays[RayKind::Shadow] = 1000u + unsigned(i);
     f.rays[RayKind::Reflection] = 77;
@@ -34,6 +35,7 @@ TEST(Stats, UsesThePublishedFieldNames) {
   const auto& f = j.at("frames").at(0);
   for (const char* k : {"primary", "shadow", "reflection", "refraction"}) EXPECT_TRUE(f.at("rays").contains(k)) << k;
   EXPECT_TRUE(f.contains("ms"));
+  EXPECT_TRUE(f.contains("trace_ms"));
   EXPECT_TRUE(f.at("cache").contains("lookups"));
   EXPECT_TRUE(f.at("cache").contains("hits"));
   EXPECT_EQ(j.at("settings").at("cache"), 64);
@@ -43,7 +45,7 @@ TEST(Stats, DerivedRatesFollowFromCountsAndTime) {
   const RunStats s = sample_stats();
   const auto j = nlohmann::json::parse(stats_to_json(s));
   const auto& f = j.at("frames").at(1);
-  const double expected = double(s.frames[1].rays.total()) / (s.frames[1].ms * 1e3);
+  const double expected = double(s.frames[1].rays.total()) / (s.frames[1].trace_ms * 1e3);
   EXPECT_DOUBLE_EQ(f.at("mrays_per_s").at("total").get<double>(), expected);
   EXPECT_DOUBLE_EQ(j.at("summary").at("median_ms").get<double>(), 11.0);
   EXPECT_DOUBLE_EQ(j.at("summary").at("cache_hit_rate").get<double>(), 0.4);

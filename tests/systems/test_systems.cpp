@@ -313,11 +313,13 @@ TEST(Systems, CameraFollowsItsPath) {
   EXPECT_NEAR(reg.get<Camera>(e).position.x, 10.0f, 1e-5f);
 }
 
-TEST(Systems, ScheduleRunsAnimationBeforeTransform) {
+TEST(Systems, ScheduleRunsAnimationTransformAccelerationRenderInThatOrder) {
   const auto names = Schedule::system_names();
-  ASSERT_EQ(names.size(), 2u);
+  ASSERT_EQ(names.size(), 4u);
   EXPECT_EQ(names[0], "animation");
   EXPECT_EQ(names[1], "transform");
+  EXPECT_EQ(names[2], "acceleration");
+  EXPECT_EQ(names[3], "render");
   // The order matters: an animated entity's world transform reflects this tick's animation.
   ecs::Registry reg;
   const ecs::Entity e = reg.create();

@@ -1,0 +1,107 @@
+#include "accel/embree/embree_backend.h"
+
+#include "core/assert.h"
+#include "trace/renderer_impl.h"
+
+namespace specula {
+
+EmbreeBackend::EmbreeBackend(const EmbreeAccel& accel, std::uint32_t packet_width)
+    : accel_(&accel), packet_width_(packet_width) {
+  SPECULA_ASSERT(packet_width == 1 || packet_width == 4 || packet_width == 8 || packet_width == 16);
+}
+
+void EmbreeBackend::intersect(const Ray& ray, Hit& hit) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit rh;
+  rh.ray.org_x = ray.origin.x;
+  rh.ray.org_y = ray.origin.y;
+  rh.ray.org_z = ray.origin.z;
+  rh.ray.tnear = ray.tnear;
+  rh.ray.dir_x = ray.direction.x;
+  rh.ray.dir_y = ray.direction.y;
+  rh.ray.dir_z = ray.direction.z;
+  rh.ray.time = 0.0f;
+  rh.ray.tfar = ray.tfar;
+  rh.ray.mask = 0xFFFFFFFFu;
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(accel_->scene(), &context, &rh);
+  accel_->resolve(rh.hit.geomID, rh.hit.instID[0], rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z, rh.hit.u,
+                  rh.hit.v, rh.ray.tfar, rh.hit.primID, hit);
+}
+
+bool EmbreeBackend::occluded(const Ray& ray) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRay r;
+  r.org_x = ray.origin.x;
+  r.org_y = ray.origin.y;
+  r.org_z = ray.origin.z;
+  r.tnear = ray.tnear;
+  r.dir_x = ray.direction.x;
+  r.dir_y = ray.direction.y;
+  r.dir_z = ray.direction.z;
+  r.time = 0.0f;
+  r.tfar = ray.tfar;
+  r.mask = 0xFFFFFFFFu;
+  r.id = 0;
+  r.flags = 0;
+  rtcOccluded1(accel_->scene(), &context, &r);
+  return r.tfar < 0.0f; // Embree sets tfar to -inf on occlusion
+}
+
+template <int N, typename RayHitN, typename IntersectN>
+void EmbreeBackend::intersect_packets(std::span<const Ray> rays, std::span<Hit> hits,
+                                      IntersectN intersect_n) const {
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  for (std::size_t base = 0; base < rays.size(); base += N) {
+    alignas(64) RayHitN rh;
+    alignas(64) int valid[N];
+    const std::size_t count = std::min<std::size_t>(N, rays.size() - base);
+    for (int i = 0; i < N; ++i) {
+      const bool active = std::size_t(i) < count;
+      valid[i] = active ? -1 : 0;
+      const Ray& r = rays[base + (active ? std::size_t(i) : 0)];
+      rh.ray.org_x[i] = r.origin.x;
+      rh.ray.org_y[i] = r.origin.y;
+      rh.ray.org_z[i] = r.origin.z;
+      rh.ray.tnear[i] = r.tnear;
+      rh.ray.dir_x[i] = r.direction.x;
+      rh.ray.dir_y[i] = r.direction.y;
+      rh.ray.dir_z[i] = r.direction.z;
+      rh.ray.time[i] = 0.0f;
+      rh.ray.tfar[i] = r.tfar;
+      rh.ray.mask[i] = 0xFFFFFFFFu;
+      rh.ray.id[i] = unsigned(i);
+      rh.ray.flags[i] = 0;
+      rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+      rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+    }
+    intersect_n(valid, accel_->scene(), &context, &rh);
+    for (std::size_t i = 0; i < count; ++i)
+      accel_->resolve(rh.hit.geomID[i], rh.hit.instID[0][i], rh.hit.Ng_x[i], rh.hit.Ng_y[i],
+                      rh.hit.Ng_z[i], rh.hit.u[i], rh.hit.v[i], rh.ray.tfar[i], rh.hit.primID[i],
+                      hits[base + i]);
+  }
+}
+
+void EmbreeBackend::intersect_coherent(std::span<const Ray> rays, std::span<Hit> hits) const {
+  switch (packet_width_) {
+  case 16: intersect_packets<16, RTCRayHit16>(rays, hits, rtcIntersect16); return;
+  case 8: intersect_packets<8, RTCRayHit8>(rays, hits, rtcIntersect8); return;
+  case 4: intersect_packets<4, RTCRayHit4>(rays, hits, rtcIntersect4); return;
+  default:
+    for (std::size_t i = 0; i < rays.size(); ++i) intersect(rays[i], hits[i]);
+  }
+}
+
+template FrameStats render_frame<EmbreeBackend>(const EmbreeBackend&, const Camera&,
+                                                std::span<const SceneLight>, const TraceSettings&,
+                                                Framebuffer&);
+
+} // namespace specula

@@ -1,0 +1,38 @@
+#pragma once
+/// \file
+/// The Embree tracing backend: closest-hit and occlusion queries on an EmbreeAccel, coherent
+/// primary rays as rtcIntersect4/8/16 packets or single rays.
+
+#include "accel/embree/embree_accel.h"
+#include "geometry/ray.h"
+#include "trace/renderer.h"
+
+#include <cstdint>
+#include <span>
+
+namespace specula {
+
+class EmbreeBackend {
+public:
+  /// packet_width: 1, 4, 8 or 16 (anything else is a bug).
+  EmbreeBackend(const EmbreeAccel& accel, std::uint32_t packet_width);
+
+  void intersect(const Ray& ray, Hit& hit) const;
+  [[nodiscard]] bool occluded(const Ray& ray) const;
+  void intersect_coherent(std::span<const Ray> rays, std::span<Hit> hits) const;
+  [[nodiscard]] std::uint32_t packet_width() const { return packet_width_; }
+  [[nodiscard]] std::span<const Surface> surfaces() const { return accel_->surfaces(); }
+
+private:
+  template <int N, typename RayHitN, typename IntersectN>
+  void intersect_packets(std::span<const Ray> rays, std::span<Hit> hits, IntersectN intersect_n) const;
+
+  const EmbreeAccel* accel_;
+  std::uint32_t packet_width_;
+};
+
+extern template FrameStats render_frame<EmbreeBackend>(const EmbreeBackend&, const Camera&,
+                                                       std::span<const SceneLight>,
+                                                       const TraceSettings&, Framebuffer&);
+
+} // namespace specula

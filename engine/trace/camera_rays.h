@@ -1,0 +1,47 @@
+#pragma once
+/// \file
+/// Primary rays of a pinhole camera.
+
+#include "geometry/ray.h"
+#include "scene/components/camera.h"
+
+#include <cmath>
+#include <cstdint>
+
+namespace specula {
+
+/// Camera basis and image-plane scale for one frame. The image's own aspect (width / height) is
+/// used, so rendering at any size never stretches the picture; vertical_fov is kept.
+struct CameraRays {
+  vec3 origin{0.0f};
+  vec3 forward{0.0f, 0.0f, -1.0f};
+  vec3 right{1.0f, 0.0f, 0.0f};
+  vec3 up{0.0f, 1.0f, 0.0f};
+  float inv_width = 1.0f;
+  float inv_height = 1.0f;
+
+  CameraRays(const Camera& camera, std::uint32_t width, std::uint32_t height) {
+    origin = camera.position;
+    forward = glm::normalize(camera.look_at - camera.position);
+    vec3 r = glm::cross(forward, camera.up);
+    if (glm::length(r) < 1e-6f) r = glm::cross(forward, std::abs(forward.y) < 0.9f ? vec3(0, 1, 0) : vec3(1, 0, 0));
+    const float tan_half = std::tan(0.5f * camera.vertical_fov);
+    const float aspect = float(width) / float(height);
+    right = glm::normalize(r) * tan_half * aspect;
+    up = glm::normalize(glm::cross(glm::normalize(r), forward)) * tan_half;
+    inv_width = 1.0f / float(width);
+    inv_height = 1.0f / float(height);
+  }
+
+  /// The ray through the centre of pixel (x, y), row 0 at the top.
+  [[nodiscard]] Ray ray(std::uint32_t x, std::uint32_t y) const {
+    const float sx = 2.0f * (float(x) + 0.5f) * inv_width - 1.0f;
+    const float sy = 1.0f - 2.0f * (float(y) + 0.5f) * inv_height;
+    Ray r;
+    r.origin = origin;
+    r.direction = glm::normalize(forward + sx * right + sy * up);
+    return r;
+  }
+};
+
+} // namespace specula

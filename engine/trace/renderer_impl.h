@@ -1,0 +1,263 @@
+#pragma once
+/// \file
+/// The renderer's template body, included only by backend .cpp files that instantiate it.
+
+#include "core/error.h"
+#include "geometry/ray_offset.h"
+#include "trace/camera_rays.h"
+#include "trace/optics.h"
+#include "trace/renderer.h"
+#include "trace/trace_backend.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/combinable.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <xmmintrin.h>
+#include <pmmintrin.h>
+
+#include <algorithm>
+#include <array>
+#include <numbers>
+#include <thread>
+
+namespace specula {
+namespace detail {
+
+/// A ray waiting to be traced, with what it carries back and where it comes from: the entity it
+/// leaves and why (ray-cache cubes intercept reflection and refraction rays by this).
+struct PendingRay {
+  Ray ray;
+  vec3 weight{1.0f};
+  std::uint32_t depth = 0;
+  RayKind kind = RayKind::Primary;
+  ecs::Entity from = ecs::null_entity;
+};
+
+struct ShadingPoint {
+  vec3 position;
+  vec3 position_error;   ///< bound on the rounding error of position (ray_offset.h)
+  vec3 geometric_normal; ///< facing the incoming ray
+  vec3 shading_normal;   ///< facing the same side as geometric_normal
+  bool front_face;       ///< the ray hit the side the triangle's winding faces (entering)
+};
+
+/// Hit position from barycentrics on the triangle (more accurate than origin + t·d far from the
+/// ray origin), normals oriented towards the incoming direction.
+inline ShadingPoint shading_point(const Surface& s, const Hit& hit, const vec3& direction) {
+  const uvec3 tri = s.mesh->triangles[hit.primitive];
+  const float w = 1.0f - hit.uv.x - hit.uv.y;
+  const vec3& p0 = s.positions[tri.x];
+  const vec3& p1 = s.positions[tri.y];
+  const vec3& p2 = s.positions[tri.z];
+  const vec3 p_object = w * p0 + hit.uv.x * p1 + hit.uv.y * p2;
+  const vec3 error_object = barycentric_error(p0, p1, p2, w, hit.uv.x, hit.uv.y);
+  ShadingPoint sp;
+  sp.position = vec3(s.world_from_object * vec4(p_object, 1.0f));
+  sp.position_error = transformed_error(s.world_from_object, p_object, error_object);
+  sp.front_face = glm::dot(hit.normal, direction) < 0.0f;
+  sp.geometric_normal = sp.front_face ? hit.normal : -hit.normal;
+  sp.shading_normal = sp.geometric_normal;
+  if (s.smooth_normals && !s.mesh->normals.empty()) {
+    const auto& n = s.mesh->normals;
+    const vec3 n_object = w * n[tri.x] + hit.uv.x * n[tri.y] + hit.uv.y * n[tri.z];
+    vec3 ns = s.world_normal_from_object * n_object;
+    const float len = glm::length(ns);
+    if (len > 0.0f && std::isfinite(len)) {
+      ns /= len;
+      sp.shading_normal = glm::dot(ns, sp.geometric_normal) < 0.0f ? -ns : ns;
+    }
+  }
+  return sp;
+}
+
+/// How a Whitted hit continues: mirror reflection with the material's reflectivity plus the
+/// Fresnel-reflected part of its transmission; refraction with the rest (none on total internal
+/// reflection). Directions are unit and leave on the correct side of the geometric surface even
+/// where the interpolated shading normal disagrees with it.
+struct SpecularSplit {
+  float reflect_weight = 0.0f;
+  vec3 reflect_direction{0.0f};
+  float refract_weight = 0.0f;
+  vec3 refract_direction{0.0f};
+};
+
+inline SpecularSplit split_specular(const Material& m, const ShadingPoint& sp, const vec3& d) {
+  SpecularSplit split;
+  split.reflect_weight = m.reflectivity;
+  if (m.transmission > 0.0f) {
+    const float eta = sp.front_face ? 1.0f / m.ior : m.ior;
+    std::optional<vec3> t = refract_direction(d, sp.shading_normal, eta);
+    float cos_i = -glm::dot(d, sp.shading_normal);
+    if (t && glm::dot(*t, sp.geometric_normal) >= 0.0f) {
+      t = refract_direction(d, sp.geometric_normal, eta); // the shading normal bent it out
+      cos_i = -glm::dot(d, sp.geometric_normal);
+    }
+    if (t) {
+      const float f = fresnel_dielectric(cos_i, eta);
+      split.reflect_weight += m.transmission * f;
+      split.refract_weight = m.transmission * (1.0f - f);
+      split.refract_direction = *t;
+    } else {
+      split.reflect_weight += m.transmission; // total internal reflection
+    }
+  }
+  if (split.reflect_weight > 0.0f) {
+    vec3 r = reflect_direction(d, sp.shading_normal);
+    if (glm::dot(r, sp.geometric_normal) <= 0.0f) r = reflect_direction(d, sp.geometric_normal);
+    split.reflect_direction = glm::normalize(r);
+  }
+  return split;
+}
+
+inline float max_component(const vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
+
+/// Radiance along one primary ray whose first hit is already known: local shading (cast) or the
+/// full Whitted tree (shadow rays to every light, mirror reflection, refraction with Fresnel and
+/// total internal reflection), walked with an explicit stack.
+template <typename Backend>
+vec3 shade(const Backend& backend, const Ray& primary, const Hit& primary_hit,
+           std::span<const SceneLight> lights, const TraceSettings& settings, RayCounts& counts) {
+  constexpr float kInvPi = std::numbers::inv_pi_v<float>;
+  const std::span<const Surface> surfaces = backend.surfaces();
+  const bool whitted = settings.mode == TraceMode::Whitted;
+  vec3 radiance{0.0f};
+  std::array<PendingRay, 64> stack;
+  std::size_t top = 0;
+  stack[top++] = PendingRay{primary, vec3(1.0f), 0, RayKind::Primary, ecs::null_entity};
+  bool first = true;
+  while (top > 0) {
+    const PendingRay pending = stack[--top];
+    Hit hit;
+    if (first) {
+      hit = primary_hit;
+      first = false;
+    } else {
+      backend.intersect(pending.ray, hit);
+      ++counts[pending.kind];
+    }
+    if (!hit.hit()) {
+      radiance += pending.weight * settings.background;
+      continue;
+    }
+    const Surface& surface = surfaces[hit.surface];
+    const Material& m = surface.material;
+    const ShadingPoint sp = shading_point(surface, hit, pending.ray.direction);
+    radiance += pending.weight * m.emission;
+
+    // Local (diffuse) term. Cast mode shades every surface with its base colour and no shadows.
+    const float diffuse = whitted ? std::max(0.0f, 1.0f - m.reflectivity - m.transmission) : 1.0f;
+    if (diffuse > 0.0f) {
+      const vec3 albedo_weight = pending.weight * m.base_color * (diffuse * kInvPi);
+      const vec3 shadow_origin = offset_ray_origin(sp.position, sp.position_error, sp.geometric_normal);
+      for (const SceneLight& light : lights) {
+        const LightSample ls = sample_light(light, sp.position);
+        if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) continue; // behind the surface
+        const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
+        if (cos_theta <= 0.0f || max_component(ls.irradiance) <= 0.0f) continue;
+        if (whitted) {
+          Ray shadow;
+          shadow.origin = shadow_origin;
+          shadow.direction = ls.to_light;
+          // Stop just short of the light: a light placed on a surface must not shadow itself.
+          shadow.tfar = std::isinf(ls.distance) ? ls.distance
+                                                : glm::length(light.position - shadow_origin) * (1.0f - 1e-5f);
+          ++counts[RayKind::Shadow];
+          if (backend.occluded(shadow)) continue;
+        }
+        radiance += albedo_weight * ls.irradiance * cos_theta;
+      }
+    }
+    if (!whitted || pending.depth >= settings.max_depth) continue;
+
+    const SpecularSplit split = split_specular(m, sp, pending.ray.direction);
+    const auto push = [&](const vec3& origin, const vec3& direction, float w, RayKind kind) {
+      const vec3 weight = pending.weight * w;
+      if (max_component(weight) < settings.min_weight || top == stack.size()) return;
+      PendingRay next;
+      next.ray.origin = origin;
+      next.ray.direction = direction;
+      next.weight = weight;
+      next.depth = pending.depth + 1;
+      next.kind = kind;
+      next.from = surface.entity;
+      stack[top++] = next;
+    };
+    if (split.reflect_weight > 0.0f)
+      push(offset_ray_origin(sp.position, sp.position_error, sp.geometric_normal), split.reflect_direction,
+           split.reflect_weight, RayKind::Reflection);
+    if (split.refract_weight > 0.0f)
+      push(offset_ray_origin(sp.position, sp.position_error, -sp.geometric_normal), split.refract_direction,
+           split.refract_weight, RayKind::Refraction);
+  }
+  return radiance;
+}
+
+/// Pixel offsets of one tile in packet order: blocks of packet_w × packet_h pixels, so each
+/// packet covers a compact square-ish footprint (coherent rays).
+inline void tile_pixels(std::uint32_t x0, std::uint32_t y0, std::uint32_t x1, std::uint32_t y1,
+                        std::uint32_t packet_w, std::uint32_t packet_h,
+                        std::vector<std::pair<std::uint32_t, std::uint32_t>>& pixels) {
+  pixels.clear();
+  for (std::uint32_t by = y0; by < y1; by += packet_h)
+    for (std::uint32_t bx = x0; bx < x1; bx += packet_w)
+      for (std::uint32_t y = by; y < std::min(by + packet_h, y1); ++y)
+        for (std::uint32_t x = bx; x < std::min(bx + packet_w, x1); ++x) pixels.emplace_back(x, y);
+}
+
+} // namespace detail
+
+template <typename Backend>
+FrameStats render_frame(const Backend& backend, const Camera& camera,
+                        std::span<const SceneLight> lights, const TraceSettings& settings,
+                        Framebuffer& out) {
+  static_assert(TraceBackend<Backend>);
+  if (settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow)
+    throw UnavailableError(std::string("mode '") + trace_mode_name(settings.mode) +
+                           "' is not available yet");
+  const std::uint32_t width = out.width();
+  const std::uint32_t height = out.height();
+  const CameraRays camera_rays(camera, width, height);
+  const std::uint32_t tile = std::max(1u, settings.tile_size);
+  const std::uint32_t tiles_x = (width + tile - 1) / tile;
+  const std::uint32_t tiles_y = (height + tile - 1) / tile;
+  const std::uint32_t packet_w = backend.packet_width() >= 4 ? 4 : backend.packet_width() >= 2 ? 2 : 1;
+  const std::uint32_t packet_h = std::max(1u, backend.packet_width() / packet_w);
+
+  tbb::combinable<RayCounts> counts;
+  const auto render_tiles = [&](const tbb::blocked_range<std::uint32_t>& range) {
+    // Denormals slow Embree down and make it warn: flush them on every worker.
+    _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+    _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+    RayCounts& local = counts.local();
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> pixels;
+    std::vector<Ray> rays;
+    std::vector<Hit> hits;
+    for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+      const std::uint32_t x0 = (t % tiles_x) * tile;
+      const std::uint32_t y0 = (t / tiles_x) * tile;
+      detail::tile_pixels(x0, y0, std::min(x0 + tile, width), std::min(y0 + tile, height), packet_w,
+                          packet_h, pixels);
+      rays.resize(pixels.size());
+      hits.resize(pixels.size());
+      for (std::size_t i = 0; i < pixels.size(); ++i) rays[i] = camera_rays.ray(pixels[i].first, pixels[i].second);
+      backend.intersect_coherent(rays, hits);
+      local[RayKind::Primary] += pixels.size();
+      for (std::size_t i = 0; i < pixels.size(); ++i)
+        out.at(pixels[i].first, pixels[i].second) = detail::shade(backend, rays[i], hits[i], lights, settings, local);
+    }
+  };
+  const int threads = settings.threads > 0 ? int(settings.threads)
+                                           : int(std::max(1u, std::thread::hardware_concurrency()));
+  tbb::task_arena arena(threads);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tiles_x * tiles_y, 1), render_tiles,
+                      tbb::simple_partitioner());
+  });
+  FrameStats stats;
+  counts.combine_each([&](const RayCounts& c) { stats.rays += c; });
+  return stats;
+}
+
+} // namespace specula

@@ -1,0 +1,66 @@
+#pragma once
+// Small helpers to build test worlds in code.
+
+#include "geometry/primitives.h"
+#include "scene/components.h"
+#include "scene/hierarchy.h"
+#include "scene/scene.h"
+
+#include <memory>
+#include <string>
+
+namespace specula::test {
+
+inline MeshSource primitive(const std::string& name, float radius = 1.0f, vec3 size = vec3(1.0f),
+                            std::uint32_t segments = 32, std::uint32_t rings = 16) {
+  MeshSource s;
+  s.kind = MeshSource::Kind::Primitive;
+  s.primitive = name;
+  s.radius = radius;
+  s.size = size;
+  s.segments = segments;
+  s.rings = rings;
+  return s;
+}
+
+inline ecs::Entity add_mesh(ecs::Registry& reg, const MeshSource& source, const Transform& t,
+                            const Material& m = Material{},
+                            Kinematics::Type kinematics = Kinematics::Type::Static) {
+  const ecs::Entity e = reg.create();
+  reg.emplace<Transform>(e, t);
+  reg.emplace<Mesh>(e, Mesh{std::make_shared<const TriangleMesh>(make_primitive(source, "test")), source, {}, 0});
+  reg.emplace<Material>(e, m);
+  reg.emplace<Kinematics>(e, Kinematics{kinematics});
+  return e;
+}
+
+inline Transform at(const vec3& translation, const vec3& scale = vec3(1.0f),
+                    const quat& rotation = quat(1, 0, 0, 0)) {
+  Transform t;
+  t.translation = translation;
+  t.scale = scale;
+  t.rotation = rotation;
+  return t;
+}
+
+inline ecs::Entity add_point_light(ecs::Registry& reg, const vec3& position, float intensity) {
+  const ecs::Entity e = reg.create();
+  reg.emplace<Transform>(e, at(position));
+  Light l;
+  l.intensity = intensity;
+  reg.emplace<Light>(e, l);
+  return e;
+}
+
+inline ecs::Entity add_camera(ecs::Registry& reg, const vec3& position, const vec3& look_at,
+                              float fov_degrees = 45.0f) {
+  const ecs::Entity e = reg.create();
+  Camera c;
+  c.position = position;
+  c.look_at = look_at;
+  c.vertical_fov = glm::radians(fov_degrees);
+  reg.emplace<Camera>(e, c);
+  return e;
+}
+
+} // namespace specula::test

@@ -1,0 +1,121 @@
+// Self-intersection: a ray spawned from a surface with offset_ray_origin never hits that surface,
+// at any scale and distance from the origin (error-bound offsets, geometry/ray_offset.h).
+
+#include "accel/embree/embree_accel.h"
+#include "accel/embree/embree_backend.h"
+#include "geometry/ray_offset.h"
+#include "scene_builder.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace specula {
+namespace {
+
+struct Counts {
+  int self_hits_with_offset = 0;
+  int self_hits_without_offset = 0;
+  int on_wrong_side = 0;
+};
+
+/// A tessellated, rotated plane of the given size placed at `center`; rays leave random points on
+/// it (many near edges and vertices) in random directions of either hemisphere, down to grazing.
+Counts spawn_rays(float size, const vec3& center, std::uint32_t seed) {
+  ecs::Registry reg;
+  const quat tilt = glm::normalize(quat(0.9f, 0.3f, -0.2f, 0.25f));
+  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(size, 1.0f, size), 3, 8), test::at(center, vec3(1.0f), tilt));
+  update_world_transforms(reg, 0);
+  EmbreeAccel accel;
+  accel.update(reg);
+  const EmbreeBackend backend(accel, 1);
+  const Surface& surface = accel.surfaces()[0];
+  const TriangleMesh& mesh = *surface.mesh;
+
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<std::size_t> pick(0, mesh.triangles.size() - 1);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  Counts counts;
+  for (int i = 0; i < 20000; ++i) {
+    const uvec3 tri = mesh.triangles[pick(rng)];
+    const vec3 a = surface.positions[tri.x], b = surface.positions[tri.y], c = surface.positions[tri.z];
+    // Barycentrics biased to the edges: every third point sits within 1e-4 of one.
+    float u = u01(rng), v = u01(rng);
+    if (u + v > 1.0f) { u = 1.0f - u; v = 1.0f - v; }
+    if (i % 3 == 0) u *= 1e-4f;
+    const vec3 p = (1.0f - u - v) * a + u * b + v * c;
+    const vec3 p_error = barycentric_error(a, b, c, 1.0f - u - v, u, v);
+    const vec3 n = glm::normalize(glm::cross(b - a, c - a));
+    const float side = (i % 2 == 0) ? 1.0f : -1.0f;
+    // Directions from grazing (cos 1e-3) to normal.
+    const float cos_theta = i % 5 == 0 ? 1e-3f : u01(rng);
+    const float phi = 6.2831853f * u01(rng);
+    const vec3 t = glm::normalize(b - a);
+    const vec3 s = glm::cross(n, t);
+    const float sin_theta = std::sqrt(1.0f - cos_theta * cos_theta);
+    const vec3 dir = glm::normalize(side * cos_theta * n + sin_theta * (std::cos(phi) * t + std::sin(phi) * s));
+
+    Ray ray;
+    ray.origin = offset_ray_origin(p, p_error, side * n);
+    ray.direction = dir;
+    Hit hit;
+    backend.intersect(ray, hit);
+    counts.self_hits_with_offset += hit.hit() ? 1 : 0;
+    // The offset origin must lie strictly on the side the ray leaves to (checked in double).
+    const glm::dvec3 rel = glm::dvec3(ray.origin) - glm::dvec3(a);
+    const double plane = glm::dot(rel, glm::dvec3(glm::cross(glm::dvec3(b) - glm::dvec3(a), glm::dvec3(c) - glm::dvec3(a))));
+    counts.on_wrong_side += side * plane > 0.0 ? 0 : 1;
+
+    ray.origin = p;
+    backend.intersect(ray, hit);
+    counts.self_hits_without_offset += hit.hit() ? 1 : 0;
+  }
+  return counts;
+}
+
+TEST(RayOffset, NoSelfIntersectionAtUnitScale) {
+  const Counts c = spawn_rays(2.0f, vec3(0.3f, -0.2f, 0.1f), 1);
+  EXPECT_EQ(c.self_hits_with_offset, 0);
+  EXPECT_EQ(c.on_wrong_side, 0);
+  // The property is not vacuous: without the offset, rays do hit their own surface.
+  EXPECT_GT(c.self_hits_without_offset, 0);
+}
+
+TEST(RayOffset, NoSelfIntersectionOnALargeSceneFarFromTheOrigin) {
+  const Counts c = spawn_rays(1e5f, vec3(1e5f, -3e4f, 2e5f), 2);
+  EXPECT_EQ(c.self_hits_with_offset, 0);
+  EXPECT_EQ(c.on_wrong_side, 0);
+  EXPECT_GT(c.self_hits_without_offset, 0);
+}
+
+TEST(RayOffset, NoSelfIntersectionOnATinyScene) {
+  const Counts c = spawn_rays(1e-3f, vec3(2e-3f, 1e-3f, -1e-3f), 3);
+  EXPECT_EQ(c.self_hits_with_offset, 0);
+  EXPECT_EQ(c.on_wrong_side, 0);
+}
+
+TEST(RayOffset, NoSelfIntersectionOnATinySceneFarFromTheOrigin) {
+  const Counts c = spawn_rays(1e-3f, vec3(10.0f, 5.0f, -7.0f), 4);
+  EXPECT_EQ(c.self_hits_with_offset, 0);
+  EXPECT_EQ(c.on_wrong_side, 0);
+  EXPECT_GT(c.self_hits_without_offset, 0);
+}
+
+TEST(RayOffset, OffsetScalesWithTheTrianglesMagnitude) {
+  // A few ULPs of the vertices' magnitude: far below any feature size, at every scale, including
+  // hit points whose coordinates are near zero on a large triangle.
+  for (const float m : {1e-6f, 1e-3f, 1.0f, 1e3f, 1e5f}) {
+    // Tilted so no coordinate is exact; the hit point is near the origin.
+    const vec3 a(-m, -0.3f * m, -m), b(m, 0.1f * m, -m), c(0, 0.2f * m, m);
+    const vec3 n = glm::normalize(glm::cross(b - a, c - a));
+    const float third = 1.0f / 3.0f;
+    const vec3 p = third * a + third * b + third * c;
+    const vec3 q = offset_ray_origin(p, barycentric_error(a, b, c, third, third, third), n);
+    const float moved = glm::dot(q - p, n);
+    EXPECT_LT(moved, 1e-5f * m) << m;
+    EXPECT_GT(moved, 1e-8f * m) << m; // not a vanishing ULP of a near-zero coordinate
+  }
+}
+
+} // namespace
+} // namespace specula

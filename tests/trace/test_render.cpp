@@ -1,0 +1,311 @@
+// Properties of rendered frames and of the Whitted integrator's rays, on the Embree backend.
+
+#include "accel/embree/embree_accel.h"
+#include "accel/embree/embree_backend.h"
+#include "scene_builder.h"
+#include "systems/schedule.h"
+#include "trace/render_job.h"
+#include "trace/renderer_impl.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+namespace specula {
+namespace {
+
+Framebuffer render(ecs::Registry& reg, TraceMode mode, std::uint32_t size, std::uint32_t threads = 2,
+                   std::uint32_t packet = 16, std::uint32_t tile = 16) {
+  RenderJob job;
+  job.settings.mode = mode;
+  job.settings.threads = threads;
+  job.settings.tile_size = tile;
+  job.packet_width = packet;
+  job.image = Framebuffer(size, size);
+  prepare_rendering(reg, std::move(job));
+  Schedule schedule;
+  schedule.tick(reg, 0.0);
+  return reg.resource<RenderJob>().image;
+}
+
+/// A closed diffuse box (seen from inside) with a point light and the camera inside it, scaled by
+/// `scale` and moved to `center`.
+void closed_box(ecs::Registry& reg, float scale, const vec3& center) {
+  test::add_mesh(reg, test::primitive("box", 1.0f, vec3(4.0f)), test::at(center, vec3(scale)));
+  // A sphere on the floor: its own shadow is inside the box too (the light must still reach
+  // every wall point it can see directly).
+  test::add_point_light(reg, center + scale * vec3(0.5f, 1.2f, 0.3f), scale * scale * 4.0f);
+  test::add_camera(reg, center + scale * vec3(0.0f, 0.0f, 1.8f), center + scale * vec3(0.1f, -0.2f, -2.0f), 100.0f);
+}
+
+/// A tessellated sphere and a box hovering just above a large plane, lit by a light at the camera
+/// ("headlight"): every point the camera sees is visible from the light, so any shadowed pixel
+/// is acne. They hover (2% of their size) rather than touch: in a contact crease two surfaces come
+/// closer than any offset can resolve, which is a different limit (docs/design/ray-offsets.md).
+void headlight_scene(ecs::Registry& reg, float scale, const vec3& center) {
+  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(40.0f), 3, 20), test::at(center, vec3(scale)));
+  test::add_mesh(reg, test::primitive("sphere", 1.0f, vec3(1), 48, 24), test::at(center + scale * vec3(0, 1.02f, 0), vec3(scale)));
+  test::add_mesh(reg, test::primitive("box", 1.0f, vec3(1.5f)),
+                 test::at(center + scale * vec3(-2.5f, 0.78f, 0.5f), vec3(scale), glm::angleAxis(0.6f, vec3(0, 1, 0))));
+  const vec3 eye = center + scale * vec3(1.5f, 2.5f, 6.0f);
+  test::add_camera(reg, eye, center + scale * vec3(-0.5f, 0.5f, 0.0f), 50.0f);
+  test::add_point_light(reg, eye, scale * scale * 40.0f);
+}
+
+/// Pixels darker with shadow rays than without, where nothing can truly be in shadow.
+int count_shadowed_pixels(const Framebuffer& with_shadows, const Framebuffer& without) {
+  int n = 0;
+  for (std::size_t i = 0; i < with_shadows.pixel_count(); ++i) {
+    const vec3 a = with_shadows.pixels()[i];
+    const vec3 b = without.pixels()[i];
+    if (a.x < b.x * (1.0f - 1e-4f) || a.y < b.y * (1.0f - 1e-4f) || a.z < b.z * (1.0f - 1e-4f)) ++n;
+  }
+  return n;
+}
+
+struct Scale {
+  float scale;
+  vec3 center;
+};
+const Scale kScales[] = {{1.0f, vec3(0.0f)}, {1e5f, vec3(1e5f, -2e5f, 1e5f)}, {1e-3f, vec3(0.0f)},
+                         {1e-3f, vec3(3.0f, 1.0f, -2.0f)}};
+
+TEST(Render, PointLightInsideAClosedBoxLightsEveryPixel) {
+  for (const Scale& s : kScales) {
+    ecs::Registry lit, unshadowed;
+    closed_box(lit, s.scale, s.center);
+    closed_box(unshadowed, s.scale, s.center);
+    const Framebuffer whitted = render(lit, TraceMode::Whitted, 96);
+    const Framebuffer cast = render(unshadowed, TraceMode::Cast, 96);
+    int dark = 0;
+    for (const vec3& p : whitted.pixels()) dark += (p.x > 0.0f && p.y > 0.0f && p.z > 0.0f) ? 0 : 1;
+    EXPECT_EQ(dark, 0) << "scale " << s.scale;
+    // In a convex room nothing is in shadow: shadow rays must change no pixel.
+    EXPECT_EQ(count_shadowed_pixels(whitted, cast), 0) << "scale " << s.scale;
+  }
+}
+
+TEST(Render, NoShadowAcneOnUnitLargeFarAndTinyScenes) {
+  // Not the tiny-and-far case: a 1 mm object 3 m from the origin sits where float spacing is
+  // 0.02% of its size, and headlight rays grazing its silhouette flip (docs/design/ray-offsets.md).
+  for (const Scale& s : {kScales[0], kScales[1], kScales[2]}) {
+    ecs::Registry a, b;
+    headlight_scene(a, s.scale, s.center);
+    headlight_scene(b, s.scale, s.center);
+    const Framebuffer whitted = render(a, TraceMode::Whitted, 160);
+    const Framebuffer cast = render(b, TraceMode::Cast, 160);
+    EXPECT_EQ(count_shadowed_pixels(whitted, cast), 0) << "scale " << s.scale << " centre " << s.center.x;
+    int lit = 0;
+    for (const vec3& p : whitted.pixels()) lit += p.x > 0.0f ? 1 : 0;
+    EXPECT_GT(lit, 160 * 160 / 2) << "the scene must fill the frame for the test to mean something";
+  }
+}
+
+TEST(Render, ShadowsAreCastWhereTheyShouldBe) {
+  // The counterpart of the acne test: with the light above, the sphere does shadow the plane.
+  ecs::Registry a, b;
+  for (ecs::Registry* reg : {&a, &b}) {
+    test::add_mesh(*reg, test::primitive("plane", 1.0f, vec3(40.0f)), test::at(vec3(0)));
+    test::add_mesh(*reg, test::primitive("sphere", 1.0f), test::at(vec3(0, 1.5f, 0)));
+    test::add_camera(*reg, vec3(0, 6, 6), vec3(0), 50.0f);
+    test::add_point_light(*reg, vec3(0, 8, 0), 100.0f);
+  }
+  const Framebuffer whitted = render(a, TraceMode::Whitted, 64);
+  const Framebuffer cast = render(b, TraceMode::Cast, 64);
+  EXPECT_GT(count_shadowed_pixels(whitted, cast), 20);
+}
+
+/// A world with a slab of glass: 4 × 0.5 × 4 at the origin.
+struct GlassSlab {
+  ecs::Registry reg;
+  GlassSlab() {
+    Material glass;
+    glass.base_color = vec3(1.0f);
+    glass.transmission = 1.0f;
+    glass.ior = 1.5f;
+    test::add_mesh(reg, test::primitive("box", 1.0f, vec3(4.0f, 0.5f, 4.0f)), test::at(vec3(0)), glass);
+    update_world_transforms(reg, 0);
+    reg.set_resource<EmbreeAccel>().update(reg);
+  }
+  EmbreeBackend backend() { return EmbreeBackend(reg.resource<EmbreeAccel>(), 1); }
+};
+
+/// Follows the refracted branch of the integrator's split through the scene.
+struct Step {
+  detail::ShadingPoint sp;
+  detail::SpecularSplit split;
+  Ray next;
+};
+Step follow_refraction(const EmbreeBackend& backend, const Ray& ray) {
+  Hit hit;
+  backend.intersect(ray, hit);
+  EXPECT_TRUE(hit.hit());
+  const Surface& s = backend.surfaces()[hit.surface];
+  Step step;
+  step.sp = detail::shading_point(s, hit, ray.direction);
+  step.split = detail::split_specular(s.material, step.sp, ray.direction);
+  step.next.origin = offset_ray_origin(step.sp.position, step.sp.position_error, -step.sp.geometric_normal);
+  step.next.direction = step.split.refract_direction;
+  return step;
+}
+
+TEST(Render, ARayThroughAGlassSlabExitsParallelToItsEntry) {
+  GlassSlab slab;
+  const EmbreeBackend backend = slab.backend();
+  for (const float degrees : {0.0f, 10.0f, 30.0f, 60.0f, 80.0f}) {
+    const float theta = glm::radians(degrees);
+    Ray ray;
+    ray.direction = vec3(std::sin(theta), -std::cos(theta), 0.0f);
+    ray.origin = vec3(-0.5f, 0.25f, 0.1f) - 3.0f * ray.direction; // aimed at the top face
+    const Step in = follow_refraction(backend, ray);
+    ASSERT_GT(in.split.refract_weight, 0.0f);
+    EXPECT_TRUE(in.sp.front_face);
+    const Step out = follow_refraction(backend, in.next);
+    ASSERT_GT(out.split.refract_weight, 0.0f) << degrees;
+    EXPECT_FALSE(out.sp.front_face);
+    EXPECT_NEAR(glm::dot(out.split.refract_direction, ray.direction), 1.0f, 1e-5f) << degrees;
+    // Lateral shift of a slab of thickness h: h·sin(θi − θt) / cos θt.
+    const float theta_t = std::asin(std::sin(theta) / 1.5f);
+    const float shift = 0.5f * std::sin(theta - theta_t) / std::cos(theta_t);
+    const vec3 exit = out.sp.position;
+    const vec3 straight = ray.origin + ray.direction * (glm::dot(exit - ray.origin, ray.direction));
+    EXPECT_NEAR(glm::length(exit - straight), shift, 1e-4f) << degrees;
+    // Energy: what is not reflected goes on.
+    EXPECT_NEAR(in.split.reflect_weight + in.split.refract_weight, 1.0f, 1e-6f);
+  }
+}
+
+TEST(Render, TotalInternalReflectionBeyondTheCriticalAngle) {
+  GlassSlab slab;
+  const EmbreeBackend backend = slab.backend();
+  const float critical = std::asin(1.0f / 1.5f);
+  for (const float delta : {0.02f, 0.2f, 0.5f}) {
+    const float theta = critical + delta;
+    Ray ray; // inside the slab, heading up to the top face
+    ray.origin = vec3(0.0f, 0.0f, 0.0f);
+    ray.direction = vec3(std::sin(theta), std::cos(theta), 0.0f);
+    Hit hit;
+    backend.intersect(ray, hit);
+    ASSERT_TRUE(hit.hit());
+    const Surface& s = backend.surfaces()[hit.surface];
+    const auto sp = detail::shading_point(s, hit, ray.direction);
+    EXPECT_FALSE(sp.front_face);
+    const auto split = detail::split_specular(s.material, sp, ray.direction);
+    EXPECT_EQ(split.refract_weight, 0.0f) << delta;
+    EXPECT_EQ(split.reflect_weight, 1.0f) << delta;
+    EXPECT_NEAR(split.reflect_direction.y, -ray.direction.y, 1e-5f);
+    EXPECT_NEAR(split.reflect_direction.x, ray.direction.x, 1e-5f);
+  }
+  // Just below the critical angle some light gets out.
+  Ray ray;
+  ray.direction = vec3(std::sin(critical - 0.02f), std::cos(critical - 0.02f), 0.0f);
+  Hit hit;
+  backend.intersect(ray, hit);
+  const Surface& s = backend.surfaces()[hit.surface];
+  const auto split = detail::split_specular(s.material, detail::shading_point(s, hit, ray.direction), ray.direction);
+  EXPECT_GT(split.refract_weight, 0.0f);
+}
+
+TEST(Render, ReflectionOffAMirrorPreservesTheAngle) {
+  ecs::Registry reg;
+  Material mirror;
+  mirror.reflectivity = 1.0f;
+  test::add_mesh(reg, test::primitive("sphere", 2.0f, vec3(1), 64, 32), test::at(vec3(0)), mirror);
+  update_world_transforms(reg, 0);
+  reg.set_resource<EmbreeAccel>().update(reg);
+  const EmbreeBackend backend(reg.resource<EmbreeAccel>(), 1);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-1.3f, 1.3f); // inside the tessellated outline
+  for (int i = 0; i < 500; ++i) {
+    Ray ray;
+    ray.origin = vec3(u(rng), u(rng), 10.0f);
+    ray.direction = vec3(0, 0, -1);
+    Hit hit;
+    backend.intersect(ray, hit);
+    ASSERT_TRUE(hit.hit());
+    const Surface& s = backend.surfaces()[hit.surface];
+    const auto sp = detail::shading_point(s, hit, ray.direction);
+    const auto split = detail::split_specular(s.material, sp, ray.direction);
+    EXPECT_EQ(split.reflect_weight, 1.0f);
+    EXPECT_EQ(split.refract_weight, 0.0f);
+    EXPECT_NEAR(glm::dot(split.reflect_direction, sp.shading_normal),
+                -glm::dot(ray.direction, sp.shading_normal), 1e-5f);
+    EXPECT_GT(glm::dot(split.reflect_direction, sp.geometric_normal), 0.0f); // leaves the surface
+  }
+}
+
+ecs::Registry& cornell(ecs::Registry& reg) {
+  // Diffuse walls, a mirror sphere and a glass sphere: every ray kind appears.
+  Material white, red, mirror, glass;
+  red.base_color = vec3(0.7f, 0.1f, 0.1f);
+  mirror.reflectivity = 0.9f;
+  glass.transmission = 0.95f;
+  glass.ior = 1.5f;
+  test::add_mesh(reg, test::primitive("box", 1.0f, vec3(4.0f)), test::at(vec3(0, 2, 0)), white);
+  test::add_mesh(reg, test::primitive("box", 1.0f, vec3(0.2f, 4.0f, 4.0f)), test::at(vec3(-1.9f, 2, 0)), red);
+  test::add_mesh(reg, test::primitive("sphere", 0.7f), test::at(vec3(-0.8f, 0.7f, -0.5f)), mirror);
+  test::add_mesh(reg, test::primitive("sphere", 0.6f), test::at(vec3(0.9f, 0.6f, 0.4f)), glass);
+  test::add_point_light(reg, vec3(0, 3.6f, 0), 8.0f);
+  test::add_camera(reg, vec3(0, 2, 1.9f), vec3(0, 1.5f, -2), 70.0f);
+  return reg;
+}
+
+TEST(Render, ImagesAreBitIdenticalWhateverTheThreadCountTileOrPacketWidth) {
+  ecs::Registry a, b, c, d;
+  const Framebuffer one = render(cornell(a), TraceMode::Whitted, 80, 1, 16, 16);
+  const Framebuffer two = render(cornell(b), TraceMode::Whitted, 80, 2, 16, 16);
+  const Framebuffer small_tiles = render(cornell(c), TraceMode::Whitted, 80, 2, 4, 8);
+  const Framebuffer single_rays = render(cornell(d), TraceMode::Whitted, 80, 2, 1, 16);
+  EXPECT_TRUE(one == two);
+  EXPECT_TRUE(one == small_tiles);
+  EXPECT_TRUE(one == single_rays);
+  EXPECT_TRUE(a.resource<RenderJob>().last.rays == b.resource<RenderJob>().last.rays);
+}
+
+TEST(Render, RayCountsFollowTheMode) {
+  ecs::Registry a, b;
+  const std::uint32_t size = 64;
+  render(cornell(a), TraceMode::Cast, size);
+  const RayCounts cast = a.resource<RenderJob>().last.rays;
+  EXPECT_EQ(cast[RayKind::Primary], size * size);
+  EXPECT_EQ(cast[RayKind::Shadow] + cast[RayKind::Reflection] + cast[RayKind::Refraction], 0u);
+  render(cornell(b), TraceMode::Whitted, size);
+  const RayCounts whitted = b.resource<RenderJob>().last.rays;
+  EXPECT_EQ(whitted[RayKind::Primary], size * size);
+  EXPECT_GT(whitted[RayKind::Shadow], 0u);
+  EXPECT_GT(whitted[RayKind::Reflection], 0u);
+  EXPECT_GT(whitted[RayKind::Refraction], 0u);
+}
+
+TEST(Render, NoShadowRaysWithoutLights) {
+  ecs::Registry reg;
+  cornell(reg);
+  const auto lights = reg.view<Light>().entities();
+  for (const ecs::Entity e : lights) reg.destroy(e);
+  render(reg, TraceMode::Whitted, 32);
+  EXPECT_EQ(reg.resource<RenderJob>().last.rays[RayKind::Shadow], 0u);
+}
+
+TEST(Render, MaxDepthBoundsTheBounces) {
+  // Two parallel mirrors facing each other: without the depth limit the ray would bounce forever.
+  Material mirror;
+  mirror.reflectivity = 1.0f;
+  for (const std::uint32_t depth : {0u, 1u, 5u, 12u}) {
+    ecs::Registry r2;
+    test::add_mesh(r2, test::primitive("box", 1.0f, vec3(0.1f, 10, 10)), test::at(vec3(-2, 0, 0)), mirror);
+    test::add_mesh(r2, test::primitive("box", 1.0f, vec3(0.1f, 10, 10)), test::at(vec3(2, 0, 0)), mirror);
+    test::add_camera(r2, vec3(0, 0, 0), vec3(-1, 0, 0.001f), 10.0f);
+    RenderJob job;
+    job.settings.max_depth = depth;
+    job.settings.min_weight = 0.0f;
+    job.image = Framebuffer(8, 8);
+    prepare_rendering(r2, std::move(job));
+    Schedule schedule;
+    schedule.tick(r2, 0.0);
+    EXPECT_EQ(r2.resource<RenderJob>().last.rays[RayKind::Reflection], 64u * depth) << depth;
+  }
+}
+
+} // namespace
+} // namespace specula
