@@ -134,7 +134,10 @@ public:
       std::size_t best = 3; // at most two edits away counts as a likely typo
       for (const std::string_view candidate : allowed) {
         const std::size_t d = edit_distance(key, candidate);
-        if (d < best) best = d, closest = candidate;
+        if (d < best) {
+          best = d;
+          closest = candidate;
+        }
       }
       if (!closest.empty()) message += " (did you mean \"" + std::string(closest) + "\"?)";
       message += "; allowed here:";
@@ -154,7 +157,6 @@ public:
   }
   [[nodiscard]] bool has(std::string_view key) const { return find(key) != nullptr; }
   [[nodiscard]] std::string path(std::string_view key) const { return member_path(path_, key); }
-  [[nodiscard]] const std::string& path() const { return path_; }
 
 private:
   const Reader& reader_;
