@@ -9,9 +9,9 @@ front sphere carries a ray-cache cube; the hidden spheres are traced conventiona
 Layout (all in metres, +Y up, the camera looks down -Z):
   * the front ("mirror") sphere, radius 1, rests on the ground at the origin;
   * the camera sits at z = 6, slightly above the sphere's centre, looking at it (30 deg fov);
-  * hidden sphere slots lie on a shell of radius 12 around the front sphere's centre, in 4 rows
-    (elevation 0, 8, 16, 24 deg) of 8 columns (azimuth -49 .. +49 deg in 14 deg steps), all
-    behind the camera; a scene with N hidden spheres takes the N slots nearest the middle of the
+  * hidden spheres (radius 0.75) sit on a shell of radius 10 around the front sphere's centre, in
+    4 rows (elevation 0, 11, 22, 33 deg) of 8 columns (azimuth -38.5 .. +38.5 deg in 11 deg
+    steps), all behind the camera: large and near enough to fill a good part of the reflection; a scene with N hidden spheres takes the N slots nearest the middle of the
     grid, so the sets are nested (the 4 of mirror_spheres_4 are among the 8 of mirror_spheres_8).
 tests/scene/test_json_scene.cpp checks that every hidden sphere lies outside the camera frustum,
 that the front sphere lies inside it, and that no two spheres (or a sphere and the camera) meet.
@@ -30,11 +30,11 @@ LINE_WIDTH = 100
 FRONT_CENTER = (0.0, 1.0, 0.0)
 FRONT_RADIUS = 1.0
 CAMERA_POSITION = (0.0, 1.6, 6.0)
-SHELL_RADIUS = 12.0
-HIDDEN_RADIUS = 0.6
+SHELL_RADIUS = 10.0
+HIDDEN_RADIUS = 0.75
 ROWS, COLUMNS = 4, 8
-ELEVATION_STEP_DEG = 8.0
-AZIMUTH_STEP_DEG = 14.0
+ELEVATION_STEP_DEG = 11.0
+AZIMUTH_STEP_DEG = 11.0
 
 
 def rounded(v, digits=4):
