@@ -124,8 +124,9 @@ public:
          std::initializer_list<std::string_view> allowed, std::string_view what = "")
       : reader_(reader), json_(j), path_(std::move(path)) {
     if (!j.is_object())
-      reader.fail(path_, "expected an object" + (what.empty() ? "" : " (" + std::string(what) + ")") +
-                             ", got " + describe(j));
+      reader.fail(path_, "expected an object" +
+                             (what.empty() ? "" : " (" + std::string(what) + ")") + ", got " +
+                             describe(j));
     for (const auto& item : j.items()) {
       const std::string& key = item.key();
       if (std::find(allowed.begin(), allowed.end(), key) != allowed.end()) continue;
@@ -214,7 +215,8 @@ std::string read_string(const Reader& r, const json& j, const std::string& path)
 
 const json& read_array(const Reader& r, const json& j, const std::string& path,
                        std::string_view what) {
-  if (!j.is_array()) r.fail(path, "expected an array (" + std::string(what) + "), got " + describe(j));
+  if (!j.is_array())
+    r.fail(path, "expected an array (" + std::string(what) + "), got " + describe(j));
   return j;
 }
 
@@ -226,7 +228,8 @@ glm::vec<N, float> read_vec(const Reader& r, const json& j, const std::string& p
                      std::string(kShape[N]) + ", got " + describe(j));
   glm::vec<N, float> v;
   for (int i = 0; i < N; ++i)
-    v[i] = read_float(r, j[static_cast<std::size_t>(i)], element_path(path, static_cast<std::size_t>(i)));
+    v[i] = read_float(r, j[static_cast<std::size_t>(i)],
+                      element_path(path, static_cast<std::size_t>(i)));
   return v;
 }
 
@@ -260,8 +263,8 @@ float read_non_negative(const Reader& r, const json& j, const std::string& path)
 /// Unit quaternions pass through untouched and others are normalized, so a written rotation
 /// reads back bit-identical (normalizing twice could move the last bit).
 quat unit_or_normalized(const quat& q) {
-  const double length = std::sqrt(double(q.x) * q.x + double(q.y) * q.y + double(q.z) * q.z +
-                                  double(q.w) * q.w);
+  const double length =
+      std::sqrt(double(q.x) * q.x + double(q.y) * q.y + double(q.z) * q.z + double(q.w) * q.w);
   if (std::abs(length - 1.0) <= 1e-6) return q;
   return quat(static_cast<float>(q.w / length), static_cast<float>(q.x / length),
               static_cast<float>(q.y / length), static_cast<float>(q.z / length));
@@ -270,7 +273,8 @@ quat unit_or_normalized(const quat& q) {
 /// [x, y, z, w] in the file (the glTF order); glm's constructor takes w first.
 quat read_quat(const Reader& r, const json& j, const std::string& path) {
   const vec4 v = read_vec<4>(r, j, path);
-  const double length2 = double(v.x) * v.x + double(v.y) * v.y + double(v.z) * v.z + double(v.w) * v.w;
+  const double length2 =
+      double(v.x) * v.x + double(v.y) * v.y + double(v.z) * v.z + double(v.w) * v.w;
   r.check(length2 > 1e-12, path,
           "rotation quaternion [x, y, z, w] has zero length (identity is [0, 0, 0, 1])");
   return unit_or_normalized(quat(v.w, v.x, v.y, v.z));
@@ -319,7 +323,8 @@ RenderSettings read_settings(const Reader& r, const json& j, const std::string& 
 Transform read_transform(const Reader& r, const json& j, const std::string& path) {
   Transform t;
   const Object o(r, j, path, {"translation", "rotation", "look_at", "scale"}, "transform");
-  if (const json* v = o.find("translation")) t.translation = read_vec<3>(r, *v, o.path("translation"));
+  if (const json* v = o.find("translation"))
+    t.translation = read_vec<3>(r, *v, o.path("translation"));
   if (o.has("rotation") && o.has("look_at"))
     r.fail(o.path("look_at"), "give either \"rotation\" or \"look_at\", not both");
   if (const json* v = o.find("rotation")) t.rotation = read_quat(r, *v, o.path("rotation"));
@@ -350,7 +355,8 @@ MeshSource read_primitive(const Reader& r, const json& j, const std::string& pat
     if (const json* v = o.find("radius")) s.radius = read_positive(r, *v, o.path("radius"));
     if (const json* v = o.find("segments"))
       s.segments = read_u32(r, *v, o.path("segments"), 3, kMaxTessellation);
-    if (const json* v = o.find("rings")) s.rings = read_u32(r, *v, o.path("rings"), 2, kMaxTessellation);
+    if (const json* v = o.find("rings"))
+      s.rings = read_u32(r, *v, o.path("rings"), 2, kMaxTessellation);
   } else if (s.primitive == "box") {
     const Object o(r, j, path, {"primitive", "size"}, "box");
     if (const json* v = o.find("size")) s.size = read_box_size(r, *v, o.path("size"));
@@ -368,8 +374,9 @@ MeshSource read_primitive(const Reader& r, const json& j, const std::string& pat
     if (const json* v = o.find("segments"))
       s.segments = read_u32(r, *v, o.path("segments"), 3, kMaxTessellation);
   } else {
-    r.fail(member_path(path, "primitive"), "unknown primitive \"" + s.primitive +
-                                               "\" (expected sphere, box, plane, cylinder or cone)");
+    r.fail(member_path(path, "primitive"),
+           "unknown primitive \"" + s.primitive +
+               "\" (expected sphere, box, plane, cylinder or cone)");
   }
   return s;
 }
@@ -384,14 +391,15 @@ MeshSource read_file_mesh(const Reader& r, const json& j, const std::string& pat
   const std::string ext = lower(fs::path(s.path).extension().string());
   const bool gltf = ext == ".gltf" || ext == ".glb";
   if (!gltf && !is_mesh_file_extension(ext))
-    r.fail(o.path("file"), "mesh file \"" + s.path + "\" has an unsupported extension (expected "
-                           ".obj, .ply, .off, .stl, .gltf or .glb)");
+    r.fail(o.path("file"), "mesh file \"" + s.path +
+                               "\" has an unsupported extension (expected "
+                               ".obj, .ply, .off, .stl, .gltf or .glb)");
   if (const json* v = o.find("gltf_mesh")) {
     if (!gltf)
       r.fail(o.path("gltf_mesh"), "\"gltf_mesh\" selects a mesh inside a .gltf/.glb file, but \"" +
                                       s.path + "\" is not one");
-    s.gltf_mesh = static_cast<int>(
-        read_unsigned(r, *v, o.path("gltf_mesh"), 0, std::uint64_t(std::numeric_limits<int>::max())));
+    s.gltf_mesh = static_cast<int>(read_unsigned(r, *v, o.path("gltf_mesh"), 0,
+                                                 std::uint64_t(std::numeric_limits<int>::max())));
   }
   const fs::path resolved = fs::path(s.path).is_absolute() ? fs::path(s.path) : base_dir / s.path;
   std::error_code ec;
@@ -412,7 +420,8 @@ std::shared_ptr<const TriangleMesh> read_inline_mesh(const Reader& r, const json
     read_array(r, *v, at, "one entry per vertex");
     if (v->size() > kMaxTriangles * 3) r.fail(at, "more vertices than any mesh may have");
     out.reserve(v->size());
-    for (std::size_t i = 0; i < v->size(); ++i) out.push_back(read_vec<N>(r, (*v)[i], element_path(at, i)));
+    for (std::size_t i = 0; i < v->size(); ++i)
+      out.push_back(read_vec<N>(r, (*v)[i], element_path(at, i)));
   };
   (void)o.require("positions");
   read_vectors("positions", mesh.positions);
@@ -431,8 +440,8 @@ std::shared_ptr<const TriangleMesh> read_inline_mesh(const Reader& r, const json
       r.fail(at, "expected an array of 3 vertex indices [i, j, k], got " + describe(tri));
     uvec3 indices;
     for (std::size_t k = 0; k < 3; ++k)
-      indices[static_cast<int>(k)] = read_u32(r, tri[k], element_path(at, k), 0,
-                                              std::numeric_limits<std::uint32_t>::max());
+      indices[static_cast<int>(k)] =
+          read_u32(r, tri[k], element_path(at, k), 0, std::numeric_limits<std::uint32_t>::max());
     mesh.triangles.push_back(indices);
   }
   try {
@@ -446,9 +455,9 @@ std::shared_ptr<const TriangleMesh> read_inline_mesh(const Reader& r, const json
 Mesh read_mesh(const Reader& r, ecs::Registry& registry, const json& j, const std::string& path,
                const fs::path& base_dir) {
   if (!j.is_object()) r.fail(path, "expected an object (mesh), got " + describe(j));
-  const int kinds = int(j.contains("primitive")) + int(j.contains("file")) + int(j.contains("inline"));
-  if (kinds != 1)
-    r.fail(path, "a mesh needs exactly one of \"primitive\", \"file\" or \"inline\"");
+  const int kinds =
+      int(j.contains("primitive")) + int(j.contains("file")) + int(j.contains("inline"));
+  if (kinds != 1) r.fail(path, "a mesh needs exactly one of \"primitive\", \"file\" or \"inline\"");
   Mesh mesh;
   if (j.contains("inline")) {
     const Object o(r, j, path, {"inline"}, "inline mesh");
@@ -456,7 +465,8 @@ Mesh read_mesh(const Reader& r, ecs::Registry& registry, const json& j, const st
     mesh.geometry = read_inline_mesh(r, o.require("inline"), o.path("inline"));
     return mesh;
   }
-  mesh.source = j.contains("file") ? read_file_mesh(r, j, path, base_dir) : read_primitive(r, j, path);
+  mesh.source =
+      j.contains("file") ? read_file_mesh(r, j, path, base_dir) : read_primitive(r, j, path);
   try {
     mesh.geometry = registry.resource_or_default<MeshLibrary>().get(mesh.source, base_dir);
   } catch (const Error& e) {
@@ -508,10 +518,12 @@ Light read_light(const Reader& r, const json& j, const std::string& path) {
   } else if (type == "spot") {
     l.type = Light::Type::Spot;
   } else {
-    r.fail(o.path("type"), "unknown light type \"" + type + "\" (expected point, directional or spot)");
+    r.fail(o.path("type"),
+           "unknown light type \"" + type + "\" (expected point, directional or spot)");
   }
   if (const json* v = o.find("color")) l.color = read_color(r, *v, o.path("color"));
-  if (const json* v = o.find("intensity")) l.intensity = read_non_negative(r, *v, o.path("intensity"));
+  if (const json* v = o.find("intensity"))
+    l.intensity = read_non_negative(r, *v, o.path("intensity"));
   if (const json* v = o.find("range")) {
     r.check(l.type != Light::Type::Directional, o.path("range"),
             "a directional light has no position, so no range");
@@ -553,7 +565,8 @@ Camera read_camera(const Reader& r, const json& j, const std::string& path,
     r.check(glm::length(c.up) > 0.0f, o.path("up"), "up vector has zero length");
   }
   r.check(glm::length(glm::cross(glm::normalize(forward), glm::normalize(c.up))) > 1e-4f,
-          o.path("up"), "up vector is parallel to the view direction, so the camera roll is undefined");
+          o.path("up"),
+          "up vector is parallel to the view direction, so the camera roll is undefined");
   if (const json* v = o.find("vertical_fov_deg")) {
     const double degrees = read_number(r, *v, o.path("vertical_fov_deg"));
     r.check(degrees > 0.0 && degrees < 180.0, o.path("vertical_fov_deg"),
@@ -588,7 +601,8 @@ CameraPath read_camera_path(const Reader& r, const json& j, const std::string& p
 // --- Animation -------------------------------------------------------------------------------
 
 template <typename V, typename ReadValue>
-Keyframes<V> read_track(const Reader& r, const json& j, const std::string& path, ReadValue read_value) {
+Keyframes<V> read_track(const Reader& r, const json& j, const std::string& path,
+                        ReadValue read_value) {
   Keyframes<V> track;
   const Object o(r, j, path, {"interpolation", "times", "values"}, "keyframe track");
   if (const json* v = o.find("interpolation")) {
@@ -598,14 +612,17 @@ Keyframes<V> read_track(const Reader& r, const json& j, const std::string& path,
     } else if (mode == "step") {
       track.interpolation = Interpolation::Step;
     } else {
-      r.fail(o.path("interpolation"), "unknown interpolation \"" + mode + "\" (expected linear or step)");
+      r.fail(o.path("interpolation"),
+             "unknown interpolation \"" + mode + "\" (expected linear or step)");
     }
   }
   const json& times = read_array(r, o.require("times"), o.path("times"), "key times in seconds");
-  const json& values = read_array(r, o.require("values"), o.path("values"), "one value per key time");
+  const json& values =
+      read_array(r, o.require("values"), o.path("values"), "one value per key time");
   r.check(!times.empty(), o.path("times"), "a track needs at least one key");
   r.check(times.size() == values.size(), o.path("values"),
-          std::to_string(times.size()) + " key times but " + std::to_string(values.size()) + " values");
+          std::to_string(times.size()) + " key times but " + std::to_string(values.size()) +
+              " values");
   for (std::size_t i = 0; i < times.size(); ++i)
     track.times.push_back(read_float(r, times[i], element_path(o.path("times"), i)));
   for (std::size_t i = 0; i < values.size(); ++i)
@@ -616,21 +633,25 @@ Keyframes<V> read_track(const Reader& r, const json& j, const std::string& path,
 Animation read_animation(const Reader& r, const json& j, const std::string& path,
                          const Mesh* mesh) {
   Animation a;
-  const Object o(r, j, path, {"loop", "speed", "time", "translation", "rotation", "scale", "vertices"},
+  const Object o(r, j, path,
+                 {"loop", "speed", "time", "translation", "rotation", "scale", "vertices"},
                  "animation");
   if (const json* v = o.find("loop")) a.loop = read_bool(r, *v, o.path("loop"));
   if (const json* v = o.find("speed")) a.speed = read_float(r, *v, o.path("speed"));
   if (const json* v = o.find("time")) a.time = read_float(r, *v, o.path("time"));
   if (const json* v = o.find("translation"))
-    a.translation = read_track<vec3>(r, *v, o.path("translation"), [&](const json& x, const std::string& at) {
-      return read_vec<3>(r, x, at);
-    });
+    a.translation =
+        read_track<vec3>(r, *v, o.path("translation"), [&](const json& x, const std::string& at) {
+          return read_vec<3>(r, x, at);
+        });
   if (const json* v = o.find("rotation"))
-    a.rotation = read_track<quat>(r, *v, o.path("rotation"),
-                                  [&](const json& x, const std::string& at) { return read_quat(r, x, at); });
+    a.rotation =
+        read_track<quat>(r, *v, o.path("rotation"),
+                         [&](const json& x, const std::string& at) { return read_quat(r, x, at); });
   if (const json* v = o.find("scale"))
-    a.scale = read_track<vec3>(r, *v, o.path("scale"),
-                               [&](const json& x, const std::string& at) { return read_scale(r, x, at); });
+    a.scale = read_track<vec3>(r, *v, o.path("scale"), [&](const json& x, const std::string& at) {
+      return read_scale(r, x, at);
+    });
   if (const json* v = o.find("vertices")) {
     if (!mesh) r.fail(o.path("vertices"), "vertex animation needs a mesh on the same entity");
     a.vertices = read_track<std::vector<vec3>>(
@@ -638,11 +659,13 @@ Animation read_animation(const Reader& r, const json& j, const std::string& path
           read_array(r, x, at, "one position per mesh vertex");
           std::vector<vec3> key;
           key.reserve(x.size());
-          for (std::size_t i = 0; i < x.size(); ++i) key.push_back(read_vec<3>(r, x[i], element_path(at, i)));
+          for (std::size_t i = 0; i < x.size(); ++i)
+            key.push_back(read_vec<3>(r, x[i], element_path(at, i)));
           return key;
         });
   }
-  validate_animation(a, mesh && mesh->geometry ? mesh->geometry->vertex_count() : 0, r.file(), path);
+  validate_animation(a, mesh && mesh->geometry ? mesh->geometry->vertex_count() : 0, r.file(),
+                     path);
   return a;
 }
 
@@ -657,9 +680,12 @@ std::optional<Kinematics::Type> parse_kinematics(const std::string& name) {
 
 const char* kinematics_name(Kinematics::Type type) {
   switch (type) {
-  case Kinematics::Type::Static: return "static";
-  case Kinematics::Type::Hierarchical: return "hierarchical";
-  case Kinematics::Type::Free: return "free";
+  case Kinematics::Type::Static:
+    return "static";
+  case Kinematics::Type::Hierarchical:
+    return "hierarchical";
+  case Kinematics::Type::Free:
+    return "free";
   }
   return "static";
 }
@@ -680,13 +706,14 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
                  const fs::path& base_dir, EntityInfo& info) {
   ecs::Registry& reg = scene.registry;
   const Object o(r, j, path,
-                 {"name", "transform", "parent", "kinematics", "mesh", "material", "ray_cache", "light",
-                  "camera", "camera_path", "animation"},
+                 {"name", "transform", "parent", "kinematics", "mesh", "material", "ray_cache",
+                  "light", "camera", "camera_path", "animation"},
                  "entity");
   const ecs::Entity e = info.entity;
   reg.emplace<Name>(e, Name{info.name});
-  reg.emplace<Transform>(e, o.has("transform") ? read_transform(r, o.require("transform"), o.path("transform"))
-                                               : Transform{});
+  reg.emplace<Transform>(e, o.has("transform")
+                                ? read_transform(r, o.require("transform"), o.path("transform"))
+                                : Transform{});
   if (const json* v = o.find("parent")) {
     info.parent_name = read_string(r, *v, o.path("parent"));
   }
@@ -694,7 +721,8 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
     const std::string name = read_string(r, *v, o.path("kinematics"));
     info.kinematics = parse_kinematics(name);
     if (!info.kinematics)
-      r.fail(o.path("kinematics"), "unknown kinematics \"" + name + "\" (expected static, hierarchical or free)");
+      r.fail(o.path("kinematics"),
+             "unknown kinematics \"" + name + "\" (expected static, hierarchical or free)");
   }
 
   const Mesh* mesh = nullptr;
@@ -711,7 +739,8 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
   if (const json* v = o.find("ray_cache")) {
     const std::string at = o.path("ray_cache");
     const Material* material = reg.try_get<Material>(e);
-    r.check(material != nullptr, at, "a ray-cache cube needs a mesh with a reflective or refractive material");
+    r.check(material != nullptr, at,
+            "a ray-cache cube needs a mesh with a reflective or refractive material");
     r.check(material->is_reflective() || material->is_refractive(), at,
             "a ray-cache cube stores rays leaving a reflective or refractive surface, but this "
             "material has reflectivity 0 and transmission 0: give it one, or remove ray_cache");
@@ -720,7 +749,8 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
     if (const json* res = c.find("resolution")) {
       cube.resolution = read_u32(r, *res, c.path("resolution"), 1, kMaxRayCacheResolution);
       r.check((cube.resolution & (cube.resolution - 1)) == 0, c.path("resolution"),
-              "cube face resolution must be a power of two, got " + std::to_string(cube.resolution));
+              "cube face resolution must be a power of two, got " +
+                  std::to_string(cube.resolution));
     }
     reg.emplace<RayCacheCube>(e, cube);
   }
@@ -728,11 +758,13 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
   if (const json* v = o.find("camera"))
     reg.emplace<Camera>(e, read_camera(r, *v, o.path("camera"), scene.settings));
   if (const json* v = o.find("camera_path")) {
-    r.check(o.has("camera"), o.path("camera_path"), "a camera path moves a camera: add \"camera\" to this entity");
+    r.check(o.has("camera"), o.path("camera_path"),
+            "a camera path moves a camera: add \"camera\" to this entity");
     reg.emplace<CameraPath>(e, read_camera_path(r, *v, o.path("camera_path")));
   }
   if (const json* v = o.find("animation")) {
-    const Animation& a = reg.emplace<Animation>(e, read_animation(r, *v, o.path("animation"), mesh));
+    const Animation& a =
+        reg.emplace<Animation>(e, read_animation(r, *v, o.path("animation"), mesh));
     info.rigid_animation = !a.translation.empty() || !a.rotation.empty() || !a.scale.empty();
     info.vertex_animation = !a.vertices.empty();
   }
@@ -748,13 +780,12 @@ void link_entities(const Reader& r, Scene& scene, std::vector<EntityInfo>& infos
     if (!infos[i].parent_name) continue;
     const std::string at = member_path(element_path("entities", i), "parent");
     const auto it = by_name.find(*infos[i].parent_name);
-    if (it == by_name.end())
-      r.fail(at, "no entity is named \"" + *infos[i].parent_name + "\"");
+    if (it == by_name.end()) r.fail(at, "no entity is named \"" + *infos[i].parent_name + "\"");
     if (it->second.size() > 1)
       r.fail(at, "parent name \"" + *infos[i].parent_name + "\" is ambiguous: " +
                      std::to_string(it->second.size()) + " entities have it (entities[" +
-                     std::to_string(it->second[0]) + "] and entities[" + std::to_string(it->second[1]) +
-                     "]); parents must have unique names");
+                     std::to_string(it->second[0]) + "] and entities[" +
+                     std::to_string(it->second[1]) + "]); parents must have unique names");
     infos[i].parent = it->second[0];
   }
 
@@ -774,7 +805,8 @@ void link_entities(const Reader& r, Scene& scene, std::vector<EntityInfo>& infos
         chain += " -> \"" + infos[*k].name + "\"";
         if (*k == *i) break;
       }
-      r.fail(member_path(element_path("entities", *i), "parent"), "parent chain forms a cycle: " + chain);
+      r.fail(member_path(element_path("entities", *i), "parent"),
+             "parent chain forms a cycle: " + chain);
     }
     for (const std::size_t k : walk) state[k] = 2;
   }
@@ -814,11 +846,13 @@ void link_entities(const Reader& r, Scene& scene, std::vector<EntityInfo>& infos
     const std::string at = member_path(element_path("entities", i), "kinematics");
     if (info.kinematics) {
       if (info.vertex_animation && *info.kinematics != Kinematics::Type::Free)
-        r.fail(at, std::string("\"") + kinematics_name(*info.kinematics) +
-                       "\" but the entity has vertex animation, which deforms the mesh: use \"free\"");
+        r.fail(at,
+               std::string("\"") + kinematics_name(*info.kinematics) +
+                   "\" but the entity has vertex animation, which deforms the mesh: use \"free\"");
       if (moves && *info.kinematics == Kinematics::Type::Static)
         r.fail(at, "\"static\" but the entity is moved by the animation of " +
-                       (*mover == i ? std::string("itself") : "its ancestor \"" + infos[*mover].name + "\"") +
+                       (*mover == i ? std::string("itself")
+                                    : "its ancestor \"" + infos[*mover].name + "\"") +
                        ": use \"hierarchical\" or \"free\"");
       reg.emplace<Kinematics>(info.entity, Kinematics{*info.kinematics});
     } else if (info.has_mesh) {
@@ -974,10 +1008,12 @@ json parse_text(const Reader& r, const std::string& text) {
   if (builder.duplicate_) r.fail(*builder.duplicate_, "key appears twice in the same object");
 
   // nlohmann's position counts the characters read, the offending one included.
-  const std::size_t at = std::min(builder.error_position_ > 0 ? builder.error_position_ - 1 : 0, text.size());
+  const std::size_t at =
+      std::min(builder.error_position_ > 0 ? builder.error_position_ - 1 : 0, text.size());
   const auto line = 1 + std::count(text.begin(), text.begin() + std::ptrdiff_t(at), '\n');
   const std::size_t previous_newline = at == 0 ? std::string::npos : text.rfind('\n', at - 1);
-  const std::size_t column = at + 1 - (previous_newline == std::string::npos ? 0 : previous_newline + 1);
+  const std::size_t column =
+      at + 1 - (previous_newline == std::string::npos ? 0 : previous_newline + 1);
   const std::string where = "line " + std::to_string(line) + " column " + std::to_string(column);
 
   // Drop nlohmann's "[json.exception.parse_error.101] parse error at line 1, column 2: " prefix.
@@ -993,7 +1029,8 @@ json parse_text(const Reader& r, const std::string& text) {
     r.fail(builder.error_path_, where + ": " + detail + " (numbers must be finite)");
   throw Error(r.file(), int(line),
               "malformed JSON at " + where +
-                  (builder.error_path_.empty() ? "" : " (in " + builder.error_path_ + ")") + ": " + detail);
+                  (builder.error_path_.empty() ? "" : " (in " + builder.error_path_ + ")") + ": " +
+                  detail);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1019,7 +1056,9 @@ struct Out {
     items.push_back(std::move(value));
     return items.back();
   }
-  [[nodiscard]] bool empty() const { return kind != Kind::Scalar && members.empty() && items.empty(); }
+  [[nodiscard]] bool empty() const {
+    return kind != Kind::Scalar && members.empty() && items.empty();
+  }
 };
 
 std::string quoted(const std::string& s) {
@@ -1096,7 +1135,8 @@ public:
     const double exact = degrees_from_radians(radians);
     char buf[64];
     for (int precision = 1; precision <= 17; ++precision) {
-      const auto result = std::to_chars(buf, buf + sizeof buf, exact, std::chars_format::general, precision);
+      const auto result =
+          std::to_chars(buf, buf + sizeof buf, exact, std::chars_format::general, precision);
       const double candidate = parse_double(std::string(buf, result.ptr));
       // Respelled shortest, so 100 reads "100" rather than "1e+02".
       if (radians_from_degrees(candidate) == radians)
@@ -1137,7 +1177,8 @@ Out write_transform(const Writer& w, const Transform& t) {
   if (t.translation != identity.translation) o.add("translation", w.vec<3>(t.translation));
   if (t.rotation != identity.rotation) o.add("rotation", w.rotation(t.rotation));
   if (t.scale != identity.scale)
-    o.add("scale", t.scale.x == t.scale.y && t.scale.y == t.scale.z ? w.number(t.scale.x) : w.vec<3>(t.scale));
+    o.add("scale", t.scale.x == t.scale.y && t.scale.y == t.scale.z ? w.number(t.scale.x)
+                                                                    : w.vec<3>(t.scale));
   return o;
 }
 
@@ -1152,7 +1193,8 @@ Out write_mesh(const Writer& w, const Mesh& mesh, const std::string& context) {
       o.add("segments", Writer::integer(s.segments));
       o.add("rings", Writer::integer(s.rings));
     } else if (s.primitive == "box") {
-      o.add("size", s.size.x == s.size.y && s.size.y == s.size.z ? w.number(s.size.x) : w.vec<3>(s.size));
+      o.add("size",
+            s.size.x == s.size.y && s.size.y == s.size.z ? w.number(s.size.x) : w.vec<3>(s.size));
     } else if (s.primitive == "plane") {
       o.add("size", s.size.x == s.size.z ? w.number(s.size.x) : w.vec<2>(vec2(s.size.x, s.size.z)));
       o.add("subdivisions", Writer::integer(s.rings));
@@ -1243,7 +1285,8 @@ Out write_camera_path(const Writer& w, const CameraPath& p) {
 template <typename V, typename WriteValue>
 Out write_track(const Writer& w, const Keyframes<V>& track, WriteValue write_value) {
   Out o = Out::object();
-  o.add("interpolation", Writer::string(track.interpolation == Interpolation::Step ? "step" : "linear"));
+  o.add("interpolation",
+        Writer::string(track.interpolation == Interpolation::Step ? "step" : "linear"));
   Out& times = o.add("times", Out::array());
   for (const float t : track.times) times.push(w.number(t));
   Out& values = o.add("values", Out::array());
@@ -1273,7 +1316,8 @@ Out write_animation(const Writer& w, const Animation& a) {
 /// Names for the written file: parents are referenced by name, so an entity that is someone's
 /// parent gets a unique name, and so does every entity without one (the format requires names).
 /// Everything else keeps its name, duplicates included, so a loaded scene writes back unchanged.
-std::vector<std::string> written_names(const ecs::Registry& reg, const std::vector<ecs::Entity>& entities,
+std::vector<std::string> written_names(const ecs::Registry& reg,
+                                       const std::vector<ecs::Entity>& entities,
                                        const std::map<std::uint32_t, std::size_t>& position) {
   std::vector<std::string> names(entities.size());
   std::map<std::string, std::size_t> uses;
@@ -1351,11 +1395,13 @@ std::string write_json_scene(Scene& scene) {
     if (const Parent* p = reg.try_get<Parent>(e)) {
       const auto it = position.find(p->entity.index);
       if (!reg.valid(p->entity) || it == position.end())
-        throw Error(context, "entity \"" + names[i] +
-                                 "\" has a parent that is destroyed or not part of the saved scene");
+        throw Error(context,
+                    "entity \"" + names[i] +
+                        "\" has a parent that is destroyed or not part of the saved scene");
       o.add("parent", Writer::string(names[it->second]));
     }
-    if (const Kinematics* k = reg.try_get<Kinematics>(e)) o.add("kinematics", Writer::string(kinematics_name(k->type)));
+    if (const Kinematics* k = reg.try_get<Kinematics>(e))
+      o.add("kinematics", Writer::string(kinematics_name(k->type)));
     const Mesh* mesh = reg.try_get<Mesh>(e);
     if (mesh) o.add("mesh", write_mesh(w, *mesh, context + ": entity \"" + names[i] + "\""));
     if (const Material* m = reg.try_get<Material>(e); m && mesh) {
@@ -1368,7 +1414,8 @@ std::string write_json_scene(Scene& scene) {
     }
     if (const Light* l = reg.try_get<Light>(e)) o.add("light", write_light(w, *l));
     if (const Camera* c = reg.try_get<Camera>(e)) o.add("camera", write_camera(w, *c));
-    if (const CameraPath* p = reg.try_get<CameraPath>(e)) o.add("camera_path", write_camera_path(w, *p));
+    if (const CameraPath* p = reg.try_get<CameraPath>(e))
+      o.add("camera_path", write_camera_path(w, *p));
     if (const Animation* a = reg.try_get<Animation>(e)) o.add("animation", write_animation(w, *a));
   }
 

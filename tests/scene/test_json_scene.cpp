@@ -112,7 +112,8 @@ void expect_same_registries(ecs::Registry& a, ecs::Registry& b) {
     }
     ASSERT_EQ(a.has<Parent>(ea[i]), b.has<Parent>(eb[i])) << what;
     if (a.has<Parent>(ea[i])) {
-      EXPECT_EQ(position(ea, a.get<Parent>(ea[i]).entity), position(eb, b.get<Parent>(eb[i]).entity))
+      EXPECT_EQ(position(ea, a.get<Parent>(ea[i]).entity),
+                position(eb, b.get<Parent>(eb[i]).entity))
           << what;
     }
     expect_same_component<Transform>(a, ea[i], b, eb[i], what + " Transform");
@@ -161,8 +162,8 @@ const char* const kTriangle =
 
 std::string scene_text(const std::string& entities, const std::string& settings = "") {
   return R"({"format": "specula-scene", "version": 1, )" +
-         (settings.empty() ? "" : "\"settings\": " + settings + ", ") + "\"entities\": [" + entities +
-         "]}";
+         (settings.empty() ? "" : "\"settings\": " + settings + ", ") + "\"entities\": [" +
+         entities + "]}";
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -177,7 +178,8 @@ TEST(JsonScene, ReadsEveryFeatureAsWritten) {
 
   const std::vector<ecs::Entity> all = file_entities(reg);
   ASSERT_EQ(all.size(), 11u);
-  for (const ecs::Entity e : all) EXPECT_TRUE(reg.has<Transform>(e)) << "every entity gets a Transform";
+  for (const ecs::Entity e : all)
+    EXPECT_TRUE(reg.has<Transform>(e)) << "every entity gets a Transform";
   EXPECT_EQ(reg.get<Name>(all[0]).value, "wheel") << "file order is creation order";
 
   // A parent may be declared after its child.
@@ -236,7 +238,8 @@ TEST(JsonScene, ReadsEveryFeatureAsWritten) {
 
 TEST(JsonScene, QuaternionsAreNormalizedAndScaleMayBeNegative) {
   Scene scene = parse_json_scene(
-      scene_text(R"({"name": "a", "transform": {"rotation": [0, 2, 0, 2], "scale": -3}})"), "q.json", kData);
+      scene_text(R"({"name": "a", "transform": {"rotation": [0, 2, 0, 2], "scale": -3}})"),
+      "q.json", kData);
   const Transform& t = scene.registry.get<Transform>(file_entities(scene.registry)[0]);
   EXPECT_NEAR(glm::length(t.rotation), 1.0f, 1e-6f);
   EXPECT_NEAR(t.rotation.y, std::sqrt(0.5f), 1e-6f);
@@ -244,7 +247,8 @@ TEST(JsonScene, QuaternionsAreNormalizedAndScaleMayBeNegative) {
 }
 
 TEST(JsonScene, KinematicsDefaultsFollowWhatMovesTheEntity) {
-  const std::string rigid = R"("animation": {"translation": {"times": [0, 1], "values": [[0, 0, 0], [1, 0, 0]]}})";
+  const std::string rigid =
+      R"("animation": {"translation": {"times": [0, 1], "values": [[0, 0, 0], [1, 0, 0]]}})";
   const std::string deform =
       R"("animation": {"vertices": {"times": [0], "values": [[[0, 0, 0], [1, 0, 0], [0, 1, 0]]]}})";
   Scene scene = parse_json_scene(
@@ -269,7 +273,9 @@ TEST(JsonScene, EmptyEntityListIsAScene) {
 TEST(JsonScene, IdenticalPrimitivesShareGeometry) {
   LOAD_OR_SKIP(scene, load_json_scene(kData / "all_primitives.json"));
   ecs::Registry& reg = scene.registry;
-  const auto geometry = [&](const char* name) { return reg.get<Mesh>(find_named(reg, name)).geometry.get(); };
+  const auto geometry = [&](const char* name) {
+    return reg.get<Mesh>(find_named(reg, name)).geometry.get();
+  };
   EXPECT_EQ(geometry("ball"), geometry("same ball"));
   EXPECT_NE(geometry("ball"), geometry("default ball"));
   EXPECT_NE(geometry("crate"), geometry("cube"));
@@ -380,7 +386,8 @@ TEST_P(JsonSceneBadFile, IsAnErrorNamingTheFileAndTheField) {
     EXPECT_EQ(e.file(), path.string()) << what;
     EXPECT_NE(what.find(c.file), std::string::npos) << what;
     EXPECT_EQ(e.field(), c.field) << what;
-    EXPECT_NE(what.find(c.message), std::string::npos) << "expected \"" << c.message << "\" in: " << what;
+    EXPECT_NE(what.find(c.message), std::string::npos)
+        << "expected \"" << c.message << "\" in: " << what;
   }
 }
 
@@ -395,7 +402,8 @@ TEST(JsonScene, EveryBadFileHasAnExpectation) {
   std::set<std::string> expected;
   for (const BadCase& c : kBadCases) expected.insert(c.file);
   std::set<std::string> present;
-  for (const auto& entry : fs::directory_iterator(kBad)) present.insert(entry.path().filename().string());
+  for (const auto& entry : fs::directory_iterator(kBad))
+    present.insert(entry.path().filename().string());
   EXPECT_EQ(present, expected);
 }
 
@@ -424,10 +432,13 @@ TEST(JsonScene, TypeErrorsSayWhatWasExpected) {
     const std::optional<Error> e = error_of_text(scene_text(entity));
     return e ? std::string(e->what()) : std::string("(no error)");
   };
-  EXPECT_NE(message(R"({"name": 3})").find("expected a string, got the integer 3"), std::string::npos);
-  EXPECT_NE(message(R"({"name": "a", "transform": {"translation": [0, "1", 0]}})").find("expected a number"),
+  EXPECT_NE(message(R"({"name": 3})").find("expected a string, got the integer 3"),
             std::string::npos);
-  EXPECT_NE(message(R"({"name": "a", "transform": []})").find("expected an object"), std::string::npos);
+  EXPECT_NE(message(R"({"name": "a", "transform": {"translation": [0, "1", 0]}})")
+                .find("expected a number"),
+            std::string::npos);
+  EXPECT_NE(message(R"({"name": "a", "transform": []})").find("expected an object"),
+            std::string::npos);
   EXPECT_NE(message(R"({"name": "a", "animation": {"loop": 1}})").find("expected true or false"),
             std::string::npos);
   EXPECT_NE(message(R"("a")").find("expected an object (entity)"), std::string::npos);
@@ -450,7 +461,8 @@ TEST(JsonScene, RoundTripKeepsFileMeshes) {
   LOAD_OR_SKIP(scene, load_json_scene(kData / "file_meshes.json"));
   expect_lossless_round_trip(scene, kData);
   const std::string text = write_json_scene(scene);
-  EXPECT_NE(text.find("\"meshes/cube.obj\""), std::string::npos) << "file paths are written as stored";
+  EXPECT_NE(text.find("\"meshes/cube.obj\""), std::string::npos)
+      << "file paths are written as stored";
   EXPECT_EQ(text.find("positions"), std::string::npos) << "file meshes are not inlined";
 }
 
@@ -464,7 +476,9 @@ float random_float(std::mt19937& rng) {
     if (std::isfinite(f)) return f;
   }
 }
-float random_unit(std::mt19937& rng) { return std::uniform_real_distribution<float>(0.0f, 1.0f)(rng); }
+float random_unit(std::mt19937& rng) {
+  return std::uniform_real_distribution<float>(0.0f, 1.0f)(rng);
+}
 
 TEST(JsonScene, FloatsSurviveTheTextBitForBit) {
   std::mt19937 rng(20240611);
@@ -478,12 +492,14 @@ TEST(JsonScene, FloatsSurviveTheTextBitForBit) {
     reg.emplace<Name>(e, Name{name});
     Transform t;
     t.translation = vec3(random_float(rng), random_float(rng), random_float(rng));
-    t.rotation = glm::normalize(quat(random_unit(rng) + 0.1f, random_unit(rng), random_unit(rng), random_unit(rng)));
+    t.rotation = glm::normalize(
+        quat(random_unit(rng) + 0.1f, random_unit(rng), random_unit(rng), random_unit(rng)));
     t.scale = vec3(random_float(rng), random_float(rng), random_float(rng));
     if (t.scale.x == 0.0f || t.scale.y == 0.0f || t.scale.z == 0.0f) t.scale = vec3(1.0f);
     reg.emplace<Transform>(e, t);
     auto geometry = std::make_shared<TriangleMesh>();
-    geometry->positions = {vec3(random_float(rng)), vec3(random_float(rng), 0, 1), vec3(0, random_float(rng), 0)};
+    geometry->positions = {vec3(random_float(rng)), vec3(random_float(rng), 0, 1),
+                           vec3(0, random_float(rng), 0)};
     geometry->triangles = {uvec3(0, 1, 2)};
     reg.emplace<Mesh>(e, Mesh{geometry, {}, {}, 0});
     Material m;
@@ -652,7 +668,8 @@ std::vector<Sphere> spheres_of(ecs::Registry& reg) {
     EXPECT_FALSE(reg.has<Parent>(e));
     const Transform& t = reg.get<Transform>(e);
     const vec3 s = glm::abs(t.scale);
-    out.push_back({reg.get<Name>(e).value, t.translation, mesh->source.radius * std::max({s.x, s.y, s.z})});
+    out.push_back(
+        {reg.get<Name>(e).value, t.translation, mesh->source.radius * std::max({s.x, s.y, s.z})});
   }
   return out;
 }
@@ -667,13 +684,16 @@ std::array<float, 5> frustum_distances(const Camera& c, const vec3& p) {
   const float tan_h = tan_v * c.aspect;
   const vec3 d = p - c.position;
   return {glm::dot(d, forward), glm::dot(d, glm::normalize(tan_h * forward - right)),
-          glm::dot(d, glm::normalize(tan_h * forward + right)), glm::dot(d, glm::normalize(tan_v * forward - up)),
+          glm::dot(d, glm::normalize(tan_h * forward + right)),
+          glm::dot(d, glm::normalize(tan_v * forward - up)),
           glm::dot(d, glm::normalize(tan_v * forward + up))};
 }
 
 class MirrorSpheres : public testing::TestWithParam<int> {
 protected:
-  fs::path path() const { return kSamples / ("mirror_spheres_" + std::to_string(GetParam()) + ".json"); }
+  fs::path path() const {
+    return kSamples / ("mirror_spheres_" + std::to_string(GetParam()) + ".json");
+  }
 };
 
 TEST_P(MirrorSpheres, HiddenSpheresAreOutsideTheFrustumAndTheFrontSphereInside) {
@@ -705,10 +725,13 @@ TEST_P(MirrorSpheres, SpheresMeetNeitherEachOtherNorTheCamera) {
   const Camera& camera = reg.get<Camera>(reg.view<Camera>().entities().front());
   const std::vector<Sphere> spheres = spheres_of(reg);
   for (std::size_t i = 0; i < spheres.size(); ++i) {
-    EXPECT_GT(glm::distance(spheres[i].center, camera.position), spheres[i].radius) << spheres[i].name;
-    EXPECT_GE(spheres[i].center.y - spheres[i].radius, 0.0f) << spheres[i].name << " is under the ground";
+    EXPECT_GT(glm::distance(spheres[i].center, camera.position), spheres[i].radius)
+        << spheres[i].name;
+    EXPECT_GE(spheres[i].center.y - spheres[i].radius, 0.0f)
+        << spheres[i].name << " is under the ground";
     for (std::size_t j = i + 1; j < spheres.size(); ++j)
-      EXPECT_GT(glm::distance(spheres[i].center, spheres[j].center), spheres[i].radius + spheres[j].radius)
+      EXPECT_GT(glm::distance(spheres[i].center, spheres[j].center),
+                spheres[i].radius + spheres[j].radius)
           << spheres[i].name << " and " << spheres[j].name;
   }
 }
@@ -722,7 +745,8 @@ TEST_P(MirrorSpheres, AllSpheresReflectAndOnlyTheFrontOneCaches) {
     if (!mesh || mesh->source.primitive != "sphere") continue;
     EXPECT_TRUE(reg.get<Material>(e).is_reflective()) << reg.get<Name>(e).value;
     // As in the paper, the front sphere's material uses the cache; the others trace normally.
-    EXPECT_EQ(reg.has<RayCacheCube>(e), reg.get<Name>(e).value == "mirror sphere") << reg.get<Name>(e).value;
+    EXPECT_EQ(reg.has<RayCacheCube>(e), reg.get<Name>(e).value == "mirror sphere")
+        << reg.get<Name>(e).value;
   }
   EXPECT_EQ(reg.count<RayCacheCube>(), 1u);
 }
@@ -733,8 +757,8 @@ TEST(JsonSceneSamples, MirrorSphereFilesAreTheGeneratorsOutput) {
   if (std::system("python3 --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "python3 not found";
   const fs::path out = fs::temp_directory_path() / "specula_mirror_spheres";
   fs::create_directories(out);
-  const std::string command = "python3 \"" + (kSamples / "make_mirror_spheres.py").string() + "\" --out \"" +
-                              out.string() + "\" > /dev/null";
+  const std::string command = "python3 \"" + (kSamples / "make_mirror_spheres.py").string() +
+                              "\" --out \"" + out.string() + "\" > /dev/null";
   ASSERT_EQ(std::system(command.c_str()), 0);
   for (const int n : kMirrorSphereCounts) {
     const std::string name = "mirror_spheres_" + std::to_string(n) + ".json";
@@ -784,7 +808,8 @@ std::optional<std::pair<json, std::string>> embed(const std::string& def, const 
     d["settings"] = value;
     return std::make_pair(d, std::string("settings"));
   }
-  if (def == "entity") return std::make_pair(document({{{"name", "root"}}, value}), std::string("entities[1]"));
+  if (def == "entity")
+    return std::make_pair(document({{{"name", "root"}}, value}), std::string("entities[1]"));
   if (def == "transform") return entity({{"transform", value}}, ".transform");
   if (def == "sphere" || def == "box" || def == "plane" || def == "cylinder" || def == "cone" ||
       def == "file_mesh" || def == "inline_mesh")
@@ -792,18 +817,24 @@ std::optional<std::pair<json, std::string>> embed(const std::string& def, const 
   if (def == "inline_geometry") return entity({{"mesh", {{"inline", value}}}}, ".mesh.inline");
   if (def == "material") return entity({{"mesh", triangle}, {"material", value}}, ".material");
   if (def == "ray_cache")
-    return entity({{"mesh", triangle}, {"material", {{"reflectivity", 1}}}, {"ray_cache", value}}, ".ray_cache");
+    return entity({{"mesh", triangle}, {"material", {{"reflectivity", 1}}}, {"ray_cache", value}},
+                  ".ray_cache");
   if (def == "light") return entity({{"light", value}}, ".light");
   if (def == "camera") return entity({{"camera", value}}, ".camera");
-  if (def == "camera_path") return entity({{"camera", camera}, {"camera_path", value}}, ".camera_path");
+  if (def == "camera_path")
+    return entity({{"camera", camera}, {"camera_path", value}}, ".camera_path");
   if (def == "camera_path_key")
-    return entity({{"camera", camera}, {"camera_path", {{"keys", {value}}}}}, ".camera_path.keys[0]");
+    return entity({{"camera", camera}, {"camera_path", {{"keys", {value}}}}},
+                  ".camera_path.keys[0]");
   if (def == "animation") return entity({{"mesh", triangle}, {"animation", value}}, ".animation");
-  if (def == "translation_track") return entity({{"animation", {{"translation", value}}}}, ".animation.translation");
-  if (def == "rotation_track") return entity({{"animation", {{"rotation", value}}}}, ".animation.rotation");
+  if (def == "translation_track")
+    return entity({{"animation", {{"translation", value}}}}, ".animation.translation");
+  if (def == "rotation_track")
+    return entity({{"animation", {{"rotation", value}}}}, ".animation.rotation");
   if (def == "scale_track") return entity({{"animation", {{"scale", value}}}}, ".animation.scale");
   if (def == "vertices_track")
-    return entity({{"mesh", triangle}, {"animation", {{"vertices", value}}}}, ".animation.vertices");
+    return entity({{"mesh", triangle}, {"animation", {{"vertices", value}}}},
+                  ".animation.vertices");
   return std::nullopt;
 }
 
@@ -813,7 +844,8 @@ TEST_P(SchemaDefinition, IsClosedAndItsExamplesUseEveryProperty) {
   const json schema = load_schema();
   const json& def = GetParam() == "scene" ? schema : schema.at("$defs").at(GetParam());
   ASSERT_TRUE(def.contains("additionalProperties"));
-  EXPECT_EQ(def.at("additionalProperties"), json(false)) << "objects must be closed, as in the parser";
+  EXPECT_EQ(def.at("additionalProperties"), json(false))
+      << "objects must be closed, as in the parser";
   ASSERT_TRUE(def.contains("examples") && !def["examples"].empty());
   std::set<std::string> used;
   for (const json& example : def["examples"])
@@ -827,8 +859,10 @@ TEST_P(SchemaDefinition, IsClosedAndItsExamplesUseEveryProperty) {
 json::json_pointer pointer_to(const std::string& path) {
   std::string p = path.empty() ? "" : "/";
   for (const char c : path) {
-    if (c == '.' || c == '[') p += '/';
-    else if (c != ']') p += c;
+    if (c == '.' || c == '[')
+      p += '/';
+    else if (c != ']')
+      p += c;
   }
   return json::json_pointer(p);
 }
@@ -871,11 +905,14 @@ TEST_P(SchemaDefinition, ParserAcceptsExactlyItsProperties) {
         missing = e.what();
     }
   }
-  if (!missing.empty()) GTEST_SKIP() << "example needs a module that has not landed yet: " << missing;
+  if (!missing.empty())
+    GTEST_SKIP() << "example needs a module that has not landed yet: " << missing;
 }
 
 INSTANTIATE_TEST_SUITE_P(Schema, SchemaDefinition, testing::ValuesIn(object_definitions()),
-                         [](const testing::TestParamInfo<std::string>& param_info) { return param_info.param; });
+                         [](const testing::TestParamInfo<std::string>& param_info) {
+                           return param_info.param;
+                         });
 
 } // namespace
 } // namespace specula
