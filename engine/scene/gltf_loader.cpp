@@ -185,8 +185,15 @@ tinygltf::Model read_model(const fs::path& path) {
   tinygltf::Model model;
   std::string err;
   std::string warn;
-  const bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, file)
-                         : loader.LoadASCIIFromFile(&model, &err, &warn, file);
+  bool ok = false;
+  try {
+    ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, file)
+                : loader.LoadASCIIFromFile(&model, &err, &warn, file);
+  } catch (const std::exception& e) {
+    // tinygltf reports through `err`, but the JSON library under it may still throw on input
+    // it did not expect; that is bad input too.
+    throw Error(file, std::string("glTF: ") + e.what());
+  }
   err = trimmed(err);
   warn = trimmed(warn);
   // tinygltf sometimes notes a real problem in `err` and still returns true: treat both alike.
@@ -1269,6 +1276,7 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
       const bool split = mesh.parts.size() > 1;
       for (std::size_t p = 0; p < mesh.parts.size(); ++p) {
         const MeshPart& part = mesh.parts[p];
+        const Material& material = material_for(part.material); // checks the index
         ecs::Entity target = e;
         if (split) {
           // Several materials: one child entity per material, at the node's origin.
@@ -1287,7 +1295,7 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
           component.source.gltf_mesh = node.mesh;
         }
         reg.emplace<Mesh>(target, std::move(component));
-        reg.emplace<Material>(target, material_for(part.material));
+        reg.emplace<Material>(target, material);
 
         Animation* animation = &node_animation;
         Animation part_animation;

@@ -14,7 +14,11 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cctype>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -457,6 +461,7 @@ const BadFile kBadFiles[] = {
     {"bad_normal_count.gltf", "one per vertex"},
     {"bad_animation_times.gltf", "strictly increasing"},
     {"bad_light_index.gltf", "light index 3 is out of range"},
+    {"bad_material_index.gltf", "material index 4 is out of range"},
     {"does_not_exist.gltf", "not found"},
 };
 
@@ -493,12 +498,82 @@ TEST(GltfBadInput, MeshLoadingReportsTheSameProblems) {
     // Files whose problem is outside mesh 0 load their mesh fine.
     if (name == "bad_cycle.gltf" || name == "bad_child_index.gltf" ||
         name == "bad_singular_matrix.gltf" || name == "bad_animation_times.gltf" ||
-        name == "bad_light_index.gltf")
+        name == "bad_light_index.gltf" || name == "bad_material_index.gltf")
       continue;
     SCOPED_TRACE(name);
     const fs::path path = kData / name;
     expect_error(path, bad.word, [&] { (void)load_gltf_mesh(path, 0); });
   }
+}
+
+namespace {
+
+std::string read_bytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void write_bytes(const fs::path& path, const std::string& bytes) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+} // namespace
+
+TEST(GltfBadInput, EveryTruncationOfABinaryFileIsAnError) {
+  const std::string bytes = read_bytes(kData / "box.glb");
+  ASSERT_GT(bytes.size(), 100u);
+  const fs::path path = fs::path(::testing::TempDir()) / "specula_truncated.glb";
+  // Every length through the headers (12-byte file header, 8-byte chunk headers), then every
+  // third: the chunks' contents fail alike.
+  for (std::size_t length = 0; length < bytes.size(); length += length < 64 ? 1 : 3) {
+    write_bytes(path, bytes.substr(0, length));
+    EXPECT_THROW((void)load_gltf_scene(path), Error) << "length " << length;
+  }
+  fs::remove(path);
+}
+
+TEST(GltfBadInput, CorruptedFilesLoadOrFailWithAnError) {
+  // Seeded corruption of valid files: each result is a scene or a specula::Error, never another
+  // exception (and, under the sanitizers, never a memory error). Binary files get random bytes;
+  // in JSON files digits become other digits, which keeps the JSON valid but breaks indices,
+  // counts and offsets (the buffer's base64 text is left alone).
+  const LogLevel saved = log_level();
+  set_log_level(LogLevel::Silent);
+  for (const char* source : {"box.glb", "hierarchy.gltf", "animated.gltf", "sparse.gltf"}) {
+    const std::string original = read_bytes(kData / source);
+    const bool json = fs::path(source).extension() == ".gltf";
+    std::vector<std::size_t> positions;
+    const std::size_t uri_begin = original.find("data:");
+    const std::size_t uri_end = original.find('"', uri_begin);
+    for (std::size_t i = 0; i < original.size(); ++i) {
+      const bool in_uri = uri_begin != std::string::npos && i >= uri_begin && i < uri_end;
+      if (!json || (!in_uri && std::isdigit(static_cast<unsigned char>(original[i]))))
+        positions.push_back(i);
+    }
+    ASSERT_FALSE(positions.empty());
+    std::mt19937 rng(12345);
+    std::uniform_int_distribution<std::size_t> pick(0, positions.size() - 1);
+    std::uniform_int_distribution<int> byte(0, 255);
+    const char digits[] = "0123456789";
+    const fs::path target = fs::path(::testing::TempDir()) / (std::string("specula_corrupted_") + source);
+    for (int trial = 0; trial < 300; ++trial) {
+      std::string bytes = original;
+      for (int k = 0; k < 1 + trial % 3; ++k)
+        bytes[positions[pick(rng)]] = json ? digits[byte(rng) % 10] : static_cast<char>(byte(rng));
+      write_bytes(target, bytes);
+      try {
+        Scene scene = load_gltf_scene(target);
+        update_world_transforms(scene.registry, 0, target.string());
+      } catch (const Error& e) {
+        EXPECT_EQ(e.file(), target.string()) << e.what();
+      } catch (const std::exception& e) {
+        ADD_FAILURE() << source << " trial " << trial << ": not a specula::Error: " << e.what();
+      }
+    }
+    fs::remove(target);
+  }
+  set_log_level(saved);
 }
 
 TEST(GltfBadInput, LoadSceneRethrowsLoaderErrors) {

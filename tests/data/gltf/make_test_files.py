@@ -347,6 +347,14 @@ def write_bad_files():
         {"sampler": 0, "target": {"node": 0, "path": "translation"}}]}]
     g.write_gltf("bad_animation_times.gltf")
 
+    # Two primitives with different materials, the second index past the end.
+    g = small_triangle(Gltf())
+    prim = g.doc["meshes"][0]["primitives"][0]
+    g.doc["materials"] = [{"name": "only"}]
+    prim["material"] = 0
+    g.doc["meshes"][0]["primitives"].append(dict(prim, material=4))
+    g.write_gltf("bad_material_index.gltf")
+
     g = small_triangle(Gltf())
     g.doc["extensionsUsed"] = ["KHR_lights_punctual"]
     g.doc["extensions"] = {"KHR_lights_punctual": {"lights": [{"type": "point"}]}}
