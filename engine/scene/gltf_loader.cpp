@@ -55,10 +55,12 @@
 //   reflectivity = metallic × (1 − roughness): a smooth metal is a mirror, a rough one scatters
 //   like the diffuse term; transmission = KHR_materials_transmission × (1 − metallic), as glTF
 //   applies transmission to the dielectric part only (this also keeps reflectivity +
-//   transmission ≤ 1); ior = KHR_materials_ior (default 1.5).
+//   transmission ≤ 1); ior = KHR_materials_ior (default 1.5). Primitives without a material
+//   get the glTF default material (white, metallic 1, roughness 1: diffuse white).
 // - Camera: perspective → Camera in world space from the node's world matrix at load time
 //   (origin, −Z forward, +Y up), aspect = aspectRatio or settings width/height. Orthographic
-//   cameras are skipped with a warning (Camera is a pinhole model).
+//   cameras are skipped with a warning (Camera is a pinhole model). Camera is world-space, so
+//   it keeps the load-time pose even when its node is animated.
 // - KHR_lights_punctual → Light on the node's entity (the entity's transform places it).
 // - Animation: channels of every glTF animation are merged per node (a node/path pair taken by
 //   an earlier animation keeps it, with a warning). LINEAR → Linear, STEP → Step, CUBICSPLINE →
@@ -68,6 +70,8 @@
 //   move rigidly with their animated ancestor); entities with vertex animation are Free; the
 //   rest is Static.
 // - Skins are ignored (meshes stay in their bind pose), with a warning.
+// - Unsupported entries of extensionsRequired (KHR_draco_mesh_compression among them) are
+//   errors naming the extension; optional extensions the loader does not know are ignored.
 
 namespace specula {
 namespace {
@@ -78,7 +82,7 @@ namespace fs = std::filesystem;
 /// attributes) or can ignore without changing geometry (texture transforms: textures are not
 /// used). Any other entry of extensionsRequired is an error naming it.
 constexpr std::array<std::string_view, 6> kSupportedRequiredExtensions = {
-    "KHR_lights_punctual",         "KHR_materials_emissive_strength", "KHR_materials_ior",
+    "KHR_lights_punctual",        "KHR_materials_emissive_strength", "KHR_materials_ior",
     "KHR_materials_transmission", "KHR_mesh_quantization",           "KHR_texture_transform"};
 
 /// Most elements one accessor may hold (three indices per triangle of the largest mesh any loader
@@ -131,8 +135,8 @@ bool starts_with_glb_magic(const fs::path& path) {
 void check_required_extensions(const std::string& file, const std::vector<std::string>& required) {
   for (std::size_t i = 0; i < required.size(); ++i) {
     const std::string& name = required[i];
-    if (std::find(kSupportedRequiredExtensions.begin(), kSupportedRequiredExtensions.end(),
-                  name) != kSupportedRequiredExtensions.end())
+    if (std::find(kSupportedRequiredExtensions.begin(), kSupportedRequiredExtensions.end(), name) !=
+        kSupportedRequiredExtensions.end())
       continue;
     const std::string why = name == "KHR_draco_mesh_compression"
                                 ? " (Draco-compressed meshes cannot be decoded by this build)"
@@ -222,35 +226,52 @@ tinygltf::Model read_model(const fs::path& path) {
 int component_size(int component_type) {
   switch (component_type) {
   case TINYGLTF_COMPONENT_TYPE_BYTE:
-  case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return 1;
+  case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+    return 1;
   case TINYGLTF_COMPONENT_TYPE_SHORT:
-  case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return 2;
+  case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+    return 2;
   case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
-  case TINYGLTF_COMPONENT_TYPE_FLOAT: return 4;
-  default: return 0; // INT and DOUBLE are not glTF 2.0 accessor component types
+  case TINYGLTF_COMPONENT_TYPE_FLOAT:
+    return 4;
+  default:
+    return 0; // INT and DOUBLE are not glTF 2.0 accessor component types
   }
 }
 
 int component_count(int type) {
   switch (type) {
-  case TINYGLTF_TYPE_SCALAR: return 1;
-  case TINYGLTF_TYPE_VEC2: return 2;
-  case TINYGLTF_TYPE_VEC3: return 3;
-  case TINYGLTF_TYPE_VEC4: return 4;
-  default: return 0; // matrices are never read by this loader
+  case TINYGLTF_TYPE_SCALAR:
+    return 1;
+  case TINYGLTF_TYPE_VEC2:
+    return 2;
+  case TINYGLTF_TYPE_VEC3:
+    return 3;
+  case TINYGLTF_TYPE_VEC4:
+    return 4;
+  default:
+    return 0; // matrices are never read by this loader
   }
 }
 
 std::string type_name(int type) {
   switch (type) {
-  case TINYGLTF_TYPE_SCALAR: return "SCALAR";
-  case TINYGLTF_TYPE_VEC2: return "VEC2";
-  case TINYGLTF_TYPE_VEC3: return "VEC3";
-  case TINYGLTF_TYPE_VEC4: return "VEC4";
-  case TINYGLTF_TYPE_MAT2: return "MAT2";
-  case TINYGLTF_TYPE_MAT3: return "MAT3";
-  case TINYGLTF_TYPE_MAT4: return "MAT4";
-  default: return "type " + std::to_string(type);
+  case TINYGLTF_TYPE_SCALAR:
+    return "SCALAR";
+  case TINYGLTF_TYPE_VEC2:
+    return "VEC2";
+  case TINYGLTF_TYPE_VEC3:
+    return "VEC3";
+  case TINYGLTF_TYPE_VEC4:
+    return "VEC4";
+  case TINYGLTF_TYPE_MAT2:
+    return "MAT2";
+  case TINYGLTF_TYPE_MAT3:
+    return "MAT3";
+  case TINYGLTF_TYPE_MAT4:
+    return "MAT4";
+  default:
+    return "type " + std::to_string(type);
   }
 }
 
@@ -289,7 +310,8 @@ std::span<const unsigned char> view_bytes(const Context& ctx, int index, const s
   const std::vector<unsigned char>& data = buffers[static_cast<std::size_t>(view.buffer)].data;
   if (view.byteLength > data.size() || view.byteOffset > data.size() - view.byteLength)
     ctx.fail(field, "byte range [" + std::to_string(view.byteOffset) + ", " +
-                        std::to_string(view.byteOffset + view.byteLength) + ") is out of range of " +
+                        std::to_string(view.byteOffset + view.byteLength) +
+                        ") is out of range of " +
                         index_field("buffers", static_cast<std::size_t>(view.buffer)) + " (" +
                         std::to_string(data.size()) + " bytes)");
   return {data.data() + view.byteOffset, view.byteLength};
@@ -335,7 +357,8 @@ AccessorInfo accessor_info(const Context& ctx, int index, const std::string& use
                          a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT))
       ctx.fail(where, "indices must be UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT");
     break;
-  case Components::AnyNumber: break;
+  case Components::AnyNumber:
+    break;
   }
   info.component_type = a.componentType;
   info.normalized = a.normalized;
@@ -360,21 +383,19 @@ AccessorInfo accessor_info(const Context& ctx, int index, const std::string& use
   const std::span<const unsigned char> bytes = view_bytes(ctx, a.bufferView, where);
   const tinygltf::BufferView& view = ctx.model.bufferViews[static_cast<std::size_t>(a.bufferView)];
   info.stride = view.byteStride == 0 ? element_size : view.byteStride;
-  if (view.byteStride != 0 &&
-      (view.byteStride < element_size || view.byteStride > 252 ||
-       view.byteStride % static_cast<std::size_t>(size) != 0))
+  if (view.byteStride != 0 && (view.byteStride < element_size || view.byteStride > 252 ||
+                               view.byteStride % static_cast<std::size_t>(size) != 0))
     ctx.fail(index_field("bufferViews", static_cast<std::size_t>(a.bufferView)),
              "byteStride " + std::to_string(view.byteStride) + " does not fit elements of " +
                  std::to_string(element_size) + " bytes");
   // count ≤ 3·10⁸ and stride ≤ 252, so these products cannot overflow.
   const std::size_t needed = (info.count - 1) * info.stride + element_size;
   if (a.byteOffset > bytes.size() || needed > bytes.size() - a.byteOffset)
-    ctx.fail(where, std::to_string(info.count) + " elements from byteOffset " +
-                        std::to_string(a.byteOffset) + " need " + std::to_string(needed) +
-                        " bytes, but " +
-                        index_field("bufferViews", static_cast<std::size_t>(a.bufferView)) +
-                        " has only " + std::to_string(bytes.size()) +
-                        " (accessor out of buffer range)");
+    ctx.fail(where,
+             std::to_string(info.count) + " elements from byteOffset " +
+                 std::to_string(a.byteOffset) + " need " + std::to_string(needed) + " bytes, but " +
+                 index_field("bufferViews", static_cast<std::size_t>(a.bufferView)) + " has only " +
+                 std::to_string(bytes.size()) + " (accessor out of buffer range)");
   info.data = bytes.data() + a.byteOffset;
   return info;
 }
@@ -405,16 +426,21 @@ float read_component(const unsigned char* p, int component_type, bool normalized
     const float v = load<std::uint16_t>(p);
     return normalized ? v / 65535.0f : v;
   }
-  case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: return static_cast<float>(load<std::uint32_t>(p));
-  default: return load<float>(p);
+  case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+    return static_cast<float>(load<std::uint32_t>(p));
+  default:
+    return load<float>(p);
   }
 }
 
 std::uint32_t read_index(const unsigned char* p, int component_type) {
   switch (component_type) {
-  case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return load<std::uint8_t>(p);
-  case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return load<std::uint16_t>(p);
-  default: return load<std::uint32_t>(p);
+  case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+    return load<std::uint8_t>(p);
+  case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+    return load<std::uint16_t>(p);
+  default:
+    return load<std::uint32_t>(p);
   }
 }
 
@@ -450,11 +476,11 @@ void apply_sparse(const Context& ctx, int index, const AccessorInfo& info, std::
 
   std::size_t previous = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    const std::size_t element = read_index(indices.data() + indices_offset + i * index_size,
-                                           index_type);
+    const std::size_t element =
+        read_index(indices.data() + indices_offset + i * index_size, index_type);
     if (element >= info.count || (i > 0 && element <= previous))
-      ctx.fail(field + ".indices", "index " + std::to_string(element) +
-                                       " is out of range or not strictly increasing");
+      ctx.fail(field + ".indices",
+               "index " + std::to_string(element) + " is out of range or not strictly increasing");
     previous = element;
     set(element, values.data() + values_offset + i * element_size);
   }
@@ -471,9 +497,8 @@ std::vector<float> read_floats(const Context& ctx, int index, const std::string&
   if (info.data != nullptr)
     for (std::size_t i = 0; i < info.count; ++i)
       for (std::size_t c = 0; c < k; ++c)
-        out[i * k + c] =
-            read_component(info.data + i * info.stride + c * size, info.component_type,
-                           info.normalized);
+        out[i * k + c] = read_component(info.data + i * info.stride + c * size, info.component_type,
+                                        info.normalized);
   apply_sparse(ctx, index, info, k * size, [&](std::size_t element, const unsigned char* p) {
     for (std::size_t c = 0; c < k; ++c)
       out[element * k + c] = read_component(p + c * size, info.component_type, info.normalized);
@@ -519,11 +544,16 @@ struct MeshPart {
 
 std::string mode_name(int mode) {
   switch (mode) {
-  case TINYGLTF_MODE_POINTS: return "points";
-  case TINYGLTF_MODE_LINE: return "lines";
-  case TINYGLTF_MODE_LINE_LOOP: return "line loop";
-  case TINYGLTF_MODE_LINE_STRIP: return "line strip";
-  default: return "mode " + std::to_string(mode);
+  case TINYGLTF_MODE_POINTS:
+    return "points";
+  case TINYGLTF_MODE_LINE:
+    return "lines";
+  case TINYGLTF_MODE_LINE_LOOP:
+    return "line loop";
+  case TINYGLTF_MODE_LINE_STRIP:
+    return "line strip";
+  default:
+    return "mode " + std::to_string(mode);
   }
 }
 
@@ -531,7 +561,8 @@ std::string mode_name(int mode) {
 bool is_triangle_primitive(const Context& ctx, const tinygltf::Primitive& prim,
                            const std::string& field) {
   const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
-  if (mode > TINYGLTF_MODE_TRIANGLE_FAN) ctx.fail(field, "unknown primitive mode " + std::to_string(mode));
+  if (mode > TINYGLTF_MODE_TRIANGLE_FAN)
+    ctx.fail(field, "unknown primitive mode " + std::to_string(mode));
   return mode >= TINYGLTF_MODE_TRIANGLES;
 }
 
@@ -549,8 +580,10 @@ std::vector<uvec3> triangles_from(const Context& ctx, const std::vector<std::uin
       tris.emplace_back(indices[i], indices[i + 1], indices[i + 2]);
   } else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
     for (std::size_t i = 0; i + 2 < n; ++i) {
-      if (i % 2 == 0) tris.emplace_back(indices[i], indices[i + 1], indices[i + 2]);
-      else tris.emplace_back(indices[i + 1], indices[i], indices[i + 2]);
+      if (i % 2 == 0)
+        tris.emplace_back(indices[i], indices[i + 1], indices[i + 2]);
+      else
+        tris.emplace_back(indices[i + 1], indices[i], indices[i + 2]);
     }
   } else { // fan
     for (std::size_t i = 1; i + 1 < n; ++i)
@@ -584,7 +617,8 @@ void append_primitive(const Context& ctx, const tinygltf::Primitive& prim, const
   }
   const std::string attr = field + ".attributes.";
   TriangleMesh mesh;
-  std::vector<vec3> base = read_vec3s(ctx, position->second, attr + "POSITION", Components::AnyNumber);
+  std::vector<vec3> base =
+      read_vec3s(ctx, position->second, attr + "POSITION", Components::AnyNumber);
   const std::size_t n = base.size();
 
   if (const auto it = prim.attributes.find("NORMAL"); it != prim.attributes.end()) {
@@ -618,9 +652,9 @@ void append_primitive(const Context& ctx, const tinygltf::Primitive& prim, const
     indices = read_indices(ctx, prim.indices, field + ".indices");
     for (std::size_t i = 0; i < indices.size(); ++i)
       if (indices[i] >= n)
-        ctx.fail(field + ".indices", "index " + std::to_string(indices[i]) + " (at position " +
-                                         std::to_string(i) + ") is out of range: the primitive has " +
-                                         std::to_string(n) + " vertices");
+        ctx.fail(field + ".indices",
+                 "index " + std::to_string(indices[i]) + " (at position " + std::to_string(i) +
+                     ") is out of range: the primitive has " + std::to_string(n) + " vertices");
   } else {
     indices.resize(n);
     for (std::size_t i = 0; i < n; ++i) indices[i] = static_cast<std::uint32_t>(i);
@@ -659,7 +693,8 @@ void append_primitive(const Context& ctx, const tinygltf::Primitive& prim, const
 std::vector<float> mesh_default_weights(const Context& ctx, int mesh_index) {
   const tinygltf::Mesh& mesh = ctx.model.meshes[static_cast<std::size_t>(mesh_index)];
   const std::size_t targets = mesh.primitives.empty() ? 0 : mesh.primitives[0].targets.size();
-  const std::string field = index_field("meshes", static_cast<std::size_t>(mesh_index)) + ".weights";
+  const std::string field =
+      index_field("meshes", static_cast<std::size_t>(mesh_index)) + ".weights";
   if (!mesh.weights.empty() && mesh.weights.size() != targets)
     ctx.fail(field, std::to_string(mesh.weights.size()) + " weights for " +
                         std::to_string(targets) + " morph targets");
@@ -678,8 +713,9 @@ std::vector<MeshPart> build_mesh_parts(const Context& ctx, int mesh_index, bool 
                                        std::span<const float> weights) {
   const auto& meshes = ctx.model.meshes;
   if (mesh_index < 0 || static_cast<std::size_t>(mesh_index) >= meshes.size())
-    ctx.fail("meshes", "mesh index " + std::to_string(mesh_index) + " is out of range (the file has " +
-                           std::to_string(meshes.size()) + " meshes)");
+    ctx.fail("meshes", "mesh index " + std::to_string(mesh_index) +
+                           " is out of range (the file has " + std::to_string(meshes.size()) +
+                           " meshes)");
   const std::string mesh_field = index_field("meshes", static_cast<std::size_t>(mesh_index));
   const tinygltf::Mesh& mesh = meshes[static_cast<std::size_t>(mesh_index)];
   if (mesh.primitives.empty()) ctx.fail(mesh_field + ".primitives", "mesh has no primitives");
@@ -752,7 +788,8 @@ Material map_material(const Context& ctx, int index) {
                               " is out of range (the file has " + std::to_string(materials.size()) +
                               " materials)");
   const tinygltf::Material& m = index < 0 ? kDefault : materials[static_cast<std::size_t>(index)];
-  const std::string field = index < 0 ? "default material" : index_field("materials", static_cast<std::size_t>(index));
+  const std::string field =
+      index < 0 ? "default material" : index_field("materials", static_cast<std::size_t>(index));
   const auto& pbr = m.pbrMetallicRoughness;
 
   Material out;
@@ -787,7 +824,8 @@ Material map_material(const Context& ctx, int index) {
                                            "transmissionFactor", field)
                               .value_or(0.0);
     out.transmission =
-        unit_factor(ctx, factor, field + ".extensions.KHR_materials_transmission.transmissionFactor") *
+        unit_factor(ctx, factor,
+                    field + ".extensions.KHR_materials_transmission.transmissionFactor") *
         (1.0f - metallic);
   }
   if (const auto ior = extension_number(ctx, m.extensions, "KHR_materials_ior", "ior", field)) {
@@ -848,16 +886,20 @@ std::optional<Light> map_light(const Context& ctx, const tinygltf::Node& node,
   const auto& lights = ctx.model.lights;
   if (index < 0 || static_cast<std::size_t>(index) >= lights.size())
     ctx.fail(field + ".light", "light index " + std::to_string(index) +
-                                   " is out of range (the file has " + std::to_string(lights.size()) +
-                                   " lights)");
+                                   " is out of range (the file has " +
+                                   std::to_string(lights.size()) + " lights)");
   const tinygltf::Light& l = lights[static_cast<std::size_t>(index)];
   const std::string lfield = "extensions.KHR_lights_punctual.lights[" + std::to_string(index) + "]";
 
   Light light;
-  if (l.type == "point") light.type = Light::Type::Point;
-  else if (l.type == "directional") light.type = Light::Type::Directional;
-  else if (l.type == "spot") light.type = Light::Type::Spot;
-  else ctx.fail(lfield + ".type", "unknown light type '" + l.type + "'");
+  if (l.type == "point")
+    light.type = Light::Type::Point;
+  else if (l.type == "directional")
+    light.type = Light::Type::Directional;
+  else if (l.type == "spot")
+    light.type = Light::Type::Spot;
+  else
+    ctx.fail(lfield + ".type", "unknown light type '" + l.type + "'");
   if (!l.color.empty()) {
     if (l.color.size() != 3) ctx.fail(lfield + ".color", "must have 3 components");
     for (int c = 0; c < 3; ++c) {
@@ -869,7 +911,8 @@ std::optional<Light> map_light(const Context& ctx, const tinygltf::Node& node,
   if (!std::isfinite(l.intensity) || l.intensity < 0.0)
     ctx.fail(lfield + ".intensity", "must be finite and ≥ 0");
   light.intensity = static_cast<float>(l.intensity);
-  if (!std::isfinite(l.range) || l.range < 0.0) ctx.fail(lfield + ".range", "must be finite and > 0");
+  if (!std::isfinite(l.range) || l.range < 0.0)
+    ctx.fail(lfield + ".range", "must be finite and > 0");
   light.range = static_cast<float>(l.range);
   if (light.type == Light::Type::Spot) {
     const double inner = l.spot.innerConeAngle;
@@ -889,7 +932,8 @@ std::optional<Light> map_light(const Context& ctx, const tinygltf::Node& node,
 /// TRS from a node's matrix: translation = column 3, scale = column lengths (x negated for a
 /// mirroring matrix), rotation from the normalized columns. Errors for non-finite, non-affine,
 /// singular or sheared matrices, which a Transform cannot hold.
-Transform decompose(const Context& ctx, const std::vector<double>& values, const std::string& field) {
+Transform decompose(const Context& ctx, const std::vector<double>& values,
+                    const std::string& field) {
   if (values.size() != 16) ctx.fail(field, "matrix must have 16 numbers");
   mat4 m;
   for (int c = 0; c < 4; ++c)
@@ -931,7 +975,8 @@ Transform node_transform(const Context& ctx, const tinygltf::Node& node, const s
     if (v.empty()) return;
     if (v.size() != 3) ctx.fail(field + "." + name, "must have 3 numbers");
     for (int i = 0; i < 3; ++i) {
-      if (!std::isfinite(v[static_cast<std::size_t>(i)])) ctx.fail(field + "." + name, "is not finite");
+      if (!std::isfinite(v[static_cast<std::size_t>(i)]))
+        ctx.fail(field + "." + name, "is not finite");
       out[i] = static_cast<float>(v[static_cast<std::size_t>(i)]);
     }
   };
@@ -1021,8 +1066,10 @@ std::map<int, NodeAnimation> read_animations(const Context& ctx) {
           anim.samplers[static_cast<std::size_t>(channel.sampler)];
       Interpolation interpolation = Interpolation::Linear;
       bool cubic = false;
-      if (sampler.interpolation == "STEP") interpolation = Interpolation::Step;
-      else if (sampler.interpolation == "CUBICSPLINE") cubic = true;
+      if (sampler.interpolation == "STEP")
+        interpolation = Interpolation::Step;
+      else if (sampler.interpolation == "CUBICSPLINE")
+        cubic = true;
       else if (sampler.interpolation != "LINEAR" && !sampler.interpolation.empty())
         ctx.fail(sampler_field + ".interpolation",
                  "unknown interpolation '" + sampler.interpolation + "'");
@@ -1048,9 +1095,9 @@ std::map<int, NodeAnimation> read_animations(const Context& ctx) {
         if (targets == 0)
           ctx.fail(field, "animates the morph weights of node " +
                               std::to_string(channel.target_node) + ", which has no morph targets");
-        const std::vector<float> f = read_floats(ctx, sampler.output, output_field,
-                                                 {TINYGLTF_TYPE_SCALAR},
-                                                 Components::FloatOrNormalized);
+        const std::vector<float> f =
+            read_floats(ctx, sampler.output, output_field, {TINYGLTF_TYPE_SCALAR},
+                        Components::FloatOrNormalized);
         if (f.size() != keys * per_key * targets)
           count_error(f.size(), "weights (" + std::to_string(targets) + " morph targets)");
         WeightTrack w;
@@ -1068,9 +1115,8 @@ std::map<int, NodeAnimation> read_animations(const Context& ctx) {
 
       Animation track; // this channel alone, validated so that errors name it
       if (path == "rotation") {
-        const std::vector<float> f =
-            read_floats(ctx, sampler.output, output_field, {TINYGLTF_TYPE_VEC4},
-                        Components::FloatOrNormalized);
+        const std::vector<float> f = read_floats(
+            ctx, sampler.output, output_field, {TINYGLTF_TYPE_VEC4}, Components::FloatOrNormalized);
         if (f.size() / 4 != keys * per_key) count_error(f.size() / 4, "rotations");
         track.rotation.times = times;
         track.rotation.interpolation = interpolation;
@@ -1085,14 +1131,17 @@ std::map<int, NodeAnimation> read_animations(const Context& ctx) {
         Keyframes<vec3>& k = path == "translation" ? track.translation : track.scale;
         k.times = times;
         k.interpolation = interpolation;
-        for (std::size_t i = 0; i < keys; ++i) k.values.push_back(values[i * per_key + value_index]);
+        for (std::size_t i = 0; i < keys; ++i)
+          k.values.push_back(values[i * per_key + value_index]);
       }
       validate_animation(track, 0, ctx.file, field);
-      if (path == "translation") node_anim.trs.translation = std::move(track.translation);
+      if (path == "translation")
+        node_anim.trs.translation = std::move(track.translation);
       else if (path == "rotation") {
         node_anim.trs.rotation = std::move(track.rotation);
         for (quat& q : node_anim.trs.rotation.values) q = glm::normalize(q);
-      } else node_anim.trs.scale = std::move(track.scale);
+      } else
+        node_anim.trs.scale = std::move(track.scale);
     }
   }
   return out;
@@ -1245,7 +1294,7 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
 
     Animation node_animation;
     if (node_anim != nullptr) node_animation = node_anim->trs;
-    bool node_deforms = false;          // the node's own entity carries vertex keys
+    bool node_deforms = false;         // the node's own entity carries vertex keys
     std::size_t node_vertex_count = 0; // vertices of the mesh on the node's own entity
 
     if (node.skin >= 0 && !warned_skin) {
@@ -1266,7 +1315,8 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
         entry.parts = build_mesh_parts(ctx, node.mesh, true, weights);
         for (const MeshPart& part : entry.parts)
           entry.geometry.push_back(std::make_shared<const TriangleMesh>(part.geometry));
-        cached = mesh_cache.emplace(std::pair(node.mesh, std::move(weights)), std::move(entry)).first;
+        cached =
+            mesh_cache.emplace(std::pair(node.mesh, std::move(weights)), std::move(entry)).first;
       }
       const CachedMesh& mesh = cached->second;
       if (mesh.parts.empty())
@@ -1329,8 +1379,8 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
     if (const auto light = map_light(ctx, node, field)) reg.emplace<Light>(e, *light);
 
     for (std::size_t c = node.children.size(); c-- > 0;)
-      stack.push_back({node.children[c], e, world_from_node, moves,
-                       field + index_field(".children", c)});
+      stack.push_back(
+          {node.children[c], e, world_from_node, moves, field + index_field(".children", c)});
   }
   return scene;
 }
@@ -1347,12 +1397,14 @@ TriangleMesh load_gltf_mesh(const std::filesystem::path& path, int mesh_index) {
   const tinygltf::Model model = read_model(path);
   const Context ctx{model, path.string()};
   if (mesh_index < 0 || static_cast<std::size_t>(mesh_index) >= model.meshes.size())
-    ctx.fail("meshes", "mesh index " + std::to_string(mesh_index) + " is out of range (the file has " +
-                           std::to_string(model.meshes.size()) + " meshes)");
+    ctx.fail("meshes", "mesh index " + std::to_string(mesh_index) +
+                           " is out of range (the file has " + std::to_string(model.meshes.size()) +
+                           " meshes)");
   std::vector<MeshPart> parts =
       build_mesh_parts(ctx, mesh_index, false, mesh_default_weights(ctx, mesh_index));
   if (parts.empty())
-    ctx.fail(index_field("meshes", static_cast<std::size_t>(mesh_index)), "mesh has no triangle primitives");
+    ctx.fail(index_field("meshes", static_cast<std::size_t>(mesh_index)),
+             "mesh has no triangle primitives");
   return std::move(parts.front().geometry);
 }
 

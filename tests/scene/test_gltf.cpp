@@ -117,8 +117,7 @@ TEST_F(GltfHierarchy, WorldTransformsMatchMatricesComputedFromTheFile) {
   const mat4 world_from_node2 = world_from_child * glm::translate(kIdentity, vec3(0, 0, -1));
   expect_near(reg().get<WorldTransform>(find(reg(), "root")).world_from_object, kWorldFromRoot);
   expect_near(reg().get<WorldTransform>(find(reg(), "child")).world_from_object, world_from_child);
-  expect_near(reg().get<WorldTransform>(find(reg(), "node 2")).world_from_object,
-              world_from_node2);
+  expect_near(reg().get<WorldTransform>(find(reg(), "node 2")).world_from_object, world_from_node2);
   // Material parts sit at their node's origin.
   for (const ecs::Entity part : children_of(reg(), find(reg(), "node 2")))
     expect_near(reg().get<WorldTransform>(part).world_from_object, world_from_node2);
@@ -195,7 +194,7 @@ TEST_F(GltfHierarchy, PbrFactorsMapToMaterial) {
 
   const Material& glow = reg().get<Material>(parts[1]);
   expect_near(glow.base_color, vec3(0.2f, 0.4f, 0.6f));
-  EXPECT_FLOAT_EQ(glow.reflectivity, 0.25f);           // 0.5 × (1 − 0.5)
+  EXPECT_FLOAT_EQ(glow.reflectivity, 0.25f);          // 0.5 × (1 − 0.5)
   expect_near(glow.emission, vec3(4.0f, 2.0f, 1.0f)); // emissiveFactor × strength 4
   EXPECT_FLOAT_EQ(glow.roughness, 0.5f);
   EXPECT_FLOAT_EQ(glow.ior, 1.5f); // no KHR_materials_ior: the glTF default
@@ -426,8 +425,8 @@ TEST(GltfSample, SmallSceneLoadsWithExpectedCounts) {
   reg.view<Mesh>().each([&](ecs::Entity e, const Mesh& mesh) {
     const TriangleMesh& m = *mesh.geometry;
     for (const uvec3& t : m.triangles) {
-      const vec3 n = glm::cross(m.positions[t.y] - m.positions[t.x],
-                                m.positions[t.z] - m.positions[t.x]);
+      const vec3 n =
+          glm::cross(m.positions[t.y] - m.positions[t.x], m.positions[t.z] - m.positions[t.x]);
       if (glm::length(n) < 1e-9f) continue; // pole triangles of the sphere may be slivers
       EXPECT_GT(glm::dot(n, m.normals[t.x] + m.normals[t.y] + m.normals[t.z]), 0.0f)
           << reg.get<Name>(e).value;
@@ -556,7 +555,8 @@ TEST(GltfBadInput, CorruptedFilesLoadOrFailWithAnError) {
     std::uniform_int_distribution<std::size_t> pick(0, positions.size() - 1);
     std::uniform_int_distribution<int> byte(0, 255);
     const char digits[] = "0123456789";
-    const fs::path target = fs::path(::testing::TempDir()) / (std::string("specula_corrupted_") + source);
+    const fs::path target =
+        fs::path(::testing::TempDir()) / (std::string("specula_corrupted_") + source);
     for (int trial = 0; trial < 300; ++trial) {
       std::string bytes = original;
       for (int k = 0; k < 1 + trial % 3; ++k)
@@ -633,8 +633,8 @@ TEST(GltfAssimp, KnownFilesGiveKnownResults) {
     });
   }
   {
-    Scene morph =
-        load_gltf_scene(kAssimp / "glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf");
+    Scene morph = load_gltf_scene(
+        kAssimp / "glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf");
     ASSERT_EQ(morph.registry.count<Animation>(), 1u);
     morph.registry.view<Animation, Mesh>().each([](const Animation& a, const Mesh& m) {
       EXPECT_EQ(a.vertices.times.size(), 127u);
@@ -644,7 +644,8 @@ TEST(GltfAssimp, KnownFilesGiveKnownResults) {
   {
     Scene engine = load_gltf_scene(kAssimp / "2CylinderEngine-glTF-Binary/2CylinderEngine.glb");
     std::uint64_t triangles = 0;
-    engine.registry.view<Mesh>().each([&](const Mesh& m) { triangles += m.geometry->triangle_count(); });
+    engine.registry.view<Mesh>().each(
+        [&](const Mesh& m) { triangles += m.geometry->triangle_count(); });
     EXPECT_GT(triangles, 100'000u);
   }
   EXPECT_NO_THROW((void)load_gltf_scene(kAssimp / "simple_skin/simple_skin.gltf"));
