@@ -29,6 +29,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
@@ -108,6 +109,14 @@ struct Context {
   }
   void warn(const std::string& message) const { log_warning(file + ": " + message); }
 };
+
+/// A JSON number as float. Doubles beyond float range (1e300) are errors too: converting them
+/// would be undefined behaviour, not infinity.
+float to_float(const Context& ctx, double value, const std::string& field) {
+  if (!std::isfinite(value) || std::abs(value) > double(std::numeric_limits<float>::max()))
+    ctx.fail(field, "value is not a finite 32-bit float");
+  return static_cast<float>(value);
+}
 
 // ---------------------------------------------------------------------------------------------
 // Reading the file
@@ -699,10 +708,8 @@ std::vector<float> mesh_default_weights(const Context& ctx, int mesh_index) {
     ctx.fail(field, std::to_string(mesh.weights.size()) + " weights for " +
                         std::to_string(targets) + " morph targets");
   std::vector<float> weights(targets, 0.0f);
-  for (std::size_t i = 0; i < mesh.weights.size(); ++i) {
-    if (!std::isfinite(mesh.weights[i])) ctx.fail(field, "weight is not finite");
-    weights[i] = static_cast<float>(mesh.weights[i]);
-  }
+  for (std::size_t i = 0; i < mesh.weights.size(); ++i)
+    weights[i] = to_float(ctx, mesh.weights[i], field);
   return weights;
 }
 
@@ -780,14 +787,16 @@ std::optional<double> extension_number(const Context& ctx, const tinygltf::Exten
 }
 
 Material map_material(const Context& ctx, int index) {
-  // Primitives without a material use the glTF default material (white, metallic 1, rough 1).
-  static const tinygltf::Material kDefault;
+  // Primitives without a material use the glTF default material (white, metallic 1, rough 1),
+  // which is what a default-constructed tinygltf::Material holds.
+  const tinygltf::Material default_material;
   const auto& materials = ctx.model.materials;
   if (index >= 0 && static_cast<std::size_t>(index) >= materials.size())
     ctx.fail("materials", "material index " + std::to_string(index) +
                               " is out of range (the file has " + std::to_string(materials.size()) +
                               " materials)");
-  const tinygltf::Material& m = index < 0 ? kDefault : materials[static_cast<std::size_t>(index)];
+  const tinygltf::Material& m =
+      index < 0 ? default_material : materials[static_cast<std::size_t>(index)];
   const std::string field =
       index < 0 ? "default material" : index_field("materials", static_cast<std::size_t>(index));
   const auto& pbr = m.pbrMetallicRoughness;
@@ -811,10 +820,10 @@ Material map_material(const Context& ctx, int index) {
   }
   if (const auto strength = extension_number(ctx, m.extensions, "KHR_materials_emissive_strength",
                                              "emissiveStrength", field)) {
-    if (!std::isfinite(*strength) || *strength < 0.0)
-      ctx.fail(field + ".extensions.KHR_materials_emissive_strength",
-               "emissiveStrength must be finite and ≥ 0");
-    out.emission *= static_cast<float>(*strength);
+    const std::string where = field + ".extensions.KHR_materials_emissive_strength";
+    const float value = to_float(ctx, *strength, where);
+    if (value < 0.0f) ctx.fail(where, "emissiveStrength must be ≥ 0");
+    out.emission *= value;
   }
 
   // See the mapping notes at the top of the file.
@@ -829,9 +838,8 @@ Material map_material(const Context& ctx, int index) {
         (1.0f - metallic);
   }
   if (const auto ior = extension_number(ctx, m.extensions, "KHR_materials_ior", "ior", field)) {
-    if (!std::isfinite(*ior) || *ior < 1.0)
-      ctx.fail(field + ".extensions.KHR_materials_ior.ior", "ior must be finite and ≥ 1");
-    out.ior = static_cast<float>(*ior);
+    out.ior = to_float(ctx, *ior, field + ".extensions.KHR_materials_ior.ior");
+    if (out.ior < 1.0f) ctx.fail(field + ".extensions.KHR_materials_ior.ior", "ior must be ≥ 1");
   }
   return out;
 }
@@ -868,7 +876,7 @@ std::optional<Camera> map_camera(const Context& ctx, int index, const mat4& worl
   camera.look_at = camera.position + glm::normalize(forward);
   camera.up = glm::normalize(up);
   camera.vertical_fov = static_cast<float>(yfov);
-  camera.aspect = aspect > 0.0 ? static_cast<float>(aspect)
+  camera.aspect = aspect > 0.0 ? to_float(ctx, aspect, field + ".perspective.aspectRatio")
                                : static_cast<float>(settings.width) /
                                      static_cast<float>(std::max(1u, settings.height));
   return camera;
@@ -903,17 +911,14 @@ std::optional<Light> map_light(const Context& ctx, const tinygltf::Node& node,
   if (!l.color.empty()) {
     if (l.color.size() != 3) ctx.fail(lfield + ".color", "must have 3 components");
     for (int c = 0; c < 3; ++c) {
-      const double v = l.color[static_cast<std::size_t>(c)];
-      if (!std::isfinite(v) || v < 0.0) ctx.fail(lfield + ".color", "must be finite and ≥ 0");
-      light.color[c] = static_cast<float>(v);
+      light.color[c] = to_float(ctx, l.color[static_cast<std::size_t>(c)], lfield + ".color");
+      if (light.color[c] < 0.0f) ctx.fail(lfield + ".color", "must be ≥ 0");
     }
   }
-  if (!std::isfinite(l.intensity) || l.intensity < 0.0)
-    ctx.fail(lfield + ".intensity", "must be finite and ≥ 0");
-  light.intensity = static_cast<float>(l.intensity);
-  if (!std::isfinite(l.range) || l.range < 0.0)
-    ctx.fail(lfield + ".range", "must be finite and > 0");
-  light.range = static_cast<float>(l.range);
+  light.intensity = to_float(ctx, l.intensity, lfield + ".intensity");
+  if (light.intensity < 0.0f) ctx.fail(lfield + ".intensity", "must be ≥ 0");
+  light.range = to_float(ctx, l.range, lfield + ".range"); // 0: not given, unlimited
+  if (light.range < 0.0f) ctx.fail(lfield + ".range", "must be > 0");
   if (light.type == Light::Type::Spot) {
     const double inner = l.spot.innerConeAngle;
     const double outer = l.spot.outerConeAngle;
@@ -938,9 +943,8 @@ Transform decompose(const Context& ctx, const std::vector<double>& values,
   mat4 m;
   for (int c = 0; c < 4; ++c)
     for (int r = 0; r < 4; ++r) {
-      const double v = values[static_cast<std::size_t>(4 * c + r)]; // column-major, as glTF
-      if (!std::isfinite(v)) ctx.fail(field, "matrix has a non-finite element");
-      m[c][r] = static_cast<float>(v);
+      // Column-major, as glTF stores it.
+      m[c][r] = to_float(ctx, values[static_cast<std::size_t>(4 * c + r)], field);
     }
   if (std::abs(m[0][3]) > 1e-6f || std::abs(m[1][3]) > 1e-6f || std::abs(m[2][3]) > 1e-6f ||
       std::abs(m[3][3] - 1.0f) > 1e-6f)
@@ -974,11 +978,8 @@ Transform node_transform(const Context& ctx, const tinygltf::Node& node, const s
   const auto vector3 = [&](const std::vector<double>& v, const char* name, vec3& out) {
     if (v.empty()) return;
     if (v.size() != 3) ctx.fail(field + "." + name, "must have 3 numbers");
-    for (int i = 0; i < 3; ++i) {
-      if (!std::isfinite(v[static_cast<std::size_t>(i)]))
-        ctx.fail(field + "." + name, "is not finite");
-      out[i] = static_cast<float>(v[static_cast<std::size_t>(i)]);
-    }
+    for (int i = 0; i < 3; ++i)
+      out[i] = to_float(ctx, v[static_cast<std::size_t>(i)], field + "." + name);
   };
   vector3(node.translation, "translation", t.translation);
   vector3(node.scale, "scale", t.scale);
@@ -987,8 +988,9 @@ Transform node_transform(const Context& ctx, const tinygltf::Node& node, const s
   if (!node.rotation.empty()) {
     if (node.rotation.size() != 4) ctx.fail(field + ".rotation", "must have 4 numbers");
     const auto& r = node.rotation;
-    const quat q(static_cast<float>(r[3]), static_cast<float>(r[0]), static_cast<float>(r[1]),
-                 static_cast<float>(r[2])); // glTF stores x, y, z, w
+    const std::string where = field + ".rotation";
+    const quat q(to_float(ctx, r[3], where), to_float(ctx, r[0], where), to_float(ctx, r[1], where),
+                 to_float(ctx, r[2], where)); // glTF stores x, y, z, w
     if (!is_finite(q) || glm::length(q) < 1e-6f)
       ctx.fail(field + ".rotation", "must be a finite, non-zero quaternion");
     t.rotation = glm::normalize(q);
@@ -1219,10 +1221,8 @@ std::vector<float> node_weights(const Context& ctx, const tinygltf::Node& node,
   if (node.weights.size() != weights.size())
     ctx.fail(field + ".weights", std::to_string(node.weights.size()) + " weights for " +
                                      std::to_string(weights.size()) + " morph targets");
-  for (std::size_t i = 0; i < weights.size(); ++i) {
-    if (!std::isfinite(node.weights[i])) ctx.fail(field + ".weights", "weight is not finite");
-    weights[i] = static_cast<float>(node.weights[i]);
-  }
+  for (std::size_t i = 0; i < weights.size(); ++i)
+    weights[i] = to_float(ctx, node.weights[i], field + ".weights");
   return weights;
 }
 

@@ -347,6 +347,10 @@ def write_bad_files():
         {"sampler": 0, "target": {"node": 0, "path": "translation"}}]}]
     g.write_gltf("bad_animation_times.gltf")
 
+    g = small_triangle(Gltf())
+    g.doc["nodes"][0]["translation"] = [0, 1e300, 0]  # a finite double, but no float
+    g.write_gltf("bad_huge_translation.gltf")
+
     # Two primitives with different materials, the second index past the end.
     g = small_triangle(Gltf())
     prim = g.doc["meshes"][0]["primitives"][0]
