@@ -35,7 +35,6 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
-#include <iostream>
 #include <limits>
 #include <mutex>
 #include <optional>
@@ -133,7 +132,8 @@ void split_tokens(std::string_view line, std::vector<std::string_view>& tokens) 
 [[nodiscard]] std::string quote_token(std::string_view token) {
   constexpr std::size_t kMax = 32; // a garbage token may be a whole binary blob
   std::string out = "'";
-  out += token.substr(0, kMax);
+  for (const char c : token.substr(0, kMax)) // keep control bytes out of messages
+    out += c >= ' ' && c <= '~' ? c : '?';
   if (token.size() > kMax) out += "...";
   return out + "'";
 }
@@ -380,11 +380,19 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
 
 // ---- PLY ------------------------------------------------------------------------------------
 
+struct PlyType {
+  std::size_t size = 0;
+  bool floating = false;
+  bool is_signed = false;
+};
+
 struct PlyProperty {
   std::string name;
   bool list = false;
-  bool floating = false; ///< float/double values (else integers)
-  std::size_t size = 0;  ///< bytes of a scalar, or of a list's count
+  PlyType count; ///< a list's length type
+  PlyType value; ///< the scalar's type, or a list entry's
+  /// The face's vertex index list (OpenMesh reads "vertex_indices" or "vertex_index").
+  bool indices = false;
 };
 
 struct PlyElement {
@@ -393,18 +401,37 @@ struct PlyElement {
   std::vector<PlyProperty> properties;
 };
 
-[[nodiscard]] std::optional<std::size_t> ply_type_size(std::string_view type) {
-  if (type == "char" || type == "uchar" || type == "int8" || type == "uint8") return 1;
-  if (type == "short" || type == "ushort" || type == "int16" || type == "uint16") return 2;
-  if (type == "int" || type == "uint" || type == "int32" || type == "uint32" ||
-      type == "float" || type == "float32")
-    return 4;
-  if (type == "double" || type == "float64") return 8;
+[[nodiscard]] std::optional<PlyType> ply_type(std::string_view type) {
+  if (type == "char" || type == "int8") return PlyType{1, false, true};
+  if (type == "uchar" || type == "uint8") return PlyType{1, false, false};
+  if (type == "short" || type == "int16") return PlyType{2, false, true};
+  if (type == "ushort" || type == "uint16") return PlyType{2, false, false};
+  if (type == "int" || type == "int32") return PlyType{4, false, true};
+  if (type == "uint" || type == "uint32") return PlyType{4, false, false};
+  if (type == "float" || type == "float32") return PlyType{4, true, true};
+  if (type == "double" || type == "float64") return PlyType{8, true, true};
   return std::nullopt;
 }
 
-[[nodiscard]] bool ply_floating(std::string_view type) {
-  return type == "float" || type == "float32" || type == "double" || type == "float64";
+[[nodiscard]] Error ply_truncated(const std::string& file, const PlyElement& element,
+                                  std::uint64_t item) {
+  return Error(file, "truncated: the file ends in " + element.name + " " + std::to_string(item) +
+                         " of the " + std::to_string(element.count) + " the header declares");
+}
+
+/// `line` 0: a binary file, no line to name.
+[[nodiscard]] Error ply_index_out_of_range(const std::string& file, int line, std::int64_t index,
+                                           std::uint64_t vertices) {
+  const std::string message = "face index " + std::to_string(index) +
+                              " is out of range: the file has " + std::to_string(vertices) +
+                              " vertices (indices start at 0)";
+  return line > 0 ? Error(file, line, message) : Error(file, message);
+}
+
+[[nodiscard]] std::uint64_t ply_vertex_count(const std::vector<PlyElement>& elements) {
+  for (const PlyElement& element : elements)
+    if (element.name == "vertex") return element.count;
+  return 0;
 }
 
 /// ASCII PLY body, value by value (the format is a token stream, as OpenMesh reads it): every
@@ -422,21 +449,14 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
     if (at == start) return std::nullopt;
     return body.substr(start, at - start);
   };
-  std::uint64_t vertices = 0;
-  for (const PlyElement& element : elements)
-    if (element.name == "vertex") vertices = element.count;
-
+  const std::uint64_t vertices = ply_vertex_count(elements);
   std::vector<std::uint64_t> corners;
   for (const PlyElement& element : elements) {
     const bool is_vertex = element.name == "vertex";
-    const bool is_face = element.name == "face";
     for (std::uint64_t item = 0; item < element.count; ++item) {
       auto value = [&](const PlyProperty& property, bool floating) -> std::string_view {
         const std::optional<std::string_view> token = next_token();
-        if (!token)
-          throw Error(file, "truncated: the file ends in " + element.name + " " +
-                                std::to_string(item) + " of the " + std::to_string(element.count) +
-                                " the header declares");
+        if (!token) throw ply_truncated(file, element, item);
         if (floating) {
           const std::optional<double> number = parse_number(*token);
           if (!number)
@@ -453,7 +473,7 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
       };
       for (const PlyProperty& property : element.properties) {
         if (!property.list) {
-          (void)value(property, property.floating);
+          (void)value(property, property.value.floating);
           continue;
         }
         const std::int64_t length = *parse_integer(value(property, false));
@@ -461,36 +481,98 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
           throw Error(file, line, "list length " + std::to_string(length) + " of " +
                                       element.name + " property '" + property.name +
                                       "' is impossible here");
-        const bool indices =
-            is_face && (property.name == "vertex_indices" || property.name == "vertex_index");
-        if (indices && length < 3)
+        if (property.indices && length < 3)
           throw Error(file, line, "face has " + std::to_string(length) + " vertices, at least 3 needed");
         corners.clear();
         for (std::int64_t k = 0; k < length; ++k) {
-          const std::string_view token = value(property, property.floating);
-          if (!indices) continue;
+          const std::string_view token = value(property, property.value.floating);
+          if (!property.indices) continue;
           const std::int64_t index = *parse_integer(token);
           if (index < 0 || static_cast<std::uint64_t>(index) >= vertices)
-            throw Error(file, line, "face index " + std::to_string(index) +
-                                        " is out of range: the file has " +
-                                        std::to_string(vertices) + " vertices (indices start at 0)");
+            throw ply_index_out_of_range(file, line, index, vertices);
           corners.push_back(static_cast<std::uint64_t>(index));
         }
-        if (indices && has_repeated(corners)) ++result.faces_with_repeated_vertex;
+        if (property.indices && has_repeated(corners)) ++result.faces_with_repeated_vertex;
+      }
+    }
+  }
+  // Values left over mean the header does not describe the data (a face with more corners than
+  // its count says, say): OpenMesh would read them shifted.
+  if (next_token())
+    throw Error(file, line, "more values than the header declares: the header does not match "
+                            "the data");
+}
+
+/// Binary PLY body: list lengths fit in the file (OpenMesh reads a negative or huge "int" length
+/// for ever) and face indices are in range.
+void walk_binary_ply(const std::string& file, std::string_view body, bool big_endian,
+                     const std::vector<PlyElement>& elements, ScanResult& result) {
+  std::size_t at = 0;
+  auto read_integer = [&](const PlyType& type) -> std::int64_t {
+    std::uint64_t bits = 0;
+    for (std::size_t b = 0; b < type.size; ++b) {
+      const auto byte = std::uint64_t{static_cast<std::uint8_t>(body[at + b])};
+      bits |= byte << (8 * (big_endian ? type.size - 1 - b : b));
+    }
+    at += type.size;
+    if (type.is_signed && type.size < 8 && (bits >> (8 * type.size - 1)) != 0)
+      return static_cast<std::int64_t>(bits) - (std::int64_t{1} << (8 * type.size));
+    return static_cast<std::int64_t>(bits);
+  };
+  const std::uint64_t vertices = ply_vertex_count(elements);
+  std::vector<std::uint64_t> corners;
+  for (const PlyElement& element : elements) {
+    const bool fixed = std::none_of(element.properties.begin(), element.properties.end(),
+                                    [](const PlyProperty& p) { return p.list; });
+    if (fixed) { // the header check already made sure these fit
+      std::uint64_t item_size = 0;
+      for (const PlyProperty& property : element.properties) item_size += property.value.size;
+      at += static_cast<std::size_t>(element.count * item_size);
+      continue;
+    }
+    for (std::uint64_t item = 0; item < element.count; ++item) {
+      for (const PlyProperty& property : element.properties) {
+        if (!property.list) {
+          if (property.value.size > body.size() - at) throw ply_truncated(file, element, item);
+          at += property.value.size;
+          continue;
+        }
+        if (property.count.size > body.size() - at) throw ply_truncated(file, element, item);
+        const std::int64_t length = read_integer(property.count);
+        if (length < 0 ||
+            static_cast<std::uint64_t>(length) > (body.size() - at) / property.value.size)
+          throw Error(file, "list length " + std::to_string(length) + " in " + element.name + " " +
+                                std::to_string(item) + " (property '" + property.name +
+                                "') is negative or runs past the end of the file");
+        if (!property.indices || property.value.floating) {
+          at += static_cast<std::size_t>(length) * property.value.size;
+          continue;
+        }
+        if (length < 3)
+          throw Error(file, "face " + std::to_string(item) + " has " + std::to_string(length) +
+                                " vertices, at least 3 needed");
+        corners.clear();
+        for (std::int64_t k = 0; k < length; ++k) {
+          const std::int64_t index = read_integer(property.value);
+          if (index < 0 || static_cast<std::uint64_t>(index) >= vertices)
+            throw ply_index_out_of_range(file, 0, index, vertices);
+          corners.push_back(static_cast<std::uint64_t>(index));
+        }
+        if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
       }
     }
   }
 }
 
-/// PLY: a header OpenMesh can read, whose element counts fit in the bytes after it; for ASCII
-/// files also every value (walk_ascii_ply). Binary face indices are checked as OpenMesh reads
-/// them (RecordingImporter), binary values by TriangleMesh::validate.
+/// PLY: a header OpenMesh reads as we do, element counts that fit in the bytes after it, then
+/// the body value by value (walk_ascii_ply, walk_binary_ply).
 [[nodiscard]] ScanResult scan_ply(const std::string& file, std::string_view bytes) {
   if (!bytes.starts_with("ply")) throw Error(file, 1, "not a PLY file: it does not start with 'ply'");
   // The header ends at "end_header" + newline; cap the search so a binary blob is not scanned.
   constexpr std::size_t kMaxHeader = 1 << 20;
   const std::string_view head = bytes.substr(0, kMaxHeader);
   std::size_t header_end = std::string_view::npos;
+  std::size_t end_keyword = std::string_view::npos;
   for (std::size_t at = head.find("end_header"); at != std::string_view::npos;
        at = head.find("end_header", at + 1)) {
     if (at != 0 && head[at - 1] != '\n') continue;
@@ -498,13 +580,14 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
     if (after < head.size() && head[after] == '\r') ++after;
     if (after < head.size() && head[after] == '\n') {
       header_end = after + 1;
+      end_keyword = at;
       break;
     }
   }
   if (header_end == std::string_view::npos)
     throw Error(file, "truncated PLY header: no 'end_header' line");
 
-  enum class PlyFormat { none, ascii, binary };
+  enum class PlyFormat { none, ascii, binary_little, binary_big };
   PlyFormat format = PlyFormat::none;
   std::vector<PlyElement> elements;
   std::vector<std::string_view> tokens;
@@ -512,34 +595,44 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
   for_each_line(bytes.substr(0, header_end), [&](int line, std::string_view content) {
     header_lines = line;
     split_tokens(content, tokens);
-    if (tokens.empty()) return;
-    if (tokens[0] == "format") {
-      if (tokens.size() < 2) throw Error(file, line, "format line without a format");
+    if (tokens.empty() || line == 1) return;
+    // OpenMesh reads the three words after "ply" as the format line, whatever they are, and
+    // loops for ever on a version that is not a number.
+    if (format == PlyFormat::none) {
+      if (tokens[0] != "format" || tokens.size() != 3 || !parse_number(tokens[2]))
+        throw Error(file, line, "expected 'format <ascii|binary_little_endian|binary_big_endian> "
+                                "1.0' after 'ply', found " + quote_token(content));
       if (tokens[1] == "ascii")
         format = PlyFormat::ascii;
-      else if (tokens[1] == "binary_little_endian" || tokens[1] == "binary_big_endian")
-        format = PlyFormat::binary;
+      else if (tokens[1] == "binary_little_endian")
+        format = PlyFormat::binary_little;
+      else if (tokens[1] == "binary_big_endian")
+        format = PlyFormat::binary_big;
       else
         throw Error(file, line, "unknown PLY format " + quote_token(tokens[1]));
     } else if (tokens[0] == "element") {
       if (tokens.size() < 3) throw Error(file, line, "element line needs a name and a count");
+      // OpenMesh reads counts as 32-bit unsigned; beyond that its header loop never ends.
       const std::optional<std::int64_t> count = parse_integer(tokens[2]);
-      if (!count || *count < 0)
-        throw Error(file, line,
-                    "element count " + quote_token(tokens[2]) + " is not a non-negative integer");
+      if (!count || *count < 0 || *count > std::numeric_limits<std::uint32_t>::max())
+        throw Error(file, line, "element count " + quote_token(tokens[2]) +
+                                    " is not an integer from 0 to 2^32 - 1 (absurd count)");
       elements.push_back({std::string(tokens[1]), static_cast<std::uint64_t>(*count), {}});
     } else if (tokens[0] == "property") {
+      // OpenMesh would write into elements_.back() of an empty list.
       if (elements.empty()) throw Error(file, line, "property before any element");
       const bool list = tokens.size() >= 2 && tokens[1] == "list";
       if (tokens.size() < (list ? 5u : 3u)) throw Error(file, line, "incomplete property line");
-      const std::string_view type = tokens[list ? 3 : 1];
-      const std::optional<std::size_t> size = ply_type_size(tokens[list ? 2 : 1]);
-      if (!size || !ply_type_size(type))
+      const std::optional<PlyType> count = list ? ply_type(tokens[2]) : PlyType{};
+      const std::optional<PlyType> value = ply_type(tokens[list ? 3 : 1]);
+      if (!count || !value || (list && count->floating))
         throw Error(file, line, "unknown PLY property type in " + quote_token(content));
-      elements.back().properties.push_back(
-          {std::string(tokens[list ? 4 : 2]), list, ply_floating(type), *size});
+      const std::string name(tokens[list ? 4 : 2]);
+      const bool indices =
+          list && elements.back().name == "face" && (name == "vertex_indices" || name == "vertex_index");
+      elements.back().properties.push_back({name, list, *count, *value, indices});
     }
-    // "ply", "comment", "obj_info", "end_header" and stray lines: OpenMesh skips them too.
+    // "comment", "obj_info", "end_header" and stray lines: OpenMesh skips them too.
   });
   if (format == PlyFormat::none) throw Error(file, "PLY header has no 'format' line");
 
@@ -549,12 +642,12 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
   const std::uint64_t body = bytes.size() - header_end;
   std::uint64_t least = 0;
   std::string counts;
-  std::optional<std::uint64_t> vertices;
+  bool has_vertices = false;
   ScanResult result;
   for (const PlyElement& element : elements) {
     std::uint64_t per_item = 0;
     for (const PlyProperty& property : element.properties)
-      per_item += format == PlyFormat::ascii ? 2 : property.size;
+      per_item += format == PlyFormat::ascii ? 2 : property.list ? property.count.size : property.value.size;
     per_item = std::max<std::uint64_t>(per_item, 1);
     counts += (counts.empty() ? "" : " and ") + std::to_string(element.count) + " '" +
               element.name + "'";
@@ -562,7 +655,7 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
     // count beyond the body saturates at once.
     least = element.count > body || least == kSaturated ? kSaturated
                                                         : least + element.count * per_item;
-    if (element.name == "vertex") vertices = element.count;
+    has_vertices = has_vertices || element.name == "vertex";
     if (element.name == "face") result.declared_faces = element.count;
   }
   // The last ASCII value needs no separator.
@@ -573,13 +666,24 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
                           (least == kSaturated ? std::string("more data than the file holds")
                                                : "at least " + std::to_string(least) + " bytes") +
                           ") but only " + std::to_string(body) + " bytes follow the header");
-  if (!vertices) throw Error(file, "PLY header declares no 'vertex' element");
-  if (*vertices > std::numeric_limits<std::uint32_t>::max())
-    throw Error(file, "too many vertices for 32-bit indices");
+  if (!has_vertices) throw Error(file, "PLY header declares no 'vertex' element");
   if (!result.declared_faces || *result.declared_faces == 0)
     throw Error(file, "PLY header declares no faces (a point cloud, not a mesh)");
-  if (format == PlyFormat::ascii)
+
+  if (format == PlyFormat::ascii) {
     walk_ascii_ply(file, bytes.substr(header_end), header_lines + 1, elements, result);
+    return result;
+  }
+  // OpenMesh finds binary data 12 bytes ("\nend_header\n", or 14 with "\r\n") after the last
+  // word before "end_header"; any other whitespace there shifts every value it reads.
+  std::size_t last_word = end_keyword;
+  while (last_word > 0 && is_space(bytes[last_word - 1])) --last_word;
+  const bool crlf = bytes.substr(last_word, 2) == "\r\n";
+  if (last_word + (crlf ? 14 : 12) != header_end)
+    throw Error(file, "unsupported whitespace around 'end_header': OpenMesh would read the "
+                      "binary data from the wrong offset");
+  walk_binary_ply(file, bytes.substr(header_end), format == PlyFormat::binary_big, elements,
+                  result);
   return result;
 }
 
@@ -658,34 +762,28 @@ std::mutex& openmesh_mutex() {
   return mutex;
 }
 
-/// While alive, routes OpenMesh's omerr/omlog/omout into a string instead of the console, so a
-/// bad file turns into one Error rather than a page of warnings. Restores the console targets.
+/// While alive, points OpenMesh's omerr/omlog/omout at a string instead of the console, so a bad
+/// file turns into one Error rather than a page of warnings. It swaps the streams' buffers
+/// rather than using mostream::connect/disconnect: disconnect() forgets the target it created in
+/// connect() without deleting it (OpenMesh 9), which leaks on every load.
 class OpenMeshLogCapture {
 public:
   OpenMeshLogCapture() {
     for (std::size_t i = 0; i < kStreams; ++i) {
-      OpenMesh::mostream& stream = this->stream(i);
-      stream.flush();
-      was_connected_[i] = disconnect_console(i);
-      stream.connect(captured_);
+      stream(i).flush(); // a pending partial line still goes to the console
+      previous_[i] = stream(i).rdbuf(&captured_);
     }
   }
   ~OpenMeshLogCapture() {
-    for (std::size_t i = 0; i < kStreams; ++i) {
-      OpenMesh::mostream& stream = this->stream(i);
-      stream.flush();
-      stream.disconnect(captured_);
-      if (was_connected_[i]) connect_console(i);
-    }
+    for (std::size_t i = 0; i < kStreams; ++i) stream(i).rdbuf(previous_[i]);
   }
   OpenMeshLogCapture(const OpenMeshLogCapture&) = delete;
   OpenMeshLogCapture& operator=(const OpenMeshLogCapture&) = delete;
 
   /// The distinct lines OpenMesh wrote so far, joined with "; " (at most a few, to stay short).
-  [[nodiscard]] std::string messages() {
-    for (std::size_t i = 0; i < kStreams; ++i) stream(i).flush();
+  [[nodiscard]] std::string messages() const {
     std::vector<std::string> lines;
-    std::istringstream in(captured_.str());
+    std::istringstream in(captured_.text());
     for (std::string line; std::getline(in, line);) {
       while (!line.empty() && is_space(line.back())) line.pop_back();
       if (!line.empty() && std::find(lines.begin(), lines.end(), line) == lines.end())
@@ -704,22 +802,31 @@ private:
   static OpenMesh::mostream& stream(std::size_t i) {
     return i == 0 ? omerr() : i == 1 ? omlog() : omout();
   }
-  // OpenMesh connects omerr to std::cerr, omlog to std::clog and omout to std::cout.
-  static bool disconnect_console(std::size_t i) {
-    return i == 0 ? omerr().disconnect(std::cerr)
-                  : i == 1 ? omlog().disconnect(std::clog) : omout().disconnect(std::cout);
-  }
-  static void connect_console(std::size_t i) {
-    if (i == 0)
-      omerr().connect(std::cerr);
-    else if (i == 1)
-      omlog().connect(std::clog);
-    else
-      omout().connect(std::cout);
-  }
 
-  std::ostringstream captured_;
-  std::array<bool, kStreams> was_connected_{};
+  /// Keeps the first 64 KiB: a reader that loops on a stream error can print without end.
+  class BoundedBuffer final : public std::streambuf {
+  public:
+    [[nodiscard]] const std::string& text() const { return text_; }
+
+  protected:
+    int_type overflow(int_type c) override {
+      if (!traits_type::eq_int_type(c, traits_type::eof()) && text_.size() < kLimit)
+        text_.push_back(traits_type::to_char_type(c));
+      return traits_type::not_eof(c);
+    }
+    std::streamsize xsputn(const char* s, std::streamsize n) override {
+      const auto room = static_cast<std::streamsize>(kLimit - std::min(kLimit, text_.size()));
+      text_.append(s, static_cast<std::size_t>(std::min(n, room)));
+      return n;
+    }
+
+  private:
+    static constexpr std::size_t kLimit = 64 * 1024;
+    std::string text_;
+  };
+
+  BoundedBuffer captured_;
+  std::array<std::streambuf*, kStreams> previous_{};
 };
 
 [[nodiscard]] std::string with_messages(std::string text, const std::string& messages) {

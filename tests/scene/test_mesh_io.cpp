@@ -219,7 +219,9 @@ INSTANTIATE_TEST_SUITE_P(
                     BadFile{"absurd_count.ply", "absurd count"},
                     BadFile{"no_faces.obj", "no faces"}, BadFile{"cube.xyz", "extension"},
                     BadFile{"degenerate_only.obj", "degenerate"},
-                    BadFile{"comment.off", "comment"}),
+                    BadFile{"comment.off", "comment"}, BadFile{"bad_version.ply", "format"},
+                    BadFile{"negative_list_length.ply", "negative"},
+                    BadFile{"end_header_whitespace.ply", "whitespace"}),
     [](const testing::TestParamInfo<BadFile>& param) { return file_test_name(param.param.name); });
 
 TEST(MeshIo, MissingFileIsAnError) {

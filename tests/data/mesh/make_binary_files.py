@@ -7,6 +7,8 @@ Binary files are generated rather than hand-edited so their content can be read 
   truncated_binary.stl  header claims 12 facets, the file holds 5
   binary_garbage.stl    300 pseudo-random bytes (neither ASCII nor size-consistent binary STL)
   out_of_range_index_binary.ply  binary triangle referring to vertex 7 of 3
+  negative_list_length.ply       binary face whose "int" corner count is -5 (OpenMesh loops)
+  end_header_whitespace.ply      binary cube triangle with spaces before "end_header"
 """
 import os
 import struct
@@ -35,11 +37,14 @@ def ply_cube():
     return header.encode("ascii") + body
 
 
-def ply_out_of_range():
+def ply_triangle(count_type="uchar", count=3, indices=(0, 1, 2), before_end=""):
     header = ("ply\nformat binary_little_endian 1.0\n"
               "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
-              "element face 1\nproperty list uchar int vertex_indices\nend_header\n")
-    body = struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0) + struct.pack("<B3i", 3, 0, 1, 7)
+              "element face 1\nproperty list %s int vertex_indices%s\nend_header\n"
+              % (count_type, before_end))
+    body = struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0)
+    body += struct.pack("<B" if count_type == "uchar" else "<i", count)
+    body += struct.pack("<3i", *indices)
     return header.encode("ascii") + body
 
 
@@ -66,7 +71,9 @@ def garbage(n, seed=12345):
 
 
 write("cube_binary.ply", ply_cube())
-write("out_of_range_index_binary.ply", ply_out_of_range())
+write("out_of_range_index_binary.ply", ply_triangle(indices=(0, 1, 7)))
+write("negative_list_length.ply", ply_triangle(count_type="int", count=-5))
+write("end_header_whitespace.ply", ply_triangle(before_end="   "))
 write("cube_binary.stl", stl_binary(CUBE_TRIANGLES, len(CUBE_TRIANGLES)))
 write("truncated_binary.stl", stl_binary(CUBE_TRIANGLES[:5], len(CUBE_TRIANGLES)))
 g = garbage(300)
