@@ -1,21 +1,25 @@
 /// \file
-/// Bare mesh files through OpenMesh, behind a pre-scan of our own.
+/// Bare mesh files through OpenMesh's readers, behind a scan of our own.
 ///
-/// OpenMesh's readers are lenient in ways that turn bad input into silent garbage or crashes
-/// (measured with OpenMesh 9.0, Debian 12):
-///   - OFF/PLY headers with absurd counts: the OFF reader reserves them (10^12 vertices aborts on
-///     allocation), the ASCII PLY reader loops for ever;
-///   - OBJ vertices it cannot parse ("nan", "banana") are dropped, shifting every later index;
-///   - the OFF reader cannot parse "inf"/"nan" and desynchronises, reads '#' comment lines as data
-///     and reads nothing when the counts share the "OFF" line;
-///   - faces with out-of-range indices are dropped with a message on omerr ("ImporterT: Face
-///     contains invalid vertex index"), and read_mesh still returns true;
-///   - faces with a repeated vertex are dropped ("Face has equal vertices");
-///   - a binary STL whose size does not match its triangle count is parsed as ASCII and yields an
-///     empty mesh with read_mesh returning true.
-/// So each file is checked first by a light scan (counts against the file size, OBJ/OFF indices
-/// and numbers, STL layout); OpenMesh then reads it, and what it built is checked against what the
-/// scan saw (faces dropped) and by TriangleMesh::validate (NaN/Inf, no triangles).
+/// OpenMesh 9.0 (Debian 12) turns much bad input into silent garbage, hangs or crashes:
+///   - absurd counts: the OFF reader reserves them (10^12 vertices aborts on allocation); the PLY
+///     header loop never ends on a count beyond 32 bits or a version that is not a number, nor
+///     the binary body on a negative or huge "int" list length;
+///   - the OBJ reader drops vertices it cannot parse ("nan", "banana", 1e39), shifting every
+///     later index; the OFF and ASCII PLY readers desynchronise on them instead;
+///   - the OFF reader reads '#' comment lines as data and nothing when the counts share the
+///     "OFF" line; binary PLY data is read from a fixed offset after the last header word, so
+///     extra whitespace before "end_header" shifts every value;
+///   - ImporterT drops faces with out-of-range indices or a repeated vertex (telling only omerr;
+///     read_mesh still returns true), and moves non-manifold faces onto copied vertices whose
+///     normals and texture coordinates stay uninitialised;
+///   - a binary STL whose size does not match its triangle count is parsed as ASCII (an empty
+///     mesh, read_mesh returns true); NaN corners vanish in the STL reader's vertex merging;
+///   - messages go to the console through omerr/omlog.
+/// So each file is first scanned by us (counts against the file size, every OBJ/OFF/ASCII PLY
+/// value and index, binary PLY list lengths and indices, STL layout and values). OpenMesh then
+/// parses it into RecordingImporter, which keeps the polygons as written; what it read is
+/// checked against the scan (faces lost) and by TriangleMesh::validate.
 
 #include "scene/mesh_io.h"
 
@@ -29,6 +33,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -74,6 +79,8 @@ struct ScanResult {
   std::optional<std::uint64_t> declared_faces;
   /// Declared faces that repeat a vertex; OpenMesh drops these as degenerate.
   std::uint64_t faces_with_repeated_vertex = 0;
+  /// STL: the binary layout (its size is 84 + 50 * triangles, OpenMesh's own test on files).
+  bool binary = false;
 };
 
 // ---- Text scanning helpers ------------------------------------------------------------------
@@ -115,8 +122,12 @@ void split_tokens(std::string_view line, std::vector<std::string_view>& tokens) 
   double value = 0.0;
   const auto [end, ec] = std::from_chars(token.data(), token.data() + token.size(), value);
   if (end != token.data() + token.size()) return std::nullopt;
-  // Out of range (1e999): not representable, as good as infinite for a mesh.
-  if (ec == std::errc::result_out_of_range) return std::numeric_limits<double>::infinity();
+  // Out of range: 1e-999 underflows to zero (as OpenMesh's stream reads it), 1e999 is as good
+  // as infinite for a mesh.
+  if (ec == std::errc::result_out_of_range)
+    return token.find("e-") != std::string_view::npos || token.find("E-") != std::string_view::npos
+               ? 0.0
+               : std::numeric_limits<double>::infinity();
   if (ec != std::errc()) return std::nullopt;
   return value;
 }
@@ -138,7 +149,13 @@ void split_tokens(std::string_view line, std::vector<std::string_view>& tokens) 
   return out + "'";
 }
 
-/// Checks the numbers of an OBJ/OFF vertex-like line: all tokens numeric and finite.
+/// Whether OpenMesh's float streams read `value` as a number: beyond the float range they fail,
+/// and the OBJ reader then drops the whole vertex, shifting every later index.
+[[nodiscard]] bool fits_float(double value) {
+  return std::abs(value) <= static_cast<double>(std::numeric_limits<float>::max());
+}
+
+/// Checks the numbers of an OBJ/OFF/STL vertex-like line: all tokens numeric, finite floats.
 void check_numbers(const std::string& file, int line, std::span<const std::string_view> tokens,
                    std::string_view what) {
   for (std::string_view token : tokens) {
@@ -148,6 +165,9 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
     if (!std::isfinite(*value))
       throw Error(file, line,
                   std::string(what) + " has a non-finite value " + quote_token(token) + " (NaN or Inf)");
+    if (!fits_float(*value))
+      throw Error(file, line, std::string(what) + " value " + quote_token(token) +
+                                  " is beyond the float range (Inf as a float)");
   }
 }
 
@@ -465,6 +485,11 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
           if (is_vertex && !std::isfinite(*number))
             throw Error(file, line, "vertex has a non-finite value " + quote_token(*token) +
                                         " (NaN or Inf) in property '" + property.name + "'");
+          // A float beyond its range fails OpenMesh's stream, which then reads the rest shifted.
+          if ((is_vertex || property.value.size == 4) && !fits_float(*number))
+            throw Error(file, line, element.name + " property '" + property.name + "' value " +
+                                        quote_token(*token) +
+                                        " is beyond the float range (Inf as a float)");
         } else if (!parse_integer(*token)) {
           throw Error(file, line, element.name + " property '" + property.name + "' value " +
                                       quote_token(*token) + " is not an integer");
@@ -669,6 +694,29 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
   if (!has_vertices) throw Error(file, "PLY header declares no 'vertex' element");
   if (!result.declared_faces || *result.declared_faces == 0)
     throw Error(file, "PLY header declares no faces (a point cloud, not a mesh)");
+  // What OpenMesh's reader gets right, measured: x, y, z among the vertex scalars; the face's
+  // vertex index list first among its properties (it forgets the ones before) and no other list
+  // before the end of the face element (it misreads their lengths and shifts what follows).
+  bool face_seen = false;
+  for (const PlyElement& element : elements) {
+    if (face_seen) break;
+    if (element.name == "vertex")
+      for (const char* axis : {"x", "y", "z"})
+        if (std::none_of(element.properties.begin(), element.properties.end(),
+                         [&](const PlyProperty& p) { return !p.list && p.name == axis; }))
+          throw Error(file, std::string("the 'vertex' element has no '") + axis + "' property");
+    if (element.name == "face" &&
+        (element.properties.empty() || !element.properties.front().indices))
+      throw Error(file, "the 'face' element must start with a 'vertex_indices' list (OpenMesh "
+                        "reads no faces otherwise, or misreads them)");
+    for (std::size_t i = 0; i < element.properties.size(); ++i) {
+      const PlyProperty& property = element.properties[i];
+      if (property.list && !(property.indices && i == 0))
+        throw Error(file, "unsupported list property '" + property.name + "' in the '" +
+                              element.name + "' element: OpenMesh's reader misreads it");
+    }
+    face_seen = element.name == "face";
+  }
 
   if (format == PlyFormat::ascii) {
     walk_ascii_ply(file, bytes.substr(header_end), header_lines + 1, elements, result);
@@ -705,7 +753,17 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
     const std::uint64_t triangles = read_u32_le(bytes, 80);
     if (84 + 50 * triangles == size) {
       if (triangles == 0) throw Error(file, "binary STL with 0 triangles");
+      // OpenMesh merges corners through an ordered map, where a NaN key compares equal to
+      // anything: the NaN vanishes into some other vertex. Check before it gets there.
+      for (std::uint64_t t = 0; t < triangles; ++t)
+        for (std::size_t k = 0; k < 9; ++k) {
+          const std::size_t at = static_cast<std::size_t>(84 + 50 * t + 12) + 4 * k;
+          if (!std::isfinite(std::bit_cast<float>(read_u32_le(bytes, at))))
+            throw Error(file, "triangle " + std::to_string(t) +
+                                  " has a non-finite vertex coordinate (NaN or Inf)");
+        }
       result.declared_faces = triangles;
+      result.binary = true;
       return result;
     }
   }
@@ -786,6 +844,8 @@ public:
     std::istringstream in(captured_.text());
     for (std::string line; std::getline(in, line);) {
       while (!line.empty() && is_space(line.back())) line.pop_back();
+      for (char& c : line) // readers echo raw file bytes; keep control bytes out of messages
+        if (c < ' ' || c > '~') c = '?';
       if (!line.empty() && std::find(lines.begin(), lines.end(), line) == lines.end())
         lines.push_back(line);
     }
@@ -827,6 +887,33 @@ private:
 
   BoundedBuffer captured_;
   std::array<std::streambuf*, kStreams> previous_{};
+};
+
+/// A read-only, seekable stream buffer over bytes we already hold, so OpenMesh parses exactly
+/// what the scan checked (no second read of a file that may have changed) without a copy.
+class BytesBuffer final : public std::streambuf {
+public:
+  explicit BytesBuffer(std::string_view bytes) {
+    // streambuf's get area takes char*, but nothing here writes through it.
+    char* begin = const_cast<char*>(bytes.data());
+    setg(begin, begin, begin + bytes.size());
+  }
+
+protected:
+  pos_type seekoff(off_type offset, std::ios_base::seekdir dir,
+                   std::ios_base::openmode which) override {
+    if (!(which & std::ios_base::in)) return pos_type(off_type(-1));
+    const off_type base = dir == std::ios_base::beg   ? 0
+                          : dir == std::ios_base::cur ? gptr() - eback()
+                                                      : egptr() - eback();
+    const off_type target = base + offset;
+    if (target < 0 || target > egptr() - eback()) return pos_type(off_type(-1));
+    setg(eback(), eback() + target, egptr());
+    return pos_type(target);
+  }
+  pos_type seekpos(pos_type position, std::ios_base::openmode which) override {
+    return seekoff(off_type(position), std::ios_base::beg, which);
+  }
 };
 
 [[nodiscard]] std::string with_messages(std::string text, const std::string& messages) {
@@ -1064,19 +1151,26 @@ TriangleMesh load_mesh_file(const fs::path& path) {
   case MeshFormat::stl: scan = scan_stl(file, bytes); break;
   }
 
-  // Only positions live in the OpenMesh mesh; the importer keeps the rest (see above).
-  OmMesh om;
-  RecordingImporter importer(om, *format == MeshFormat::obj);
   OpenMesh::IO::Options options = OpenMesh::IO::Options::VertexNormal |
                                   OpenMesh::IO::Options::VertexTexCoord |
                                   OpenMesh::IO::Options::FaceTexCoord;
+  // The extension picks OpenMesh's reader; the STL reader cannot tell binary from ASCII in a
+  // stream, so it is told.
+  constexpr std::array<const char*, 4> extension_of = {".obj", ".ply", ".off", ".stl"};
+  if (*format == MeshFormat::stl && scan.binary) options += OpenMesh::IO::Options::Binary;
+  // Only positions live in the OpenMesh mesh; the importer keeps the rest (see above).
+  OmMesh om;
+  RecordingImporter importer(om, *format == MeshFormat::obj);
   std::string messages;
   {
     const std::lock_guard lock(openmesh_mutex());
     OpenMeshLogCapture capture;
     bool ok = false;
     try {
-      ok = OpenMesh::IO::IOManager().read(file, importer, options);
+      BytesBuffer buffer(bytes);
+      std::istream in(&buffer);
+      ok = OpenMesh::IO::IOManager().read(in, extension_of[static_cast<int>(*format)], importer,
+                                          options);
     } catch (const std::exception& e) {
       throw Error(file, with_messages(std::string("OpenMesh failed to read the file: ") + e.what(),
                                       capture.messages()));

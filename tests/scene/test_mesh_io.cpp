@@ -221,7 +221,10 @@ INSTANTIATE_TEST_SUITE_P(
                     BadFile{"degenerate_only.obj", "degenerate"},
                     BadFile{"comment.off", "comment"}, BadFile{"bad_version.ply", "format"},
                     BadFile{"negative_list_length.ply", "negative"},
-                    BadFile{"end_header_whitespace.ply", "whitespace"}),
+                    BadFile{"end_header_whitespace.ply", "whitespace"},
+                    BadFile{"float_overflow.obj", "float range"},
+                    BadFile{"nan_vertex_binary.stl", "NaN"},
+                    BadFile{"face_texcoord_list.ply", "list property"}),
     [](const testing::TestParamInfo<BadFile>& param) { return file_test_name(param.param.name); });
 
 TEST(MeshIo, MissingFileIsAnError) {

@@ -9,6 +9,7 @@ Binary files are generated rather than hand-edited so their content can be read 
   out_of_range_index_binary.ply  binary triangle referring to vertex 7 of 3
   negative_list_length.ply       binary face whose "int" corner count is -5 (OpenMesh loops)
   end_header_whitespace.ply      binary cube triangle with spaces before "end_header"
+  nan_vertex_binary.stl          binary cube whose facet 3 has a NaN corner coordinate
 """
 import os
 import struct
@@ -56,9 +57,13 @@ def stl_facet(t):
     return struct.pack("<3f", *n) + b"".join(struct.pack("<3f", *p) for p in ps) + b"\0\0"
 
 
-def stl_binary(facets, claimed):
+def stl_binary(facets, claimed, nan_facet=None):
     header = b"binary cube".ljust(80, b"\0")
-    return header + struct.pack("<I", claimed) + b"".join(stl_facet(t) for t in facets)
+    body = [stl_facet(t) for t in facets]
+    if nan_facet is not None:  # first corner's x (after the 12-byte facet normal)
+        f = body[nan_facet]
+        body[nan_facet] = f[:12] + struct.pack("<f", float("nan")) + f[16:]
+    return header + struct.pack("<I", claimed) + b"".join(body)
 
 
 def garbage(n, seed=12345):
@@ -75,6 +80,7 @@ write("out_of_range_index_binary.ply", ply_triangle(indices=(0, 1, 7)))
 write("negative_list_length.ply", ply_triangle(count_type="int", count=-5))
 write("end_header_whitespace.ply", ply_triangle(before_end="   "))
 write("cube_binary.stl", stl_binary(CUBE_TRIANGLES, len(CUBE_TRIANGLES)))
+write("nan_vertex_binary.stl", stl_binary(CUBE_TRIANGLES, len(CUBE_TRIANGLES), nan_facet=3))
 write("truncated_binary.stl", stl_binary(CUBE_TRIANGLES[:5], len(CUBE_TRIANGLES)))
 g = garbage(300)
 assert not g.lstrip().lower().startswith(b"solid")
