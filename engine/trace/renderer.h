@@ -42,4 +42,10 @@ FrameStats render_frame(const Backend& backend, const Camera& camera,
                         std::span<const SceneLight> lights, const TraceSettings& settings,
                         Framebuffer& out);
 
+/// The primary-ray stage of render_frame alone (camera rays, coherent packets, hits resolved to
+/// surfaces), for measuring the tracer's own overhead against its backend. Returns a checksum.
+template <typename Backend>
+std::uint64_t trace_primary_frame(const Backend& backend, const Camera& camera, std::uint32_t width,
+                                  std::uint32_t height, const TraceSettings& settings);
+
 } // namespace specula

@@ -22,6 +22,11 @@ struct Surface {
   /// Whether mesh->normals may be interpolated for shading (false for deformed meshes, whose
   /// vertex normals no longer match the positions: shading then uses the geometric normal).
   bool smooth_normals = true;
+
+  /// Unit world-space normal from an object-space one (e.g. Hit::object_normal).
+  [[nodiscard]] vec3 world_normal(const vec3& object_normal) const {
+    return glm::normalize(world_normal_from_object * object_normal);
+  }
 };
 
 } // namespace specula

@@ -57,7 +57,7 @@ public:
   [[nodiscard]] RTCScene scene() const { return top_; }
   [[nodiscard]] RTCDevice device() const { return device_; }
 
-  /// Fills `hit` from an Embree ray-hit record (surface index, world normal, barycentrics).
+  /// Fills `hit` from an Embree ray-hit record (surface index, object-space normal, barycentrics).
   void resolve(unsigned geom_id, unsigned inst_id, float ng_x, float ng_y, float ng_z, float u,
                float v, float t, unsigned prim_id, Hit& hit) const {
     if (geom_id == RTC_INVALID_GEOMETRY_ID) {
@@ -70,7 +70,7 @@ public:
     hit.surface = surface;
     hit.primitive = prim_id;
     hit.uv = vec2(u, v);
-    hit.normal = glm::normalize(surfaces_[surface].world_normal_from_object * vec3(ng_x, ng_y, ng_z));
+    hit.object_normal = vec3(ng_x, ng_y, ng_z);
   }
 
 private:

@@ -103,5 +103,8 @@ void EmbreeBackend::intersect_coherent(std::span<const Ray> rays, std::span<Hit>
 template FrameStats render_frame<EmbreeBackend>(const EmbreeBackend&, const Camera&,
                                                 std::span<const SceneLight>, const TraceSettings&,
                                                 Framebuffer&);
+template std::uint64_t trace_primary_frame<EmbreeBackend>(const EmbreeBackend&, const Camera&,
+                                                          std::uint32_t, std::uint32_t,
+                                                          const TraceSettings&);
 
 } // namespace specula

@@ -34,5 +34,8 @@ private:
 extern template FrameStats render_frame<EmbreeBackend>(const EmbreeBackend&, const Camera&,
                                                        std::span<const SceneLight>,
                                                        const TraceSettings&, Framebuffer&);
+extern template std::uint64_t trace_primary_frame<EmbreeBackend>(const EmbreeBackend&, const Camera&,
+                                                                 std::uint32_t, std::uint32_t,
+                                                                 const TraceSettings&);
 
 } // namespace specula
