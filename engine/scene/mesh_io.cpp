@@ -79,8 +79,6 @@ struct ScanResult {
   std::optional<std::uint64_t> declared_faces;
   /// Declared faces that repeat a vertex; OpenMesh drops these as degenerate.
   std::uint64_t faces_with_repeated_vertex = 0;
-  /// STL: the binary layout (its size is 84 + 50 * triangles, OpenMesh's own test on files).
-  bool binary = false;
 };
 
 // ---- Text scanning helpers ------------------------------------------------------------------
@@ -161,14 +159,24 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
   for (std::string_view token : tokens) {
     const std::optional<double> value = parse_number(token);
     if (!value)
-      throw Error(file, line, std::string(what) + " value " + quote_token(token) + " is not a number");
+      throw Error(file, line,
+                  std::string(what) + " value " + quote_token(token) + " is not a number");
     if (!std::isfinite(*value))
       throw Error(file, line,
-                  std::string(what) + " has a non-finite value " + quote_token(token) + " (NaN or Inf)");
+                  std::string(what) + " has a non-finite value " + quote_token(token) +
+                      " (NaN or Inf)");
     if (!fits_float(*value))
-      throw Error(file, line, std::string(what) + " value " + quote_token(token) +
-                                  " is beyond the float range (Inf as a float)");
+      throw Error(file, line,
+                  std::string(what) + " value " + quote_token(token) +
+                      " is beyond the float range (Inf as a float)");
   }
+}
+
+[[nodiscard]] std::uint32_t read_u32_le(std::string_view bytes, std::size_t at) {
+  std::uint32_t v = 0;
+  for (std::size_t b = 0; b < 4; ++b)
+    v |= std::uint32_t{static_cast<std::uint8_t>(bytes[at + b])} << (8 * b);
+  return v;
 }
 
 [[nodiscard]] bool has_repeated(std::vector<std::uint64_t>& indices) {
@@ -185,10 +193,9 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
                                               std::string_view what) {
   const std::optional<std::int64_t> index = parse_integer(token);
   if (!index) throw Error(file, line, "face index " + quote_token(token) + " is not an integer");
-  if (*index == 0)
-    throw Error(file, line, "face index 0 is out of range (OBJ indices start at 1)");
-  const std::uint64_t magnitude =
-      *index > 0 ? static_cast<std::uint64_t>(*index) : static_cast<std::uint64_t>(-(*index + 1)) + 1;
+  if (*index == 0) throw Error(file, line, "face index 0 is out of range (OBJ indices start at 1)");
+  const std::uint64_t magnitude = *index > 0 ? static_cast<std::uint64_t>(*index)
+                                             : static_cast<std::uint64_t>(-(*index + 1)) + 1;
   if (magnitude > count)
     throw Error(file, line,
                 "face index " + std::string(token) + " is out of range: only " +
@@ -215,7 +222,8 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
     if (keyword == "v") {
       // x y z, optionally w or an r g b colour.
       if (values.size() < 3 || values.size() > 7)
-        throw Error(file, line, "vertex needs 3 coordinates, found " + std::to_string(values.size()));
+        throw Error(file, line,
+                    "vertex needs 3 coordinates, found " + std::to_string(values.size()));
       check_numbers(file, line, values, "vertex");
       ++positions;
     } else if (keyword == "vt") {
@@ -241,8 +249,7 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
         const std::string_view rest = corner.substr(slash1 + 1);
         const std::size_t slash2 = rest.find('/');
         const std::string_view vt = rest.substr(0, slash2);
-        if (!vt.empty())
-          (void)resolve_obj_index(file, line, vt, texcoords, "texture coordinates");
+        if (!vt.empty()) (void)resolve_obj_index(file, line, vt, texcoords, "texture coordinates");
         if (slash2 != std::string_view::npos) {
           const std::string_view vn = rest.substr(slash2 + 1);
           if (!vn.empty()) (void)resolve_obj_index(file, line, vn, normals, "normals");
@@ -259,6 +266,49 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
 }
 
 // ---- OFF ------------------------------------------------------------------------------------
+
+/// Binary OFF as OpenMesh reads it: little-endian 32-bit counts, vertices of 3 floats (+3 for
+/// normals, +2 for texture coordinates), faces of a 32-bit corner count and 32-bit indices.
+/// Its face loop does not stop at the end of the file (a truncated file or a huge face count
+/// feeds it stale values for ever), so everything must be in the file.
+[[nodiscard]] ScanResult scan_binary_off(const std::string& file, std::string_view body,
+                                         bool has_normals, bool has_texcoords) {
+  if (body.size() < 12) throw Error(file, "binary OFF file truncated: no vertex and face counts");
+  const std::uint64_t vertices = read_u32_le(body, 0);
+  const std::uint64_t faces = read_u32_le(body, 4);
+  const std::uint64_t vertex_size = 12 + (has_normals ? 12 : 0) + (has_texcoords ? 8 : 0);
+  // Each face takes at least 16 bytes (a count and three indices).
+  if (vertices * vertex_size + faces * 16 > body.size() - 12)
+    throw Error(file, "binary OFF file truncated or corrupt: " + std::to_string(vertices) +
+                          " vertices and " + std::to_string(faces) + " faces do not fit in its " +
+                          std::to_string(body.size()) + " bytes (absurd count?)");
+  if (faces == 0) throw Error(file, "the file declares no faces");
+  std::size_t at = static_cast<std::size_t>(12 + vertices * vertex_size);
+  ScanResult result;
+  std::vector<std::uint64_t> corners;
+  for (std::uint64_t f = 0; f < faces; ++f) {
+    if (body.size() - at < 4)
+      throw Error(file, "truncated: the file ends in face " + std::to_string(f) + " of " +
+                            std::to_string(faces));
+    const std::uint64_t n = read_u32_le(body, at);
+    at += 4;
+    if (n < 3 || n > (body.size() - at) / 4)
+      throw Error(file, "face " + std::to_string(f) + " has " + std::to_string(n) +
+                            " corners: fewer than 3, or more than the file holds");
+    corners.clear();
+    for (std::uint64_t k = 0; k < n; ++k, at += 4) {
+      const std::uint64_t index = read_u32_le(body, at);
+      if (index >= vertices)
+        throw Error(file, "face index " + std::to_string(index) +
+                              " is out of range: the file has " + std::to_string(vertices) +
+                              " vertices (indices start at 0)");
+      corners.push_back(index);
+    }
+    if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
+  }
+  result.declared_faces = faces;
+  return result;
+}
 
 /// OFF: header keyword, counts that fit in the file, then numeric finite vertices and faces
 /// whose indices are in range. Also rejects what OpenMesh's OFF reader misreads silently.
@@ -298,47 +348,35 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
   // [ST][C][N][4][n]OFF, as the OFF specification allows.
   std::string_view prefix = keyword;
   if (prefix.size() < 3 || prefix.substr(prefix.size() - 3) != "OFF")
-    throw Error(file, 1, "not an OFF file: the first line is " + quote_token(keyword) + ", not 'OFF'");
+    throw Error(file, 1,
+                "not an OFF file: the first line is " + quote_token(keyword) + ", not 'OFF'");
   prefix.remove_suffix(3);
-  if (prefix.starts_with("ST")) prefix.remove_prefix(2);
-  if (prefix.starts_with("C")) prefix.remove_prefix(1);
-  if (prefix.starts_with("N")) prefix.remove_prefix(1);
+  const bool has_texcoords = prefix.starts_with("ST");
+  if (has_texcoords) prefix.remove_prefix(2);
+  const bool has_colors = prefix.starts_with("C");
+  if (has_colors) prefix.remove_prefix(1);
+  const bool has_normals = prefix.starts_with("N");
+  if (has_normals) prefix.remove_prefix(1);
   if (!prefix.empty())
     throw Error(file, line_number,
                 "unsupported OFF variant " + quote_token(keyword) + " (only 3D vertices are read)");
 
   if (tokens.size() > 1 && tokens[1] == "BINARY") {
-    // Binary OFF: three 32-bit counts, then at least 12 bytes per vertex and 16 per triangle.
-    // The byte order varies between writers; if neither reading fits in the file, the counts
-    // are garbage and OpenMesh would reserve them.
-    const std::uint64_t body = text.size() - std::min<std::size_t>(offset, text.size());
-    if (body < 12) throw Error(file, "binary OFF file truncated: no vertex and face counts");
-    auto fits = [&](bool big_endian) {
-      std::array<std::uint64_t, 2> counts{};
-      for (int k = 0; k < 2; ++k) {
-        std::uint32_t v = 0;
-        for (int b = 0; b < 4; ++b) {
-          const auto byte = static_cast<std::uint8_t>(text[offset + static_cast<std::size_t>(k * 4 + b)]);
-          v = big_endian ? (v << 8) | byte : v | (std::uint32_t{byte} << (8 * b));
-        }
-        counts[static_cast<std::size_t>(k)] = v;
-      }
-      return counts[0] * 12 + counts[1] * 16 <= body - 12;
-    };
-    if (!fits(true) && !fits(false))
-      throw Error(file, "binary OFF file truncated or corrupt: its vertex and face counts do "
-                        "not fit in the file");
-    return result;
+    if (has_colors)
+      throw Error(file, "binary OFF with colours (" + quote_token(keyword) +
+                            ") is not supported: its layout depends on reader options");
+    return scan_binary_off(file, text.substr(std::min(offset, text.size())), has_normals,
+                           has_texcoords);
   }
   if (tokens.size() > 1)
     throw Error(file, line_number,
-                "the vertex, face and edge counts must be on the line after " + quote_token(keyword) +
+                "the vertex, face and edge counts must be on the line after " +
+                    quote_token(keyword) +
                     " (OpenMesh's reader finds nothing when they share its line)");
 
   if (!next_line()) throw Error(file, "truncated: no vertex and face counts after the header");
   const int counts_line = line_number;
-  if (tokens.size() < 2)
-    throw Error(file, counts_line, "expected vertex, face and edge counts");
+  if (tokens.size() < 2) throw Error(file, counts_line, "expected vertex, face and edge counts");
   const std::optional<std::int64_t> vertex_count = parse_integer(tokens[0]);
   const std::optional<std::int64_t> face_count = parse_integer(tokens[1]);
   if (!vertex_count || !face_count || *vertex_count < 0 || *face_count < 0)
@@ -353,8 +391,7 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
     throw Error(file, counts_line,
                 "the header declares " + std::to_string(vertices) + " vertices and " +
                     std::to_string(faces) + " faces, more than the remaining " +
-                    std::to_string(remaining) +
-                    " bytes can hold (truncated file or absurd count)");
+                    std::to_string(remaining) + " bytes can hold (truncated file or absurd count)");
   if (vertices > std::numeric_limits<std::uint32_t>::max())
     throw Error(file, counts_line, "too many vertices for 32-bit indices");
 
@@ -362,11 +399,14 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
     if (!next_line())
       throw Error(file, "truncated: the header declares " + std::to_string(vertices) +
                             " vertices, the file holds " + std::to_string(v));
-    if (tokens.size() < 3)
-      throw Error(file, line_number, "vertex needs 3 coordinates, found " +
-                                         std::to_string(tokens.size()));
-    check_numbers(file, line_number, std::span<const std::string_view>(tokens).first(3),
-                  "vertex");
+    // x y z [nx ny nz] [colour: 1, 3 or 4 values] [u v]
+    const std::size_t least =
+        3 + (has_normals ? 3 : 0) + (has_colors ? 1 : 0) + (has_texcoords ? 2 : 0);
+    if (tokens.size() < least)
+      throw Error(file, line_number,
+                  "vertex needs " + std::to_string(least) + " values for " + quote_token(keyword) +
+                      ", found " + std::to_string(tokens.size()));
+    check_numbers(file, line_number, std::span<const std::string_view>(tokens), "vertex");
   }
   std::vector<std::uint64_t> corners;
   for (std::uint64_t f = 0; f < faces; ++f) {
@@ -374,9 +414,11 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
       throw Error(file, "truncated: the header declares " + std::to_string(faces) +
                             " faces, the file holds " + std::to_string(f));
     const std::optional<std::int64_t> n = parse_integer(tokens[0]);
-    if (!n) throw Error(file, line_number, "face size " + quote_token(tokens[0]) + " is not an integer");
+    if (!n)
+      throw Error(file, line_number, "face size " + quote_token(tokens[0]) + " is not an integer");
     if (*n < 3)
-      throw Error(file, line_number, "face has " + std::to_string(*n) + " vertices, at least 3 needed");
+      throw Error(file, line_number,
+                  "face has " + std::to_string(*n) + " vertices, at least 3 needed");
     if (static_cast<std::uint64_t>(*n) > tokens.size() - 1)
       throw Error(file, line_number,
                   "face declares " + std::to_string(*n) + " vertices but lists " +
@@ -384,7 +426,9 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
     corners.clear();
     for (std::size_t k = 1; k <= static_cast<std::size_t>(*n); ++k) {
       const std::optional<std::int64_t> index = parse_integer(tokens[k]);
-      if (!index) throw Error(file, line_number, "face index " + quote_token(tokens[k]) + " is not an integer");
+      if (!index)
+        throw Error(file, line_number,
+                    "face index " + quote_token(tokens[k]) + " is not an integer");
       if (*index < 0 || static_cast<std::uint64_t>(*index) >= vertices)
         throw Error(file, line_number,
                     "face index " + std::to_string(*index) + " is out of range: the file has " +
@@ -480,19 +524,22 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
         if (floating) {
           const std::optional<double> number = parse_number(*token);
           if (!number)
-            throw Error(file, line, element.name + " property '" + property.name + "' value " +
-                                        quote_token(*token) + " is not a number");
+            throw Error(file, line,
+                        element.name + " property '" + property.name + "' value " +
+                            quote_token(*token) + " is not a number");
           if (is_vertex && !std::isfinite(*number))
-            throw Error(file, line, "vertex has a non-finite value " + quote_token(*token) +
-                                        " (NaN or Inf) in property '" + property.name + "'");
+            throw Error(file, line,
+                        "vertex has a non-finite value " + quote_token(*token) +
+                            " (NaN or Inf) in property '" + property.name + "'");
           // A float beyond its range fails OpenMesh's stream, which then reads the rest shifted.
           if ((is_vertex || property.value.size == 4) && !fits_float(*number))
-            throw Error(file, line, element.name + " property '" + property.name + "' value " +
-                                        quote_token(*token) +
-                                        " is beyond the float range (Inf as a float)");
+            throw Error(file, line,
+                        element.name + " property '" + property.name + "' value " +
+                            quote_token(*token) + " is beyond the float range (Inf as a float)");
         } else if (!parse_integer(*token)) {
-          throw Error(file, line, element.name + " property '" + property.name + "' value " +
-                                      quote_token(*token) + " is not an integer");
+          throw Error(file, line,
+                      element.name + " property '" + property.name + "' value " +
+                          quote_token(*token) + " is not an integer");
         }
         return *token;
       };
@@ -503,11 +550,12 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
         }
         const std::int64_t length = *parse_integer(value(property, false));
         if (length < 0 || static_cast<std::uint64_t>(length) > body.size() - at)
-          throw Error(file, line, "list length " + std::to_string(length) + " of " +
-                                      element.name + " property '" + property.name +
-                                      "' is impossible here");
+          throw Error(file, line,
+                      "list length " + std::to_string(length) + " of " + element.name +
+                          " property '" + property.name + "' is impossible here");
         if (property.indices && length < 3)
-          throw Error(file, line, "face has " + std::to_string(length) + " vertices, at least 3 needed");
+          throw Error(file, line,
+                      "face has " + std::to_string(length) + " vertices, at least 3 needed");
         corners.clear();
         for (std::int64_t k = 0; k < length; ++k) {
           const std::string_view token = value(property, property.value.floating);
@@ -524,8 +572,9 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
   // Values left over mean the header does not describe the data (a face with more corners than
   // its count says, say): OpenMesh would read them shifted.
   if (next_token())
-    throw Error(file, line, "more values than the header declares: the header does not match "
-                            "the data");
+    throw Error(file, line,
+                "more values than the header declares: the header does not match "
+                "the data");
 }
 
 /// Binary PLY body: list lengths fit in the file (OpenMesh reads a negative or huge "int" length
@@ -592,7 +641,8 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
 /// PLY: a header OpenMesh reads as we do, element counts that fit in the bytes after it, then
 /// the body value by value (walk_ascii_ply, walk_binary_ply).
 [[nodiscard]] ScanResult scan_ply(const std::string& file, std::string_view bytes) {
-  if (!bytes.starts_with("ply")) throw Error(file, 1, "not a PLY file: it does not start with 'ply'");
+  if (!bytes.starts_with("ply"))
+    throw Error(file, 1, "not a PLY file: it does not start with 'ply'");
   // The header ends at "end_header" + newline; cap the search so a binary blob is not scanned.
   constexpr std::size_t kMaxHeader = 1 << 20;
   const std::string_view head = bytes.substr(0, kMaxHeader);
@@ -625,8 +675,10 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
     // loops for ever on a version that is not a number.
     if (format == PlyFormat::none) {
       if (tokens[0] != "format" || tokens.size() != 3 || !parse_number(tokens[2]))
-        throw Error(file, line, "expected 'format <ascii|binary_little_endian|binary_big_endian> "
-                                "1.0' after 'ply', found " + quote_token(content));
+        throw Error(file, line,
+                    "expected 'format <ascii|binary_little_endian|binary_big_endian> "
+                    "1.0' after 'ply', found " +
+                        quote_token(content));
       if (tokens[1] == "ascii")
         format = PlyFormat::ascii;
       else if (tokens[1] == "binary_little_endian")
@@ -640,8 +692,9 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
       // OpenMesh reads counts as 32-bit unsigned; beyond that its header loop never ends.
       const std::optional<std::int64_t> count = parse_integer(tokens[2]);
       if (!count || *count < 0 || *count > std::numeric_limits<std::uint32_t>::max())
-        throw Error(file, line, "element count " + quote_token(tokens[2]) +
-                                    " is not an integer from 0 to 2^32 - 1 (absurd count)");
+        throw Error(file, line,
+                    "element count " + quote_token(tokens[2]) +
+                        " is not an integer from 0 to 2^32 - 1 (absurd count)");
       elements.push_back({std::string(tokens[1]), static_cast<std::uint64_t>(*count), {}});
     } else if (tokens[0] == "property") {
       // OpenMesh would write into elements_.back() of an empty list.
@@ -653,8 +706,8 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
       if (!count || !value || (list && count->floating))
         throw Error(file, line, "unknown PLY property type in " + quote_token(content));
       const std::string name(tokens[list ? 4 : 2]);
-      const bool indices =
-          list && elements.back().name == "face" && (name == "vertex_indices" || name == "vertex_index");
+      const bool indices = list && elements.back().name == "face" &&
+                           (name == "vertex_indices" || name == "vertex_index");
       elements.back().properties.push_back({name, list, *count, *value, indices});
     }
     // "comment", "obj_info", "end_header" and stray lines: OpenMesh skips them too.
@@ -672,14 +725,16 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
   for (const PlyElement& element : elements) {
     std::uint64_t per_item = 0;
     for (const PlyProperty& property : element.properties)
-      per_item += format == PlyFormat::ascii ? 2 : property.list ? property.count.size : property.value.size;
+      per_item += format == PlyFormat::ascii ? 2
+                  : property.list            ? property.count.size
+                                             : property.value.size;
     per_item = std::max<std::uint64_t>(per_item, 1);
-    counts += (counts.empty() ? "" : " and ") + std::to_string(element.count) + " '" +
-              element.name + "'";
+    counts +=
+        (counts.empty() ? "" : " and ") + std::to_string(element.count) + " '" + element.name + "'";
     // Saturating: count <= body keeps each product far below 2^64 (per_item is small), and a
     // count beyond the body saturates at once.
-    least = element.count > body || least == kSaturated ? kSaturated
-                                                        : least + element.count * per_item;
+    least =
+        element.count > body || least == kSaturated ? kSaturated : least + element.count * per_item;
     has_vertices = has_vertices || element.name == "vertex";
     if (element.name == "face") result.declared_faces = element.count;
   }
@@ -737,13 +792,6 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
 
 // ---- STL ------------------------------------------------------------------------------------
 
-[[nodiscard]] std::uint32_t read_u32_le(std::string_view bytes, std::size_t at) {
-  std::uint32_t v = 0;
-  for (std::size_t b = 0; b < 4; ++b)
-    v |= std::uint32_t{static_cast<std::uint8_t>(bytes[at + b])} << (8 * b);
-  return v;
-}
-
 /// STL: binary when the size is exactly 84 + 50 * (declared triangles), which is also the rule
 /// OpenMesh uses; otherwise it must be ASCII ("solid ...") with complete, numeric facets.
 [[nodiscard]] ScanResult scan_stl(const std::string& file, std::string_view bytes) {
@@ -763,7 +811,6 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
                                   " has a non-finite vertex coordinate (NaN or Inf)");
         }
       result.declared_faces = triangles;
-      result.binary = true;
       return result;
     }
   }
@@ -787,7 +834,8 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
     if (tokens.empty()) return;
     const std::string keyword = lower_ascii(tokens[0]);
     if (keyword == "facet") {
-      if (corners >= 0) throw Error(file, line, "'facet' inside another facet (missing 'endfacet')");
+      if (corners >= 0)
+        throw Error(file, line, "'facet' inside another facet (missing 'endfacet')");
       corners = 0;
     } else if (keyword == "vertex") {
       if (corners < 0) throw Error(file, line, "'vertex' outside a facet");
@@ -889,33 +937,6 @@ private:
   std::array<std::streambuf*, kStreams> previous_{};
 };
 
-/// A read-only, seekable stream buffer over bytes we already hold, so OpenMesh parses exactly
-/// what the scan checked (no second read of a file that may have changed) without a copy.
-class BytesBuffer final : public std::streambuf {
-public:
-  explicit BytesBuffer(std::string_view bytes) {
-    // streambuf's get area takes char*, but nothing here writes through it.
-    char* begin = const_cast<char*>(bytes.data());
-    setg(begin, begin, begin + bytes.size());
-  }
-
-protected:
-  pos_type seekoff(off_type offset, std::ios_base::seekdir dir,
-                   std::ios_base::openmode which) override {
-    if (!(which & std::ios_base::in)) return pos_type(off_type(-1));
-    const off_type base = dir == std::ios_base::beg   ? 0
-                          : dir == std::ios_base::cur ? gptr() - eback()
-                                                      : egptr() - eback();
-    const off_type target = base + offset;
-    if (target < 0 || target > egptr() - eback()) return pos_type(off_type(-1));
-    setg(eback(), eback() + target, egptr());
-    return pos_type(target);
-  }
-  pos_type seekpos(pos_type position, std::ios_base::openmode which) override {
-    return seekoff(off_type(position), std::ios_base::beg, which);
-  }
-};
-
 [[nodiscard]] std::string with_messages(std::string text, const std::string& messages) {
   if (!messages.empty()) text += " (OpenMesh: " + messages + ")";
   return text;
@@ -1003,7 +1024,8 @@ public:
     if (!valid(vh)) return;
     const vec3 normal(n[0], n[1], n[2]);
     set_at(vertex_normals_, vh, normal);
-    if (corner_normals_) pending_normals_.emplace_back(static_cast<std::uint32_t>(vh.idx()), normal);
+    if (corner_normals_)
+      pending_normals_.emplace_back(static_cast<std::uint32_t>(vh.idx()), normal);
   }
   void set_normal(OpenMesh::VertexHandle vh, const OpenMesh::Vec3d& n) override {
     set_normal(vh, OpenMesh::Vec3f(static_cast<float>(n[0]), static_cast<float>(n[1]),
@@ -1073,14 +1095,13 @@ private:
       const uvec3 t(corners[0].vertex, corners[k].vertex, corners[k + 1].vertex);
       if (t.x != t.y && t.y != t.z && t.x != t.z) welded.triangles.push_back(t);
     }
-    for (const Corner& c : corners)
-      has_uvs = has_uvs && (c.uv || in.vertex_uv(c.vertex));
+    for (const Corner& c : corners) has_uvs = has_uvs && (c.uv || in.vertex_uv(c.vertex));
   }
   welded.compute_vertex_normals();
 
   TriangleMesh mesh;
   std::vector<std::uint32_t> first_output(om.n_vertices(), kNone); // per file vertex
-  std::vector<std::uint32_t> next_output;                           // chain of its splits
+  std::vector<std::uint32_t> next_output;                          // chain of its splits
   auto output_vertex = [&](const Corner& c) {
     std::optional<vec3> normal = c.normal ? c.normal : in.vertex_normal(c.vertex);
     if (normal && glm::dot(*normal, *normal) > 0.0f)
@@ -1105,7 +1126,12 @@ private:
       const Corner& b = corners[k];
       const Corner& c = corners[k + 1];
       if (a.vertex == b.vertex || b.vertex == c.vertex || a.vertex == c.vertex) continue;
-      mesh.triangles.emplace_back(output_vertex(a), output_vertex(b), output_vertex(c));
+      // One statement each: output vertices are numbered in corner order, not in whatever
+      // order the compiler evaluates arguments.
+      const std::uint32_t ia = output_vertex(a);
+      const std::uint32_t ib = output_vertex(b);
+      const std::uint32_t ic = output_vertex(c);
+      mesh.triangles.emplace_back(ia, ib, ic);
     }
   }
   return mesh;
@@ -1114,7 +1140,8 @@ private:
 [[nodiscard]] std::string read_whole_file(const fs::path& path, std::uintmax_t size) {
   std::ifstream in(path, std::ios::binary);
   if (!in)
-    throw Error(path.string(), std::string("cannot open the file for reading: ") + std::strerror(errno));
+    throw Error(path.string(),
+                std::string("cannot open the file for reading: ") + std::strerror(errno));
   std::string bytes(static_cast<std::size_t>(size), '\0');
   in.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
   if (in.gcount() != static_cast<std::streamsize>(bytes.size()))
@@ -1145,21 +1172,28 @@ TriangleMesh load_mesh_file(const fs::path& path) {
   const std::string bytes = read_whole_file(path, size);
   ScanResult scan;
   switch (*format) {
-  case MeshFormat::obj: scan = scan_obj(file, bytes); break;
-  case MeshFormat::off: scan = scan_off(file, bytes); break;
-  case MeshFormat::ply: scan = scan_ply(file, bytes); break;
-  case MeshFormat::stl: scan = scan_stl(file, bytes); break;
+  case MeshFormat::obj:
+    scan = scan_obj(file, bytes);
+    break;
+  case MeshFormat::off:
+    scan = scan_off(file, bytes);
+    break;
+  case MeshFormat::ply:
+    scan = scan_ply(file, bytes);
+    break;
+  case MeshFormat::stl:
+    scan = scan_stl(file, bytes);
+    break;
   }
 
   OpenMesh::IO::Options options = OpenMesh::IO::Options::VertexNormal |
                                   OpenMesh::IO::Options::VertexTexCoord |
                                   OpenMesh::IO::Options::FaceTexCoord;
-  // The extension picks OpenMesh's reader; the STL reader cannot tell binary from ASCII in a
-  // stream, so it is told.
-  constexpr std::array<const char*, 4> extension_of = {".obj", ".ply", ".off", ".stl"};
-  if (*format == MeshFormat::stl && scan.binary) options += OpenMesh::IO::Options::Binary;
-  // Only positions live in the OpenMesh mesh; the importer keeps the rest (see above).
+  // Only positions live in the OpenMesh mesh; the importer keeps the rest (see above). Some
+  // readers (OFF) only pass normals and texture coordinates on when the mesh has the properties.
   OmMesh om;
+  om.request_vertex_normals();
+  om.request_vertex_texcoords2D();
   RecordingImporter importer(om, *format == MeshFormat::obj);
   std::string messages;
   {
@@ -1167,18 +1201,18 @@ TriangleMesh load_mesh_file(const fs::path& path) {
     OpenMeshLogCapture capture;
     bool ok = false;
     try {
-      BytesBuffer buffer(bytes);
-      std::istream in(&buffer);
-      ok = OpenMesh::IO::IOManager().read(in, extension_of[static_cast<int>(*format)], importer,
-                                          options);
+      // By file name, not from a stream over `bytes`: the OFF reader takes the header's
+      // variant (NOFF, STOFF, BINARY) from can_u_read(filename), and from a stream it would
+      // use whatever the previous file had.
+      ok = OpenMesh::IO::IOManager().read(file, importer, options);
     } catch (const std::exception& e) {
       throw Error(file, with_messages(std::string("OpenMesh failed to read the file: ") + e.what(),
                                       capture.messages()));
     }
     messages = capture.messages();
     if (!ok)
-      throw Error(file, with_messages("malformed or truncated file: OpenMesh could not read it",
-                                      messages));
+      throw Error(
+          file, with_messages("malformed or truncated file: OpenMesh could not read it", messages));
   }
 
   if (const std::optional<std::int64_t> bad = importer.bad_index())
@@ -1190,20 +1224,24 @@ TriangleMesh load_mesh_file(const fs::path& path) {
   // corners coincide); anything else missing means the reader lost its way in the file.
   if (scan.declared_faces && *format != MeshFormat::stl &&
       faces + scan.faces_with_repeated_vertex < *scan.declared_faces)
-    throw Error(file, with_messages("malformed file: OpenMesh read only " + std::to_string(faces) +
-                                        " of the " + std::to_string(*scan.declared_faces) +
-                                        " faces",
-                                    messages));
+    throw Error(file,
+                with_messages("malformed file: OpenMesh read only " + std::to_string(faces) +
+                                  " of the " + std::to_string(*scan.declared_faces) + " faces",
+                              messages));
   if (faces == 0) throw Error(file, with_messages("the file contains no faces", messages));
 
   TriangleMesh mesh = to_triangle_mesh(om, importer);
+  if (mesh.triangles.empty())
+    throw Error(file, "all " + std::to_string(faces) +
+                          " faces are degenerate (they repeat a vertex): no triangles");
   mesh.validate(file);
 
-  const bool all_degenerate = std::all_of(mesh.triangles.begin(), mesh.triangles.end(), [&](const uvec3& t) {
-    const vec3 n = glm::cross(mesh.positions[t.y] - mesh.positions[t.x],
-                              mesh.positions[t.z] - mesh.positions[t.x]);
-    return !(glm::dot(n, n) > 0.0f);
-  });
+  const bool all_degenerate =
+      std::all_of(mesh.triangles.begin(), mesh.triangles.end(), [&](const uvec3& t) {
+        const vec3 n = glm::cross(mesh.positions[t.y] - mesh.positions[t.x],
+                                  mesh.positions[t.z] - mesh.positions[t.x]);
+        return !(glm::dot(n, n) > 0.0f);
+      });
   if (all_degenerate)
     throw Error(file, "all " + std::to_string(mesh.triangle_count()) +
                           " triangles are degenerate (zero area)");

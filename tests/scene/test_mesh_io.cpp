@@ -35,7 +35,8 @@ std::string load_error(const fs::path& path) {
   return {};
 }
 
-/// GoogleTest name of a parameter naming a file: "out_of_range_index.obj" -> "out_of_range_index_obj".
+/// GoogleTest name of a parameter naming a file: "out_of_range_index.obj" ->
+/// "out_of_range_index_obj".
 std::string file_test_name(std::string name) {
   for (char& c : name)
     if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
@@ -128,8 +129,8 @@ TEST_P(UnitCubeFile, IsTwelveOutwardTrianglesFillingTheUnitCube) {
 }
 
 INSTANTIATE_TEST_SUITE_P(AllFormats, UnitCubeFile,
-                         testing::Values("cube.obj", "cube.off", "cube_ascii.ply",
-                                         "cube_binary.ply", "cube_binary.stl"));
+                         testing::Values("cube.obj", "cube.off", "cube_binary.off",
+                                         "cube_ascii.ply", "cube_binary.ply", "cube_binary.stl"));
 
 TEST(MeshIo, AsciiStlTriangleHasItsCornersAndFacingNormal) {
   const TriangleMesh mesh = load_mesh_file(kMeshData / "tri.stl");
@@ -151,6 +152,19 @@ TEST(MeshIo, ObjTextureCoordinatesAndNormalsAreKept) {
     EXPECT_EQ(mesh.normals[i], vec3(0, 0, 1)) << "vertex " << i;
   }
   expect_bounds(mesh, vec3(0.0f), vec3(1.0f, 1.0f, 0.0f), "quad_uv.obj");
+}
+
+TEST(MeshIo, OffNormalsAndTextureCoordinatesAreKept) {
+  // normals.off (NOFF): a triangle wound towards +Z whose file normals all say -Z; the file's
+  // normals win over computed ones.
+  const TriangleMesh with_normals = load_mesh_file(kMeshData / "normals.off");
+  ASSERT_EQ(with_normals.triangle_count(), 1u);
+  for (const vec3& n : with_normals.normals) EXPECT_EQ(n, vec3(0, 0, -1));
+  // texcoords.off (STOFF): each vertex's texture coordinate is its (x, y).
+  const TriangleMesh with_uvs = load_mesh_file(kMeshData / "texcoords.off");
+  ASSERT_EQ(with_uvs.uvs.size(), with_uvs.vertex_count());
+  for (std::size_t i = 0; i < with_uvs.vertex_count(); ++i)
+    EXPECT_EQ(with_uvs.uvs[i], vec2(with_uvs.positions[i].x, with_uvs.positions[i].y));
 }
 
 TEST(MeshIo, PerFaceObjNormalsSplitSharedPositions) {
@@ -206,25 +220,23 @@ TEST_P(BadMeshFile, ThrowsAnErrorNamingTheFileAndTheProblem) {
 
 INSTANTIATE_TEST_SUITE_P(
     Data, BadMeshFile,
-    testing::Values(BadFile{"empty.obj", "empty"}, BadFile{"truncated.ply", "truncated"},
-                    BadFile{"truncated_binary.stl", "truncated"},
-                    BadFile{"binary_garbage.stl", "not an STL"},
-                    BadFile{"malformed.obj", "not a number"}, BadFile{"nan_vertex.obj", "NaN"},
-                    BadFile{"nan_vertex.ply", "NaN"}, BadFile{"inf_vertex.off", "Inf"},
-                    BadFile{"out_of_range_index.obj", "out of range"},
-                    BadFile{"out_of_range_index.off", "out of range"},
-                    BadFile{"out_of_range_index.ply", "out of range"},
-                    BadFile{"out_of_range_index_binary.ply", "out of range"},
-                    BadFile{"absurd_count.off", "absurd count"},
-                    BadFile{"absurd_count.ply", "absurd count"},
-                    BadFile{"no_faces.obj", "no faces"}, BadFile{"cube.xyz", "extension"},
-                    BadFile{"degenerate_only.obj", "degenerate"},
-                    BadFile{"comment.off", "comment"}, BadFile{"bad_version.ply", "format"},
-                    BadFile{"negative_list_length.ply", "negative"},
-                    BadFile{"end_header_whitespace.ply", "whitespace"},
-                    BadFile{"float_overflow.obj", "float range"},
-                    BadFile{"nan_vertex_binary.stl", "NaN"},
-                    BadFile{"face_texcoord_list.ply", "list property"}),
+    testing::Values(
+        BadFile{"empty.obj", "empty"}, BadFile{"truncated.ply", "truncated"},
+        BadFile{"truncated_binary.stl", "truncated"}, BadFile{"binary_garbage.stl", "not an STL"},
+        BadFile{"malformed.obj", "not a number"}, BadFile{"nan_vertex.obj", "NaN"},
+        BadFile{"nan_vertex.ply", "NaN"}, BadFile{"inf_vertex.off", "Inf"},
+        BadFile{"out_of_range_index.obj", "out of range"},
+        BadFile{"out_of_range_index.off", "out of range"},
+        BadFile{"out_of_range_index.ply", "out of range"},
+        BadFile{"out_of_range_index_binary.ply", "out of range"},
+        BadFile{"absurd_count.off", "absurd count"}, BadFile{"absurd_count.ply", "absurd count"},
+        BadFile{"absurd_count_binary.off", "truncated or corrupt"},
+        BadFile{"no_faces.obj", "no faces"}, BadFile{"cube.xyz", "extension"},
+        BadFile{"degenerate_only.obj", "degenerate"}, BadFile{"comment.off", "comment"},
+        BadFile{"bad_version.ply", "format"}, BadFile{"negative_list_length.ply", "negative"},
+        BadFile{"end_header_whitespace.ply", "whitespace"},
+        BadFile{"float_overflow.obj", "float range"}, BadFile{"nan_vertex_binary.stl", "NaN"},
+        BadFile{"face_texcoord_list.ply", "list property"}),
     [](const testing::TestParamInfo<BadFile>& param) { return file_test_name(param.param.name); });
 
 TEST(MeshIo, MissingFileIsAnError) {
@@ -349,8 +361,8 @@ TEST(MeshIo, ConcurrentLoadsAllSucceedOrFailCleanly) {
   for (std::size_t i = 0; i < loaded.size(); ++i)
     threads.emplace_back([&, i] {
       for (int round = 0; round < 10; ++round) {
-        loaded[i] += load_mesh_file(kMeshData / (i % 2 ? "cube.off" : "cube.obj"))
-                             .triangle_count() == 12u;
+        loaded[i] +=
+            load_mesh_file(kMeshData / (i % 2 ? "cube.off" : "cube.obj")).triangle_count() == 12u;
         try {
           (void)load_mesh_file(kMeshData / "out_of_range_index_binary.ply");
         } catch (const Error&) {

@@ -4,7 +4,10 @@
 Binary files are generated rather than hand-edited so their content can be read here:
   cube_binary.ply       unit cube [0,1]^3, 8 vertices, 12 triangles, little-endian
   cube_binary.stl       unit cube [0,1]^3, 12 facets (36 corners, 8 distinct positions)
+  cube_binary.off       unit cube [0,1]^3, 8 vertices, 6 quads ("OFF BINARY", little-endian
+                        32-bit counts, floats and indices: the layout OpenMesh writes)
   truncated_binary.stl  header claims 12 facets, the file holds 5
+  absurd_count_binary.off  binary OFF claiming 2^31 - 1 vertices in 100 bytes
   binary_garbage.stl    300 pseudo-random bytes (neither ASCII nor size-consistent binary STL)
   out_of_range_index_binary.ply  binary triangle referring to vertex 7 of 3
   negative_list_length.ply       binary face whose "int" corner count is -5 (OpenMesh loops)
@@ -49,6 +52,13 @@ def ply_triangle(count_type="uchar", count=3, indices=(0, 1, 2), before_end=""):
     return header.encode("ascii") + body
 
 
+def off_cube(vertex_count=len(CUBE_POSITIONS)):
+    body = struct.pack("<3i", vertex_count, len(CUBE_QUADS), 0)
+    body += b"".join(struct.pack("<3f", *p) for p in CUBE_POSITIONS)
+    body += b"".join(struct.pack("<5i", 4, *q) for q in CUBE_QUADS)
+    return b"OFF BINARY\n" + body
+
+
 def stl_facet(t):
     ps = [CUBE_POSITIONS[i] for i in t]
     u = [ps[1][k] - ps[0][k] for k in range(3)]
@@ -79,6 +89,8 @@ write("cube_binary.ply", ply_cube())
 write("out_of_range_index_binary.ply", ply_triangle(indices=(0, 1, 7)))
 write("negative_list_length.ply", ply_triangle(count_type="int", count=-5))
 write("end_header_whitespace.ply", ply_triangle(before_end="   "))
+write("cube_binary.off", off_cube())
+write("absurd_count_binary.off", off_cube(vertex_count=2**31 - 1)[:100])
 write("cube_binary.stl", stl_binary(CUBE_TRIANGLES, len(CUBE_TRIANGLES)))
 write("nan_vertex_binary.stl", stl_binary(CUBE_TRIANGLES, len(CUBE_TRIANGLES), nan_facet=3))
 write("truncated_binary.stl", stl_binary(CUBE_TRIANGLES[:5], len(CUBE_TRIANGLES)))
