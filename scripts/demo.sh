@@ -22,15 +22,12 @@ for s in samples/scenes/*.json samples/scenes/*.gltf; do
                                      END{print "triangles " t ", lights " l ", entities " e}'
 done
 echo
-echo "== specula render $scene --stats build/release/demo-stats.json --out build/release/demo.png"
-set +e
-"$specula" render "$scene" --stats build/release/demo-stats.json --out build/release/demo.png
-rc=$?
-set -e
-if [ $rc -eq 2 ]; then
-  echo "(tracing backends are not part of this build yet: the scene loads, render reports exit 2)"
-elif [ $rc -ne 0 ]; then
-  exit $rc
-else
-  cat build/release/demo-stats.json
-fi
+echo "== specula render $scene (Whitted, Embree, 2 threads, 30 frames)"
+"$specula" render "$scene" --backend embree --mode whitted --threads 2 --frames 30 \
+  --stats build/release/demo-stats.json --out build/release/demo.png
+echo
+echo "== the same frame in cast mode, compared with the Whitted frame"
+"$specula" render "$scene" --backend embree --mode cast --threads 2 --frames 1 --out build/release/demo-cast.png >/dev/null
+"$specula" compare build/release/demo.png build/release/demo-cast.png
+echo
+echo "image: build/release/demo.png   stats: build/release/demo-stats.json"
