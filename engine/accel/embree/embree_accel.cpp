@@ -15,17 +15,6 @@
 namespace specula {
 namespace {
 
-/// Embree reports errors through a callback; keep the latest message for the exception.
-void on_embree_error(void* user, RTCError code, const char* message) {
-  auto* last = static_cast<std::string*>(user);
-  *last = "Embree error " + std::to_string(int(code)) + ": " + (message ? message : "");
-}
-
-std::string& embree_message_slot() {
-  // One device per EmbreeAccel in practice; the slot only carries text from callback to check().
-  thread_local std::string slot;
-  return slot;
-}
 
 mat3 normal_matrix(const mat4& world_from_object) {
   return glm::transpose(glm::inverse(mat3(world_from_object)));
@@ -62,10 +51,17 @@ bool is_dynamic(ecs::Registry& registry, ecs::Entity e, const Mesh& mesh) {
 static_assert(sizeof(vec3) == 3 * sizeof(float) && sizeof(uvec3) == 3 * sizeof(std::uint32_t),
               "Embree buffers are filled with memcpy from GLM vectors");
 
+void EmbreeAccel::on_error(void* user, RTCError code, const char* message) {
+  // Embree may call this from its own build threads: keep the text under a lock for check().
+  auto* self = static_cast<EmbreeAccel*>(user);
+  const std::lock_guard lock(self->error_mutex_);
+  self->last_error_ = "Embree error " + std::to_string(int(code)) + ": " + (message ? message : "");
+}
+
 EmbreeAccel::EmbreeAccel() {
   device_ = rtcNewDevice("verbose=0");
   if (device_ == nullptr) throw Error("embree", "cannot create an Embree device");
-  rtcSetDeviceErrorFunction(device_, on_embree_error, &embree_message_slot());
+  rtcSetDeviceErrorFunction(device_, &EmbreeAccel::on_error, this);
   top_ = rtcNewScene(device_);
   rtcSetSceneFlags(top_, RTC_SCENE_FLAG_DYNAMIC | RTC_SCENE_FLAG_ROBUST);
   rtcSetSceneBuildQuality(top_, RTC_BUILD_QUALITY_LOW);
@@ -82,10 +78,14 @@ EmbreeAccel::~EmbreeAccel() {
   if (device_) rtcReleaseDevice(device_);
 }
 
-void EmbreeAccel::check(const char* what) const {
+void EmbreeAccel::check(const char* what) {
   const RTCError code = rtcGetDeviceError(device_);
   if (code == RTC_ERROR_NONE) return;
-  std::string message = embree_message_slot();
+  std::string message;
+  {
+    const std::lock_guard lock(error_mutex_);
+    message.swap(last_error_);
+  }
   if (message.empty()) message = "Embree error " + std::to_string(int(code));
   throw Error("embree", std::string(what) + ": " + message);
 }

@@ -20,6 +20,8 @@
 
 #include <cstdint>
 #include <memory>
+#include <mutex>
+#include <string>
 #include <span>
 #include <unordered_map>
 #include <vector>
@@ -99,7 +101,8 @@ private:
   void rebuild_static(ecs::Registry& registry, const std::vector<StaticEntry>& entries);
   RTCScene shared_blas(const std::shared_ptr<const TriangleMesh>& mesh);
   void release_dynamic(Dynamic& d);
-  void check(const char* what) const;
+  void check(const char* what);
+  static void on_error(void* user, RTCError code, const char* message);
 
   RTCDevice device_ = nullptr;
   RTCScene top_ = nullptr;
@@ -115,6 +118,8 @@ private:
   std::vector<Surface> surfaces_;
   std::vector<std::shared_ptr<const TriangleMesh>> keep_alive_;
   AccelUpdateStats last_;
+  std::mutex error_mutex_;
+  std::string last_error_; ///< the latest message Embree reported, consumed by check()
 };
 
 } // namespace specula
