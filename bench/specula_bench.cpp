@@ -22,6 +22,7 @@
 #include "scene/scene.h"
 #include "systems/schedule.h"
 #include "trace/camera_rays.h"
+#include "trace/packet_tile.h"
 #include "trace/render_job.h"
 
 #include <CLI/CLI.hpp>
@@ -119,8 +120,6 @@ std::uint64_t embree_minimal_packets(RTCScene scene, const CameraRays& cam, std:
                                      std::uint32_t threads, IntersectN intersect_n) {
   const std::uint32_t tile = 16;
   const std::uint32_t tiles_x = (size + tile - 1) / tile;
-  const std::uint32_t pw = N >= 4 ? 4 : 1;
-  const std::uint32_t ph = N / pw;
   std::atomic<std::uint64_t> checksum{0};
   tbb::task_arena arena{static_cast<int>(threads)};
   arena.execute([&] {
@@ -133,14 +132,16 @@ std::uint64_t embree_minimal_packets(RTCScene scene, const CameraRays& cam, std:
       std::uint64_t local = 0;
       for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
         const std::uint32_t x0 = (t % tiles_x) * tile, y0 = (t / tiles_x) * tile;
-        for (std::uint32_t by = y0; by < std::min(y0 + tile, size); by += ph)
-          for (std::uint32_t bx = x0; bx < std::min(x0 + tile, size); bx += pw) {
+        // The renderer's packet footprints (PacketTile), so both trace the same packets.
+        const PacketTile footprint = PacketTile::for_width(x0, y0, std::min(x0 + tile, size), std::min(y0 + tile, size), N);
+        footprint.for_each_block([&](std::uint32_t bx, std::uint32_t by, std::uint32_t ex, std::uint32_t ey) {
+            const std::uint32_t pw = footprint.packet_w;
             alignas(64) RayHitN rh;
             alignas(64) int valid[N];
             for (int i = 0; i < N; ++i) {
               const std::uint32_t x = bx + std::uint32_t(i) % pw, y = by + std::uint32_t(i) / pw;
-              valid[i] = (x < size && y < size) ? -1 : 0;
-              const Ray r = cam.ray(std::min(x, size - 1), std::min(y, size - 1));
+              valid[i] = (std::uint32_t(i) < pw * footprint.packet_h && x < ex && y < ey) ? -1 : 0;
+              const Ray r = cam.ray(std::min(x, ex - 1), std::min(y, ey - 1));
               rh.ray.org_x[i] = r.origin.x; rh.ray.org_y[i] = r.origin.y; rh.ray.org_z[i] = r.origin.z;
               rh.ray.dir_x[i] = r.direction.x; rh.ray.dir_y[i] = r.direction.y; rh.ray.dir_z[i] = r.direction.z;
               rh.ray.tnear[i] = 0.0f; rh.ray.tfar[i] = r.tfar; rh.ray.time[i] = 0.0f;
@@ -150,7 +151,7 @@ std::uint64_t embree_minimal_packets(RTCScene scene, const CameraRays& cam, std:
             }
             intersect_n(valid, scene, &context, &rh);
             for (int i = 0; i < N; ++i) local += valid[i] ? rh.hit.primID[i] : 0;
-          }
+          });
       }
       checksum += local;
     });

@@ -207,37 +207,30 @@ vec3 shade(const Backend& backend, const Ray& primary, const Hit& primary_hit,
   return radiance;
 }
 
-/// One worker's scratch for a tile: its primary rays and hits, in packet order. Ray i belongs
-/// to pixel(i): the tile is walked in blocks of packet_w × packet_h pixels (so each packet covers
-/// a compact footprint: coherent rays), rows inside a block; edge blocks are clipped.
+/// One worker's scratch for a tile: the hits of its primary rays and their pixels, in the tile's
+/// trace order (PacketTile).
 struct TileBatch {
-  std::vector<Ray> rays;
   std::vector<Hit> hits;
-  std::vector<std::uint32_t> pixel_index; ///< y · image width + x, per ray
+  std::vector<std::uint32_t> pixel_x;
+  std::vector<std::uint32_t> pixel_y;
 
-  /// The primary-ray stage of a tile: camera rays in packet order, closest hits as one batch.
+  /// The primary-ray stage of a tile: the backend generates the camera rays into its coherent
+  /// packets and returns the closest hits.
   template <typename Backend>
-  void trace_primary(const Backend& backend, const CameraRays& camera, std::uint32_t image_width,
-                     std::uint32_t x0, std::uint32_t y0, std::uint32_t x1, std::uint32_t y1) {
-    const std::uint32_t packet_w = backend.packet_width() >= 4 ? 4 : backend.packet_width() >= 2 ? 2 : 1;
-    const std::uint32_t packet_h = std::max(1u, backend.packet_width() / packet_w);
-    const std::size_t count = std::size_t(x1 - x0) * (y1 - y0);
-    rays.resize(count);
+  void trace_primary(const Backend& backend, const CameraRays& camera, std::uint32_t x0, std::uint32_t y0,
+                     std::uint32_t x1, std::uint32_t y1) {
+    const PacketTile tile = PacketTile::for_width(x0, y0, x1, y1, backend.packet_width());
+    const std::size_t count = tile.pixel_count();
     hits.resize(count);
-    pixel_index.resize(count);
+    pixel_x.resize(count);
+    pixel_y.resize(count);
     std::size_t i = 0;
-    for (std::uint32_t by = y0; by < y1; by += packet_h) {
-      const std::uint32_t ey = std::min(by + packet_h, y1);
-      for (std::uint32_t bx = x0; bx < x1; bx += packet_w) {
-        const std::uint32_t ex = std::min(bx + packet_w, x1);
-        for (std::uint32_t y = by; y < ey; ++y)
-          for (std::uint32_t x = bx; x < ex; ++x, ++i) {
-            rays[i] = camera.ray(x, y);
-            pixel_index[i] = y * image_width + x;
-          }
-      }
-    }
-    backend.intersect_coherent(rays, hits);
+    tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
+      pixel_x[i] = x;
+      pixel_y[i] = y;
+      ++i;
+    });
+    backend.intersect_camera(camera, tile, hits);
   }
 };
 
@@ -281,7 +274,7 @@ std::uint64_t trace_primary_frame(const Backend& backend, const Camera& camera, 
   std::atomic<std::uint64_t> checksum{0};
   detail::for_each_tile(width, height, settings.tile_size, settings.threads,
                         [&](detail::TileBatch& batch, std::uint32_t x0, std::uint32_t y0, std::uint32_t x1, std::uint32_t y1) {
-                          batch.trace_primary(backend, camera_rays, width, x0, y0, x1, y1);
+                          batch.trace_primary(backend, camera_rays, x0, y0, x1, y1);
                           std::uint64_t local = 0;
                           for (const Hit& h : batch.hits) local += h.surface + h.primitive;
                           checksum += local;
@@ -303,12 +296,16 @@ FrameStats render_frame(const Backend& backend, const Camera& camera,
   tbb::combinable<RayCounts> counts;
   detail::for_each_tile(width, out.height(), settings.tile_size, settings.threads,
                         [&](detail::TileBatch& batch, std::uint32_t x0, std::uint32_t y0, std::uint32_t x1, std::uint32_t y1) {
-                          batch.trace_primary(backend, camera_rays, width, x0, y0, x1, y1);
+                          batch.trace_primary(backend, camera_rays, x0, y0, x1, y1);
                           RayCounts& local = counts.local();
-                          local[RayKind::Primary] += batch.rays.size();
-                          for (std::size_t i = 0; i < batch.rays.size(); ++i)
-                            pixels[batch.pixel_index[i]] =
-                                detail::shade(backend, batch.rays[i], batch.hits[i], lights, settings, local);
+                          local[RayKind::Primary] += batch.hits.size();
+                          for (std::size_t i = 0; i < batch.hits.size(); ++i) {
+                            const std::uint32_t x = batch.pixel_x[i], y = batch.pixel_y[i];
+                            // The ray is regenerated for shading: cheaper than keeping every
+                            // tile's rays in memory between the two stages.
+                            pixels[std::size_t(y) * width + x] = detail::shade(
+                                backend, camera_rays.ray(x, y), batch.hits[i], lights, settings, local);
+                          }
                         });
   FrameStats stats;
   counts.combine_each([&](const RayCounts& c) { stats.rays += c; });

@@ -4,6 +4,10 @@
 #include "accel/embree/embree_backend.h"
 #include "scene_builder.h"
 #include "systems/schedule.h"
+#include "trace/camera_rays.h"
+#include "trace/packet_tile.h"
+
+#include <algorithm>
 
 #include <gtest/gtest.h>
 
@@ -145,24 +149,32 @@ TEST(EmbreeAccel, PacketsAndSingleRaysFindTheSameHits) {
   World w;
   Schedule schedule;
   schedule.tick(w.reg, 0.0);
-  std::vector<Ray> rays;
-  for (int y = 0; y < 23; ++y)
-    for (int x = 0; x < 23; ++x) {
-      Ray r;
-      r.origin = vec3(0, 6, 12);
-      r.direction = glm::normalize(vec3(-8 + 16.0f * x / 22.0f, -6 + 6.0f * y / 22.0f, -12));
-      rays.push_back(r);
-    }
-  std::vector<Hit> reference(rays.size());
-  EmbreeBackend(w.accel(), 1).intersect_coherent(rays, reference);
+  Camera camera;
+  camera.position = vec3(0, 6, 12);
+  camera.look_at = vec3(0, 0, 0);
+  const CameraRays rays(camera, 64, 64);
+  // A 23×23 tile: partial blocks at its right and bottom edges for every footprint.
+  std::vector<Hit> reference(23 * 23);
+  EmbreeBackend(w.accel(), 1).intersect_camera(rays, PacketTile::for_width(5, 7, 28, 30, 1), reference);
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> reference_pixels;
+  PacketTile::for_width(5, 7, 28, 30, 1).for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
+    reference_pixels.emplace_back(x, y);
+  });
   for (const std::uint32_t width : {4u, 8u, 16u}) {
-    std::vector<Hit> hits(rays.size());
-    EmbreeBackend(w.accel(), width).intersect_coherent(rays, hits); // 529 rays: a partial last packet
-    for (std::size_t i = 0; i < rays.size(); ++i) {
-      EXPECT_EQ(hits[i].surface, reference[i].surface) << width << " " << i;
+    const PacketTile tile = PacketTile::for_width(5, 7, 28, 30, width);
+    std::vector<Hit> hits(tile.pixel_count());
+    EmbreeBackend(w.accel(), width).intersect_camera(rays, tile, hits);
+    std::size_t i = 0;
+    tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
+      const auto at = std::find(reference_pixels.begin(), reference_pixels.end(), std::make_pair(x, y));
+      ASSERT_NE(at, reference_pixels.end());
+      const Hit& ref = reference[std::size_t(at - reference_pixels.begin())];
+      EXPECT_EQ(hits[i].surface, ref.surface) << width << " pixel " << x << "," << y;
       // The primitive may differ where a ray meets a shared edge exactly: either is right.
-      EXPECT_FLOAT_EQ(hits[i].t, reference[i].t) << width << " " << i;
-    }
+      EXPECT_FLOAT_EQ(hits[i].t, ref.t) << width << " pixel " << x << "," << y;
+      ++i;
+    });
+    EXPECT_EQ(i, reference_pixels.size());
   }
 }
 

@@ -54,28 +54,42 @@ bool EmbreeBackend::occluded(const Ray& ray) const {
 }
 
 template <int N, typename RayHitN, typename IntersectN>
-void EmbreeBackend::intersect_packets(std::span<const Ray> rays, std::span<Hit> hits,
-                                      IntersectN intersect_n) const {
+void EmbreeBackend::intersect_camera_packets(const CameraRays& camera, const PacketTile& tile,
+                                             std::span<Hit> hits, IntersectN intersect_n) const {
+  SPECULA_ASSERT(tile.packet_w * tile.packet_h <= std::uint32_t(N));
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-  for (std::size_t base = 0; base < rays.size(); base += N) {
+  std::size_t next = 0;
+  tile.for_each_block([&](std::uint32_t bx0, std::uint32_t by0, std::uint32_t bx1, std::uint32_t by1) {
     alignas(64) RayHitN rh;
     alignas(64) int valid[N];
-    const std::size_t count = std::min<std::size_t>(N, rays.size() - base);
+    int lanes = 0;
+    for (std::uint32_t y = by0; y < by1; ++y)
+      for (std::uint32_t x = bx0; x < bx1; ++x, ++lanes) {
+        const Ray r = camera.ray(x, y);
+        rh.ray.org_x[lanes] = r.origin.x;
+        rh.ray.org_y[lanes] = r.origin.y;
+        rh.ray.org_z[lanes] = r.origin.z;
+        rh.ray.dir_x[lanes] = r.direction.x;
+        rh.ray.dir_y[lanes] = r.direction.y;
+        rh.ray.dir_z[lanes] = r.direction.z;
+        rh.ray.tnear[lanes] = r.tnear;
+        rh.ray.tfar[lanes] = r.tfar;
+      }
     for (int i = 0; i < N; ++i) {
-      const bool active = std::size_t(i) < count;
-      valid[i] = active ? -1 : 0;
-      const Ray& r = rays[base + (active ? std::size_t(i) : 0)];
-      rh.ray.org_x[i] = r.origin.x;
-      rh.ray.org_y[i] = r.origin.y;
-      rh.ray.org_z[i] = r.origin.z;
-      rh.ray.tnear[i] = r.tnear;
-      rh.ray.dir_x[i] = r.direction.x;
-      rh.ray.dir_y[i] = r.direction.y;
-      rh.ray.dir_z[i] = r.direction.z;
+      valid[i] = i < lanes ? -1 : 0;
+      if (i >= lanes) { // inactive lanes still hold finite data
+        rh.ray.org_x[i] = rh.ray.org_x[0];
+        rh.ray.org_y[i] = rh.ray.org_y[0];
+        rh.ray.org_z[i] = rh.ray.org_z[0];
+        rh.ray.dir_x[i] = rh.ray.dir_x[0];
+        rh.ray.dir_y[i] = rh.ray.dir_y[0];
+        rh.ray.dir_z[i] = rh.ray.dir_z[0];
+        rh.ray.tnear[i] = rh.ray.tnear[0];
+        rh.ray.tfar[i] = rh.ray.tfar[0];
+      }
       rh.ray.time[i] = 0.0f;
-      rh.ray.tfar[i] = r.tfar;
       rh.ray.mask[i] = 0xFFFFFFFFu;
       rh.ray.id[i] = unsigned(i);
       rh.ray.flags[i] = 0;
@@ -83,20 +97,24 @@ void EmbreeBackend::intersect_packets(std::span<const Ray> rays, std::span<Hit> 
       rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
     }
     intersect_n(valid, accel_->scene(), &context, &rh);
-    for (std::size_t i = 0; i < count; ++i)
+    for (int i = 0; i < lanes; ++i)
       accel_->resolve(rh.hit.geomID[i], rh.hit.instID[0][i], rh.hit.Ng_x[i], rh.hit.Ng_y[i],
                       rh.hit.Ng_z[i], rh.hit.u[i], rh.hit.v[i], rh.ray.tfar[i], rh.hit.primID[i],
-                      hits[base + i]);
-  }
+                      hits[next + std::size_t(i)]);
+    next += std::size_t(lanes);
+  });
 }
 
-void EmbreeBackend::intersect_coherent(std::span<const Ray> rays, std::span<Hit> hits) const {
+void EmbreeBackend::intersect_camera(const CameraRays& camera, const PacketTile& tile,
+                                     std::span<Hit> hits) const {
   switch (packet_width_) {
-  case 16: intersect_packets<16, RTCRayHit16>(rays, hits, rtcIntersect16); return;
-  case 8: intersect_packets<8, RTCRayHit8>(rays, hits, rtcIntersect8); return;
-  case 4: intersect_packets<4, RTCRayHit4>(rays, hits, rtcIntersect4); return;
-  default:
-    for (std::size_t i = 0; i < rays.size(); ++i) intersect(rays[i], hits[i]);
+  case 16: intersect_camera_packets<16, RTCRayHit16>(camera, tile, hits, rtcIntersect16); return;
+  case 8: intersect_camera_packets<8, RTCRayHit8>(camera, tile, hits, rtcIntersect8); return;
+  case 4: intersect_camera_packets<4, RTCRayHit4>(camera, tile, hits, rtcIntersect4); return;
+  default: {
+    std::size_t i = 0;
+    tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) { intersect(camera.ray(x, y), hits[i++]); });
+  }
   }
 }
 

@@ -5,6 +5,8 @@
 
 #include "accel/embree/embree_accel.h"
 #include "geometry/ray.h"
+#include "trace/camera_rays.h"
+#include "trace/packet_tile.h"
 #include "trace/renderer.h"
 
 #include <cstdint>
@@ -19,13 +21,16 @@ public:
 
   void intersect(const Ray& ray, Hit& hit) const;
   [[nodiscard]] bool occluded(const Ray& ray) const;
-  void intersect_coherent(std::span<const Ray> rays, std::span<Hit> hits) const;
+  /// The tile's camera rays as one packet per block (tile.packet_w × tile.packet_h ≤ the packet
+  /// width), generated straight into Embree's SoA layout; hits in the tile's trace order.
+  void intersect_camera(const CameraRays& camera, const PacketTile& tile, std::span<Hit> hits) const;
   [[nodiscard]] std::uint32_t packet_width() const { return packet_width_; }
   [[nodiscard]] std::span<const Surface> surfaces() const { return accel_->surfaces(); }
 
 private:
   template <int N, typename RayHitN, typename IntersectN>
-  void intersect_packets(std::span<const Ray> rays, std::span<Hit> hits, IntersectN intersect_n) const;
+  void intersect_camera_packets(const CameraRays& camera, const PacketTile& tile, std::span<Hit> hits,
+                                IntersectN intersect_n) const;
 
   const EmbreeAccel* accel_;
   std::uint32_t packet_width_;
