@@ -4,12 +4,15 @@
 set -euo pipefail
 build_dir=$1
 source_dir=$2
+cxx_flags=${3:-}
+linker_flags=${4:-}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 cmake --install "$build_dir" --prefix "$work/prefix" >/dev/null
 test -f "$work/prefix/lib/cmake/Specula/SpeculaConfig.cmake"
 test -f "$work/prefix/include/specula/ecs/registry.h"
 cmake -S "$source_dir/tests/install/consumer" -B "$work/build" -G Ninja \
-      -DCMAKE_PREFIX_PATH="$work/prefix" -DCMAKE_BUILD_TYPE=Release >/dev/null
+      -DCMAKE_PREFIX_PATH="$work/prefix" -DCMAKE_BUILD_TYPE=Release \
+      -DCMAKE_CXX_FLAGS="$cxx_flags" -DCMAKE_EXE_LINKER_FLAGS="$linker_flags" >/dev/null
 cmake --build "$work/build" >/dev/null
 "$work/build/consumer"
