@@ -207,29 +207,19 @@ vec3 shade(const Backend& backend, const Ray& primary, const Hit& primary_hit,
   return radiance;
 }
 
-/// One worker's scratch for a tile: the hits of its primary rays and their pixels, in the tile's
-/// trace order (PacketTile).
+/// One worker's scratch for a tile: the hits of its primary rays in the tile's trace order
+/// (PacketTile; the same walk maps them back to pixels).
 struct TileBatch {
+  PacketTile tile;
   std::vector<Hit> hits;
-  std::vector<std::uint32_t> pixel_x;
-  std::vector<std::uint32_t> pixel_y;
 
   /// The primary-ray stage of a tile: the backend generates the camera rays into its coherent
   /// packets and returns the closest hits.
   template <typename Backend>
   void trace_primary(const Backend& backend, const CameraRays& camera, std::uint32_t x0, std::uint32_t y0,
                      std::uint32_t x1, std::uint32_t y1) {
-    const PacketTile tile = PacketTile::for_width(x0, y0, x1, y1, backend.packet_width());
-    const std::size_t count = tile.pixel_count();
-    hits.resize(count);
-    pixel_x.resize(count);
-    pixel_y.resize(count);
-    std::size_t i = 0;
-    tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
-      pixel_x[i] = x;
-      pixel_y[i] = y;
-      ++i;
-    });
+    tile = PacketTile::for_width(x0, y0, x1, y1, backend.packet_width());
+    hits.resize(tile.pixel_count());
     backend.intersect_camera(camera, tile, hits);
   }
 };
@@ -299,13 +289,13 @@ FrameStats render_frame(const Backend& backend, const Camera& camera,
                           batch.trace_primary(backend, camera_rays, x0, y0, x1, y1);
                           RayCounts& local = counts.local();
                           local[RayKind::Primary] += batch.hits.size();
-                          for (std::size_t i = 0; i < batch.hits.size(); ++i) {
-                            const std::uint32_t x = batch.pixel_x[i], y = batch.pixel_y[i];
+                          std::size_t i = 0;
+                          batch.tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
                             // The ray is regenerated for shading: cheaper than keeping every
                             // tile's rays in memory between the two stages.
                             pixels[std::size_t(y) * width + x] = detail::shade(
-                                backend, camera_rays.ray(x, y), batch.hits[i], lights, settings, local);
-                          }
+                                backend, camera_rays.ray(x, y), batch.hits[i++], lights, settings, local);
+                          });
                         });
   FrameStats stats;
   counts.combine_each([&](const RayCounts& c) { stats.rays += c; });
