@@ -4,7 +4,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/deps.sh
-export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
 jobs=$(nproc 2>/dev/null || echo 2)
 cmake --preset release -DSPECULA_BUILD_TESTS=OFF >/dev/null
 cmake --build --preset release -j "$jobs" --target specula
