@@ -240,7 +240,9 @@ void for_each_tile(std::uint32_t width, std::uint32_t height, std::uint32_t tile
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tiles_x * tiles_y, 1),
                       [&](const tbb::blocked_range<std::uint32_t>& range) {
-                        // Denormals slow Embree down and make it warn: flush them on every worker.
+                        // Denormals slow Embree down and make it warn: flush them while tracing,
+                        // and give the thread (possibly the caller's own) its mode back after.
+                        const unsigned int saved_csr = _mm_getcsr();
                         _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
                         _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
                         TileBatch& batch = batches.local();
@@ -249,6 +251,7 @@ void for_each_tile(std::uint32_t width, std::uint32_t height, std::uint32_t tile
                           const std::uint32_t y0 = (t / tiles_x) * tile;
                           f(batch, x0, y0, std::min(x0 + tile, width), std::min(y0 + tile, height));
                         }
+                        _mm_setcsr(saved_csr);
                       });
   });
 }

@@ -263,6 +263,16 @@ TEST(Render, ImagesAreBitIdenticalWhateverTheThreadCountTileOrPacketWidth) {
   EXPECT_TRUE(a.resource<RenderJob>().last.rays == b.resource<RenderJob>().last.rays);
 }
 
+TEST(Render, TheCallersFloatingPointModeIsLeftAsItWas) {
+  // Tracing flushes denormals for Embree; the calling thread must get its own mode back.
+  const unsigned int before = _mm_getcsr();
+  ecs::Registry reg;
+  render(cornell(reg), TraceMode::Whitted, 32, 1);
+  EXPECT_EQ(_mm_getcsr(), before);
+  volatile float tiny = 1e-39f; // a denormal must survive arithmetic on this thread
+  EXPECT_GT(tiny * 1.0f, 0.0f);
+}
+
 TEST(Render, RayCountsFollowTheMode) {
   ecs::Registry a, b;
   const std::uint32_t size = 64;
