@@ -36,6 +36,17 @@ struct World {
   EmbreeAccel& accel() { return reg.resource<EmbreeAccel>(); }
 };
 
+/// The closest hit of a ray cast straight down from 10 units above (x, z).
+Hit hit_below(World& w, float x, float z) {
+  const EmbreeBackend backend(w.accel(), 1);
+  Ray down;
+  down.origin = vec3(x, 10, z);
+  down.direction = vec3(0, -1, 0);
+  Hit hit;
+  backend.intersect(down, hit);
+  return hit;
+}
+
 TEST(EmbreeAccel, FirstUpdateBuildsStaticOnceAndOneStructurePerMesh) {
   World w;
   Schedule schedule;
@@ -75,12 +86,7 @@ TEST(EmbreeAccel, MovingOneObjectRewritesOnlyItsInstance) {
   EXPECT_TRUE(s.top_committed);
 
   // And the moved ball is where the ray now finds it.
-  const EmbreeBackend backend(w.accel(), 1);
-  Ray down;
-  down.origin = vec3(3, 10, 0);
-  down.direction = vec3(0, -1, 0);
-  Hit hit;
-  backend.intersect(down, hit);
+  const Hit hit = hit_below(w, 3, 0);
   ASSERT_TRUE(hit.hit());
   EXPECT_EQ(w.accel().surfaces()[hit.surface].entity, w.ball);
   EXPECT_NEAR(hit.t, 8.0f, 0.01f);
@@ -105,12 +111,7 @@ TEST(EmbreeAccel, DeformingMeshIsRefittedNotRebuilt) {
   EXPECT_EQ(s.blas_builds, 0u);
   EXPECT_EQ(s.static_builds, 0u);
   // Half-way: the blob's top is at 1 + 0.5 * 1.5 = 1.75.
-  const EmbreeBackend backend(w.accel(), 1);
-  Ray down;
-  down.origin = vec3(0, 10, 4);
-  down.direction = vec3(0, -1, 0);
-  Hit hit;
-  backend.intersect(down, hit);
+  const Hit hit = hit_below(w, 0, 4);
   ASSERT_TRUE(hit.hit());
   EXPECT_EQ(w.accel().surfaces()[hit.surface].entity, w.blob);
   EXPECT_NEAR(10.0f - hit.t, 1.75f, 0.01f);
@@ -125,12 +126,7 @@ TEST(EmbreeAccel, DestroyedEntitiesLeaveTheStructure) {
   EXPECT_EQ(w.accel().last_update().instances_removed, 1u);
   EXPECT_EQ(w.accel().last_update().static_builds, 0u);
   EXPECT_EQ(w.accel().surfaces().size(), 4u);
-  const EmbreeBackend backend(w.accel(), 1);
-  Ray down;
-  down.origin = vec3(5, 10, 0);
-  down.direction = vec3(0, -1, 0);
-  Hit hit;
-  backend.intersect(down, hit);
+  const Hit hit = hit_below(w, 5, 0);
   ASSERT_TRUE(hit.hit());
   EXPECT_EQ(w.accel().surfaces()[hit.surface].entity, w.ground);
 }
