@@ -12,18 +12,18 @@
 //   depth    speed against error of the depth and weight cut-offs (reference: depth 32, no
 //            cut-off), with RMSE, PSNR and FLIP on the same frames.
 
-#include "accel/embree/embree_accel.h"
-#include "accel/embree/embree_backend.h"
-#include "image/flip.h"
-#include "image/metrics.h"
-#include "scene/components.h"
-#include "scene/hierarchy.h"
-#include "scene/mesh_io.h"
-#include "scene/scene.h"
-#include "systems/schedule.h"
-#include "trace/camera_rays.h"
-#include "trace/packet_tile.h"
-#include "trace/render_job.h"
+#include "specula/accel/embree/embree_accel.h"
+#include "specula/accel/embree/embree_backend.h"
+#include "specula/image/flip.h"
+#include "specula/image/metrics.h"
+#include "specula/scene/components.h"
+#include "specula/scene/hierarchy.h"
+#include "specula/scene/mesh_io.h"
+#include "specula/scene/scene.h"
+#include "specula/systems/schedule.h"
+#include "specula/trace/camera_rays.h"
+#include "specula/trace/packet_tile.h"
+#include "specula/trace/render_job.h"
 
 #include <CLI/CLI.hpp>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>

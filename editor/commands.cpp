@@ -1,11 +1,11 @@
 #include "commands.h"
 
-#include "core/error.h"
-#include "scene/scene.h"
-#include "image/image_io.h"
-#include "systems/schedule.h"
-#include "trace/render_job.h"
-#include "trace/stats.h"
+#include "specula/core/error.h"
+#include "specula/scene/scene.h"
+#include "specula/image/image_io.h"
+#include "specula/systems/schedule.h"
+#include "specula/trace/render_job.h"
+#include "specula/trace/stats.h"
 
 #include <nlohmann/json.hpp>
 

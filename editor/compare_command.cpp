@@ -1,9 +1,9 @@
 #include "compare_command.h"
 
-#include "core/error.h"
-#include "image/flip.h"
-#include "image/image_io.h"
-#include "image/metrics.h"
+#include "specula/core/error.h"
+#include "specula/image/flip.h"
+#include "specula/image/image_io.h"
+#include "specula/image/metrics.h"
 
 #include <cmath>
 #include <ostream>

@@ -4,8 +4,8 @@
 
 #include "commands.h"
 #include "compare_command.h"
-#include "core/error.h"
-#include "scene/scene.h"
+#include "specula/core/error.h"
+#include "specula/scene/scene.h"
 
 #include <CLI/CLI.hpp>
 

@@ -1,6 +1,6 @@
-#include "systems/acceleration_system.h"
+#include "specula/systems/acceleration_system.h"
 
-#include "accel/embree/embree_accel.h"
+#include "specula/accel/embree/embree_accel.h"
 
 namespace specula {
 

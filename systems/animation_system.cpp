@@ -1,10 +1,10 @@
-#include "systems/animation_system.h"
+#include "specula/systems/animation_system.h"
 
-#include "scene/animation_sampling.h"
-#include "scene/components/animation.h"
-#include "scene/components/camera.h"
-#include "scene/components/mesh.h"
-#include "scene/components/transform.h"
+#include "specula/scene/animation_sampling.h"
+#include "specula/scene/components/animation.h"
+#include "specula/scene/components/camera.h"
+#include "specula/scene/components/mesh.h"
+#include "specula/scene/components/transform.h"
 
 namespace specula {
 

@@ -1,6 +1,6 @@
 #pragma once
-#include "ecs/registry.h"
-#include "systems/frame_context.h"
+#include "specula/ecs/registry.h"
+#include "specula/systems/frame_context.h"
 
 namespace specula {
 

@@ -1,9 +1,9 @@
-#include "systems/render_system.h"
+#include "specula/systems/render_system.h"
 
-#include "accel/embree/embree_backend.h"
-#include "core/error.h"
-#include "scene/scene.h"
-#include "trace/render_job.h"
+#include "specula/accel/embree/embree_backend.h"
+#include "specula/core/error.h"
+#include "specula/scene/scene.h"
+#include "specula/trace/render_job.h"
 
 #include <chrono>
 

@@ -1,9 +1,9 @@
-#include "systems/schedule.h"
+#include "specula/systems/schedule.h"
 
-#include "systems/acceleration_system.h"
-#include "systems/animation_system.h"
-#include "systems/render_system.h"
-#include "systems/transform_system.h"
+#include "specula/systems/acceleration_system.h"
+#include "specula/systems/animation_system.h"
+#include "specula/systems/render_system.h"
+#include "specula/systems/transform_system.h"
 
 namespace specula {
 namespace {

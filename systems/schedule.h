@@ -2,8 +2,8 @@
 /// \file
 /// The schedule: the one place that knows the order of systems in a frame.
 
-#include "ecs/registry.h"
-#include "systems/frame_context.h"
+#include "specula/ecs/registry.h"
+#include "specula/systems/frame_context.h"
 
 #include <string_view>
 #include <vector>

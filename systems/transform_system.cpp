@@ -1,6 +1,6 @@
-#include "systems/transform_system.h"
+#include "specula/systems/transform_system.h"
 
-#include "scene/hierarchy.h"
+#include "specula/scene/hierarchy.h"
 
 namespace specula {
 

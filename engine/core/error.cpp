@@ -1,4 +1,4 @@
-#include "core/error.h"
+#include "specula/core/error.h"
 
 #include <utility>
 

@@ -1,4 +1,4 @@
-#include "core/log.h"
+#include "specula/core/log.h"
 
 #include <atomic>
 #include <cstdio>

@@ -1,4 +1,4 @@
-#include "core/math.h"
+#include "specula/core/math.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 

@@ -21,9 +21,9 @@
 /// 4. Resources are one value per type per registry (caches, shared geometry libraries), never
 ///    statics; clear() and the destructor destroy them after the components.
 
-#include "core/assert.h"
-#include "ecs/entity.h"
-#include "ecs/storage.h"
+#include "specula/core/assert.h"
+#include "specula/ecs/entity.h"
+#include "specula/ecs/storage.h"
 
 #include <atomic>
 #include <cstddef>

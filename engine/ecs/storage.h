@@ -5,8 +5,8 @@
 /// `dense` in pages of fixed size, so adding a component never moves the others (references stay
 /// valid across emplace). Removal swaps the last element into the hole (O(1)).
 
-#include "core/assert.h"
-#include "ecs/entity.h"
+#include "specula/core/assert.h"
+#include "specula/ecs/entity.h"
 
 #include <algorithm>
 #include <cstddef>

@@ -1,6 +1,6 @@
-#include "geometry/primitives.h"
+#include "specula/geometry/primitives.h"
 
-#include "core/error.h"
+#include "specula/core/error.h"
 
 #include <cmath>
 #include <cstdint>

@@ -4,8 +4,8 @@
 /// given in MeshSource. Centred at the origin, +Y up, outward-facing counter-clockwise triangles,
 /// smooth normals on curved surfaces and flat normals on flat faces, UVs.
 
-#include "geometry/triangle_mesh.h"
-#include "scene/components/mesh.h"
+#include "specula/geometry/triangle_mesh.h"
+#include "specula/scene/components/mesh.h"
 
 #include <string>
 

@@ -2,7 +2,7 @@
 /// \file
 /// Rays and hits shared by every backend.
 
-#include "core/math.h"
+#include "specula/core/math.h"
 
 #include <cstdint>
 #include <limits>

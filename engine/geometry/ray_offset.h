@@ -9,7 +9,7 @@
 /// no global epsilon, and none of the fixed near-origin offset that makes the integer-ULP method
 /// too coarse on millimetre scenes.
 
-#include "core/math.h"
+#include "specula/core/math.h"
 
 #include <cmath>
 #include <limits>

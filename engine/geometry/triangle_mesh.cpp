@@ -1,6 +1,6 @@
-#include "geometry/triangle_mesh.h"
+#include "specula/geometry/triangle_mesh.h"
 
-#include "core/error.h"
+#include "specula/core/error.h"
 
 namespace specula {
 

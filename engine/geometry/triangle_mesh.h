@@ -2,7 +2,7 @@
 /// \file
 /// Shared triangle geometry: what a Mesh component points at. Flat arrays, 32-bit indices.
 
-#include "core/math.h"
+#include "specula/core/math.h"
 
 #include <cstdint>
 #include <string>

@@ -6,11 +6,11 @@
 // Filters are applied separably (every kernel here is a sum of products f(x)·g(y)), which gives
 // the same result as the paper's square kernels at a fraction of the cost.
 
-#include "image/flip.h"
+#include "specula/image/flip.h"
 
-#include "core/error.h"
-#include "image/image_io.h"
-#include "image/srgb.h"
+#include "specula/core/error.h"
+#include "specula/image/image_io.h"
+#include "specula/image/srgb.h"
 
 #include <algorithm>
 #include <array>

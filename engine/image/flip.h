@@ -8,7 +8,7 @@
 /// (the Hunt-adjusted HyAB distance between pure green and pure blue).
 /// Written from the paper's description; see flip.cpp for each step and its section.
 
-#include "image/framebuffer.h"
+#include "specula/image/framebuffer.h"
 
 #include <cstdint>
 #include <filesystem>

@@ -1,7 +1,7 @@
-#include "image/framebuffer.h"
+#include "specula/image/framebuffer.h"
 
-#include "core/assert.h"
-#include "core/error.h"
+#include "specula/core/assert.h"
+#include "specula/core/error.h"
 
 #include <algorithm>
 #include <string>

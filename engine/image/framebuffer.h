@@ -3,7 +3,7 @@
 /// Framebuffer: a width × height grid of linear RGB radiance, the image type every renderer
 /// writes and every metric and image file reader or writer takes.
 
-#include "core/math.h"
+#include "specula/core/math.h"
 
 #include <cstddef>
 #include <cstdint>

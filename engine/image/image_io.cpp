@@ -1,7 +1,7 @@
-#include "image/image_io.h"
+#include "specula/image/image_io.h"
 
-#include "core/error.h"
-#include "image/srgb.h"
+#include "specula/core/error.h"
+#include "specula/image/srgb.h"
 
 // The implementations live in the system libstb; only the declarations are included here.
 #include <stb_image.h>

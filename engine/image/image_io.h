@@ -7,7 +7,7 @@
 /// the problem (missing, empty, truncated, wrong signature, absurd size, unsupported variant,
 /// non-finite values); no reader trusts a size field before checking it.
 
-#include "image/framebuffer.h"
+#include "specula/image/framebuffer.h"
 
 #include <cstdint>
 #include <filesystem>

@@ -1,7 +1,7 @@
-#include "image/metrics.h"
+#include "specula/image/metrics.h"
 
-#include "core/error.h"
-#include "image/srgb.h"
+#include "specula/core/error.h"
+#include "specula/image/srgb.h"
 
 #include <cmath>
 #include <limits>

@@ -4,7 +4,7 @@
 /// perceptual metric (FLIP) is in image/flip.h. Every function throws specula::Error when the
 /// sizes differ (callers comparing files check first, to name the files in the message).
 
-#include "image/framebuffer.h"
+#include "specula/image/framebuffer.h"
 
 namespace specula {
 

@@ -1,6 +1,6 @@
-#include "scene/animation_sampling.h"
+#include "specula/scene/animation_sampling.h"
 
-#include "core/error.h"
+#include "specula/core/error.h"
 
 #include <algorithm>
 #include <cmath>

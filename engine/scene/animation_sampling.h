@@ -2,8 +2,8 @@
 /// \file
 /// Sampling keyframe tracks (Animation, CameraPath) and validating them for loaders.
 
-#include "scene/components/animation.h"
-#include "scene/components/camera.h"
+#include "specula/scene/components/animation.h"
+#include "specula/scene/components/camera.h"
 
 #include <cstddef>
 #include <string>

@@ -1,9 +1,9 @@
-#include "scene/gltf_loader.h"
+#include "specula/scene/gltf_loader.h"
 
-#include "core/error.h"
-#include "core/log.h"
-#include "scene/animation_sampling.h"
-#include "scene/components.h"
+#include "specula/core/error.h"
+#include "specula/core/log.h"
+#include "specula/scene/animation_sampling.h"
+#include "specula/scene/components.h"
 
 // tiny_gltf.h is third-party code written to a looser warning set than ours (-Wshadow,
 // -Wold-style-cast, ...). From /usr/include GCC already treats it as a system header, but a copy

@@ -3,8 +3,8 @@
 /// glTF 2.0 (.gltf and .glb) through tinygltf: node hierarchy, meshes, PBR materials mapped to
 /// Material, cameras, KHR_lights_punctual, animations.
 
-#include "geometry/triangle_mesh.h"
-#include "scene/scene.h"
+#include "specula/geometry/triangle_mesh.h"
+#include "specula/scene/scene.h"
 
 #include <filesystem>
 

@@ -1,10 +1,10 @@
-#include "scene/hierarchy.h"
+#include "specula/scene/hierarchy.h"
 
-#include "core/error.h"
-#include "scene/components/name.h"
-#include "scene/components/parent.h"
-#include "scene/components/transform.h"
-#include "scene/components/world_transform.h"
+#include "specula/core/error.h"
+#include "specula/scene/components/name.h"
+#include "specula/scene/components/parent.h"
+#include "specula/scene/components/transform.h"
+#include "specula/scene/components/world_transform.h"
 
 #include <unordered_map>
 #include <vector>

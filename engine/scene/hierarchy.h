@@ -3,7 +3,7 @@
 /// World transforms from the Transform/Parent hierarchy. Used by transform_system each tick and
 /// by loaders once after loading.
 
-#include "ecs/registry.h"
+#include "specula/ecs/registry.h"
 
 #include <cstdint>
 #include <string>

@@ -1,11 +1,11 @@
-#include "scene/json_scene.h"
+#include "specula/scene/json_scene.h"
 
-#include "core/error.h"
-#include "scene/animation_sampling.h"
-#include "scene/components.h"
-#include "scene/gltf_loader.h"
-#include "scene/mesh_io.h"
-#include "scene/mesh_library.h"
+#include "specula/core/error.h"
+#include "specula/scene/animation_sampling.h"
+#include "specula/scene/components.h"
+#include "specula/scene/gltf_loader.h"
+#include "specula/scene/mesh_io.h"
+#include "specula/scene/mesh_library.h"
 
 #include <nlohmann/json.hpp>
 

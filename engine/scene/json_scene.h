@@ -2,7 +2,7 @@
 /// \file
 /// Specula's JSON scene format (docs/scene-format.md, schema docs/scene.schema.json).
 
-#include "scene/scene.h"
+#include "specula/scene/scene.h"
 
 #include <filesystem>
 #include <string>

@@ -21,9 +21,9 @@
 /// parses it into RecordingImporter, which keeps the polygons as written; what it read is
 /// checked against the scan (faces lost) and by TriangleMesh::validate.
 
-#include "scene/mesh_io.h"
+#include "specula/scene/mesh_io.h"
 
-#include "core/error.h"
+#include "specula/core/error.h"
 
 // OpenMesh's headers are found under /usr/include, so GCC treats them as system headers and
 // keeps their warnings out of our -Werror build; nothing else is needed around the includes.

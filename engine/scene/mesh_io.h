@@ -2,7 +2,7 @@
 /// \file
 /// Bare mesh files (OBJ, PLY, OFF, STL) through OpenMesh.
 
-#include "geometry/triangle_mesh.h"
+#include "specula/geometry/triangle_mesh.h"
 
 #include <filesystem>
 #include <string_view>

@@ -1,9 +1,9 @@
-#include "scene/mesh_library.h"
+#include "specula/scene/mesh_library.h"
 
-#include "core/error.h"
-#include "geometry/primitives.h"
-#include "scene/gltf_loader.h"
-#include "scene/mesh_io.h"
+#include "specula/core/error.h"
+#include "specula/geometry/primitives.h"
+#include "specula/scene/gltf_loader.h"
+#include "specula/scene/mesh_io.h"
 
 #include <sstream>
 

@@ -3,8 +3,8 @@
 /// A registry resource that shares geometry between entities: the same file (and glTF mesh index)
 /// or the same primitive parameters give the same TriangleMesh.
 
-#include "geometry/triangle_mesh.h"
-#include "scene/components/mesh.h"
+#include "specula/geometry/triangle_mesh.h"
+#include "specula/scene/components/mesh.h"
 
 #include <filesystem>
 #include <map>

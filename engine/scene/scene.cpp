@@ -1,11 +1,11 @@
-#include "scene/scene.h"
+#include "specula/scene/scene.h"
 
-#include "core/error.h"
-#include "scene/components.h"
-#include "scene/gltf_loader.h"
-#include "scene/hierarchy.h"
-#include "scene/json_scene.h"
-#include "scene/mesh_io.h"
+#include "specula/core/error.h"
+#include "specula/scene/components.h"
+#include "specula/scene/gltf_loader.h"
+#include "specula/scene/hierarchy.h"
+#include "specula/scene/json_scene.h"
+#include "specula/scene/mesh_io.h"
 
 #include <algorithm>
 #include <cctype>

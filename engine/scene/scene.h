@@ -3,9 +3,9 @@
 /// A scene: the ECS registry holding every entity, plus the render settings from the file.
 /// load_scene() reads any supported format; save_scene_json() writes Specula's JSON format.
 
-#include "core/math.h"
-#include "ecs/registry.h"
-#include "scene/components/camera.h"
+#include "specula/core/math.h"
+#include "specula/ecs/registry.h"
+#include "specula/scene/components/camera.h"
 
 #include <cstdint>
 #include <filesystem>

@@ -2,8 +2,8 @@
 /// \file
 /// Primary rays of a pinhole camera.
 
-#include "geometry/ray.h"
-#include "scene/components/camera.h"
+#include "specula/geometry/ray.h"
+#include "specula/scene/components/camera.h"
 
 #include <cmath>
 #include <cstdint>

@@ -1,6 +1,6 @@
-#include "trace/lights.h"
+#include "specula/trace/lights.h"
 
-#include "scene/components/world_transform.h"
+#include "specula/scene/components/world_transform.h"
 
 #include <cmath>
 

@@ -4,9 +4,9 @@
 /// (KHR_lights_punctual conventions: point/spot intensity in candela, directional in lux,
 /// spot cone smoothstep-free quadratic falloff, optional range window).
 
-#include "core/math.h"
-#include "ecs/registry.h"
-#include "scene/components/light.h"
+#include "specula/core/math.h"
+#include "specula/ecs/registry.h"
+#include "specula/scene/components/light.h"
 
 #include <limits>
 #include <vector>

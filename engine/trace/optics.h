@@ -4,7 +4,7 @@
 /// dielectric interface (Whitted, "An Improved Illumination Model for Shaded Display", 1980;
 /// pbrt-v4 §9.3 for the Fresnel form).
 
-#include "core/math.h"
+#include "specula/core/math.h"
 
 #include <cmath>
 #include <optional>

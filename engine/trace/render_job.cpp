@@ -1,7 +1,7 @@
-#include "trace/render_job.h"
+#include "specula/trace/render_job.h"
 
-#include "accel/embree/embree_accel.h"
-#include "core/error.h"
+#include "specula/accel/embree/embree_accel.h"
+#include "specula/core/error.h"
 
 #include <string>
 

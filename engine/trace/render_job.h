@@ -4,10 +4,10 @@
 /// settings, the image) and what it reports (the last frame's stats). Backends are chosen once,
 /// when the job is prepared.
 
-#include "ecs/registry.h"
-#include "image/framebuffer.h"
-#include "trace/renderer.h"
-#include "trace/stats.h"
+#include "specula/ecs/registry.h"
+#include "specula/image/framebuffer.h"
+#include "specula/trace/renderer.h"
+#include "specula/trace/stats.h"
 
 #include <cstdint>
 #include <optional>

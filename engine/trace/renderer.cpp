@@ -1,4 +1,4 @@
-#include "trace/renderer.h"
+#include "specula/trace/renderer.h"
 
 namespace specula {
 

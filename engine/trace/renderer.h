@@ -6,10 +6,10 @@
 /// Pixels are independent and shading has no randomness, so the image is bit-identical whatever
 /// the thread count.
 
-#include "image/framebuffer.h"
-#include "scene/components/camera.h"
-#include "trace/lights.h"
-#include "trace/stats.h"
+#include "specula/image/framebuffer.h"
+#include "specula/scene/components/camera.h"
+#include "specula/trace/lights.h"
+#include "specula/trace/stats.h"
 
 #include <cstdint>
 #include <optional>

@@ -2,12 +2,12 @@
 /// \file
 /// The renderer's template body, included only by backend .cpp files that instantiate it.
 
-#include "core/error.h"
-#include "geometry/ray_offset.h"
-#include "trace/camera_rays.h"
-#include "trace/optics.h"
-#include "trace/renderer.h"
-#include "trace/trace_backend.h"
+#include "specula/core/error.h"
+#include "specula/geometry/ray_offset.h"
+#include "specula/trace/camera_rays.h"
+#include "specula/trace/optics.h"
+#include "specula/trace/renderer.h"
+#include "specula/trace/trace_backend.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/combinable.h>

@@ -1,6 +1,6 @@
-#include "trace/stats.h"
+#include "specula/trace/stats.h"
 
-#include "core/error.h"
+#include "specula/core/error.h"
 
 #include <nlohmann/json.hpp>
 

@@ -2,10 +2,10 @@
 /// \file
 /// What shading needs to know about the surface a ray hit, whatever backend found it.
 
-#include "core/math.h"
-#include "ecs/entity.h"
-#include "geometry/triangle_mesh.h"
-#include "scene/components/material.h"
+#include "specula/core/math.h"
+#include "specula/ecs/entity.h"
+#include "specula/geometry/triangle_mesh.h"
+#include "specula/scene/components/material.h"
 
 namespace specula {
 

@@ -3,10 +3,10 @@
 /// What the renderer needs from a tracing backend. Backends are chosen once per run and trace
 /// batches; the renderer is a template over the backend, so no call per ray is virtual.
 
-#include "geometry/ray.h"
-#include "trace/camera_rays.h"
-#include "trace/packet_tile.h"
-#include "trace/surface.h"
+#include "specula/geometry/ray.h"
+#include "specula/trace/camera_rays.h"
+#include "specula/trace/packet_tile.h"
+#include "specula/trace/surface.h"
 
 #include <concepts>
 #include <cstdint>

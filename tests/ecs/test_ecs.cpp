@@ -1,7 +1,7 @@
 // Tests for the ECS rules of docs/ecs.md, one group per rule. Each test asserts the property the
 // rule names; the randomized tests compare against a plain std::map model with a fixed seed.
 
-#include "ecs/registry.h"
+#include "specula/ecs/registry.h"
 
 #include <gtest/gtest.h>
 

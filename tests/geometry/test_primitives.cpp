@@ -3,8 +3,8 @@
 // outward, normals are unit and agree with the winding, bounds match the parameters, and bad
 // parameters throw specula::Error naming the problem.
 
-#include "core/error.h"
-#include "geometry/primitives.h"
+#include "specula/core/error.h"
+#include "specula/geometry/primitives.h"
 
 #include <gtest/gtest.h>
 

@@ -2,8 +2,8 @@
 // an error naming it, compute_vertex_normals() gives unit area-weighted normals and copes with
 // degenerate triangles, bounds() encloses exactly the positions.
 
-#include "core/error.h"
-#include "geometry/triangle_mesh.h"
+#include "specula/core/error.h"
+#include "specula/geometry/triangle_mesh.h"
 
 #include <gtest/gtest.h>
 

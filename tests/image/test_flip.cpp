@@ -3,10 +3,10 @@
 // [0, 1], noise of larger amplitude scores higher, a one-pixel change stays local, and a farther
 // viewer (more pixels per degree) sees fine noise less.
 
-#include "core/error.h"
-#include "image/flip.h"
-#include "image/image_io.h"
-#include "image/srgb.h"
+#include "specula/core/error.h"
+#include "specula/image/flip.h"
+#include "specula/image/image_io.h"
+#include "specula/image/srgb.h"
 #include "test_support.h"
 
 #include <gtest/gtest.h>

@@ -1,8 +1,8 @@
 // Framebuffer: size validation, row-major layout, fill and equality.
 
-#include "core/error.h"
-#include "image/framebuffer.h"
-#include "image/srgb.h"
+#include "specula/core/error.h"
+#include "specula/image/framebuffer.h"
+#include "specula/image/srgb.h"
 
 #include <gtest/gtest.h>
 

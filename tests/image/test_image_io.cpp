@@ -2,9 +2,9 @@
 // (HALF, extra channels, decreasing line order, offset data window), and bad files of every
 // kind, each of which must throw specula::Error naming the file.
 
-#include "core/error.h"
-#include "image/image_io.h"
-#include "image/srgb.h"
+#include "specula/core/error.h"
+#include "specula/image/image_io.h"
+#include "specula/image/srgb.h"
 #include "test_support.h"
 
 #include <gtest/gtest.h>

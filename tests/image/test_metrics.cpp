@@ -1,8 +1,8 @@
 // RMSE and PSNR: properties that follow from their definitions, on seeded random images.
 
-#include "core/error.h"
-#include "image/metrics.h"
-#include "image/srgb.h"
+#include "specula/core/error.h"
+#include "specula/image/metrics.h"
+#include "specula/image/srgb.h"
 #include "test_support.h"
 
 #include <gtest/gtest.h>

@@ -3,7 +3,7 @@
 // raw file bytes, and a minimal PNG encoder (stored deflate blocks) that is independent of the
 // stb code under test, so the reader is checked against files it did not write itself.
 
-#include "image/framebuffer.h"
+#include "specula/image/framebuffer.h"
 
 #include <gtest/gtest.h>
 

@@ -2,13 +2,13 @@
 // compared below are the ones that script writes. Expected matrices are built here with GLM's
 // translate/rotate/scale, independently of the loader's own TRS code.
 
-#include "core/error.h"
-#include "core/log.h"
-#include "scene/animation_sampling.h"
-#include "scene/components.h"
-#include "scene/gltf_loader.h"
-#include "scene/hierarchy.h"
-#include "scene/scene.h"
+#include "specula/core/error.h"
+#include "specula/core/log.h"
+#include "specula/scene/animation_sampling.h"
+#include "specula/scene/components.h"
+#include "specula/scene/gltf_loader.h"
+#include "specula/scene/hierarchy.h"
+#include "specula/scene/scene.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>

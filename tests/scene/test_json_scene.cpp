@@ -1,9 +1,9 @@
 // Specula's JSON scene format: the reader, the writer, the samples, and the schema in docs/.
 
-#include "core/error.h"
-#include "scene/components.h"
-#include "scene/json_scene.h"
-#include "scene/scene.h"
+#include "specula/core/error.h"
+#include "specula/scene/components.h"
+#include "specula/scene/json_scene.h"
+#include "specula/scene/scene.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -3,9 +3,9 @@
 // The small files live in tests/data/mesh/ (binary ones from make_binary_files.py there); real
 // files come from Debian's assimp-testmodels when installed.
 
-#include "scene/mesh_io.h"
+#include "specula/scene/mesh_io.h"
 
-#include "core/error.h"
+#include "specula/core/error.h"
 
 #include <gtest/gtest.h>
 

@@ -1,9 +1,9 @@
 // load_scene dispatch, default camera/light, summaries.
 
-#include "core/error.h"
-#include "scene/components.h"
-#include "scene/hierarchy.h"
-#include "scene/scene.h"
+#include "specula/core/error.h"
+#include "specula/scene/components.h"
+#include "specula/scene/hierarchy.h"
+#include "specula/scene/scene.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>

@@ -1,5 +1,5 @@
-#include "core/error.h"
-#include "trace/stats.h"
+#include "specula/core/error.h"
+#include "specula/trace/stats.h"
 
 #include <nlohmann/json.hpp>
 #include <gtest/gtest.h>

@@ -1,10 +1,10 @@
 // Headless system tests: build a world, tick the schedule, assert on components.
 
-#include "core/error.h"
-#include "scene/components.h"
-#include "systems/animation_system.h"
-#include "systems/schedule.h"
-#include "systems/transform_system.h"
+#include "specula/core/error.h"
+#include "specula/scene/components.h"
+#include "specula/systems/animation_system.h"
+#include "specula/systems/schedule.h"
+#include "specula/systems/transform_system.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>

@@ -1,10 +1,10 @@
 #pragma once
 // Small helpers to build test worlds in code.
 
-#include "geometry/primitives.h"
-#include "scene/components.h"
-#include "scene/hierarchy.h"
-#include "scene/scene.h"
+#include "specula/geometry/primitives.h"
+#include "specula/scene/components.h"
+#include "specula/scene/hierarchy.h"
+#include "specula/scene/scene.h"
 
 #include <memory>
 #include <string>

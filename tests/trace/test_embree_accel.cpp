@@ -1,11 +1,11 @@
 // The two-level Embree structure: only entities that changed cause work.
 
-#include "accel/embree/embree_accel.h"
-#include "accel/embree/embree_backend.h"
+#include "specula/accel/embree/embree_accel.h"
+#include "specula/accel/embree/embree_backend.h"
 #include "scene_builder.h"
-#include "systems/schedule.h"
-#include "trace/camera_rays.h"
-#include "trace/packet_tile.h"
+#include "specula/systems/schedule.h"
+#include "specula/trace/camera_rays.h"
+#include "specula/trace/packet_tile.h"
 
 #include <algorithm>
 

@@ -5,12 +5,12 @@
 //
 // SPECULA_UPDATE_GOLDEN=1 rewrites the references (review the PNGs written beside them first).
 
-#include "image/flip.h"
-#include "image/image_io.h"
-#include "image/metrics.h"
-#include "scene/scene.h"
-#include "systems/schedule.h"
-#include "trace/render_job.h"
+#include "specula/image/flip.h"
+#include "specula/image/image_io.h"
+#include "specula/image/metrics.h"
+#include "specula/scene/scene.h"
+#include "specula/systems/schedule.h"
+#include "specula/trace/render_job.h"
 
 #include <gtest/gtest.h>
 

@@ -1,6 +1,6 @@
 // Reflection, refraction and Fresnel: the laws they implement, on seeded random directions.
 
-#include "trace/optics.h"
+#include "specula/trace/optics.h"
 
 #include <gtest/gtest.h>
 

@@ -1,9 +1,9 @@
 // Self-intersection: a ray spawned from a surface with offset_ray_origin never hits that surface,
 // at any scale and distance from the origin (error-bound offsets, geometry/ray_offset.h).
 
-#include "accel/embree/embree_accel.h"
-#include "accel/embree/embree_backend.h"
-#include "geometry/ray_offset.h"
+#include "specula/accel/embree/embree_accel.h"
+#include "specula/accel/embree/embree_backend.h"
+#include "specula/geometry/ray_offset.h"
 #include "scene_builder.h"
 
 #include <gtest/gtest.h>

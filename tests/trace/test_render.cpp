@@ -1,11 +1,11 @@
 // Properties of rendered frames and of the Whitted integrator's rays, on the Embree backend.
 
-#include "accel/embree/embree_accel.h"
-#include "accel/embree/embree_backend.h"
+#include "specula/accel/embree/embree_accel.h"
+#include "specula/accel/embree/embree_backend.h"
 #include "scene_builder.h"
-#include "systems/schedule.h"
-#include "trace/render_job.h"
-#include "trace/renderer_impl.h"
+#include "specula/systems/schedule.h"
+#include "specula/trace/render_job.h"
+#include "specula/trace/renderer_impl.h"
 
 #include <gtest/gtest.h>
 

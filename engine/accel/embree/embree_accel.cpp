@@ -1,12 +1,12 @@
-#include "accel/embree/embree_accel.h"
+#include "specula/accel/embree/embree_accel.h"
 
-#include "core/error.h"
-#include "core/log.h"
-#include "scene/components/animation.h"
-#include "scene/components/kinematics.h"
-#include "scene/components/material.h"
-#include "scene/components/mesh.h"
-#include "scene/components/world_transform.h"
+#include "specula/core/error.h"
+#include "specula/core/log.h"
+#include "specula/scene/components/animation.h"
+#include "specula/scene/components/kinematics.h"
+#include "specula/scene/components/material.h"
+#include "specula/scene/components/mesh.h"
+#include "specula/scene/components/world_transform.h"
 
 #include <algorithm>
 #include <cstring>

@@ -12,9 +12,9 @@
 ///     recommitted only when one of them changed.
 /// Only entities that changed cause work; last_update() counts what was done.
 
-#include "ecs/registry.h"
-#include "geometry/ray.h"
-#include "trace/surface.h"
+#include "specula/ecs/registry.h"
+#include "specula/geometry/ray.h"
+#include "specula/trace/surface.h"
 
 #include <embree3/rtcore.h>
 

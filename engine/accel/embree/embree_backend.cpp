@@ -1,7 +1,7 @@
-#include "accel/embree/embree_backend.h"
+#include "specula/accel/embree/embree_backend.h"
 
-#include "core/assert.h"
-#include "trace/renderer_impl.h"
+#include "specula/core/assert.h"
+#include "specula/trace/renderer_impl.h"
 
 namespace specula {
 

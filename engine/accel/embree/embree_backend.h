@@ -3,11 +3,11 @@
 /// The Embree tracing backend: closest-hit and occlusion queries on an EmbreeAccel, coherent
 /// primary rays as rtcIntersect4/8/16 packets or single rays.
 
-#include "accel/embree/embree_accel.h"
-#include "geometry/ray.h"
-#include "trace/camera_rays.h"
-#include "trace/packet_tile.h"
-#include "trace/renderer.h"
+#include "specula/accel/embree/embree_accel.h"
+#include "specula/geometry/ray.h"
+#include "specula/trace/camera_rays.h"
+#include "specula/trace/packet_tile.h"
+#include "specula/trace/renderer.h"
 
 #include <cstdint>
 #include <span>

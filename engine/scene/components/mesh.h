@@ -1,6 +1,6 @@
 #pragma once
-#include "core/math.h"
-#include "geometry/triangle_mesh.h"
+#include "specula/core/math.h"
+#include "specula/geometry/triangle_mesh.h"
 
 #include <cstdint>
 #include <memory>

@@ -1,5 +1,5 @@
 #pragma once
-#include "ecs/entity.h"
+#include "specula/ecs/entity.h"
 
 namespace specula {
 

@@ -1,5 +1,5 @@
 #pragma once
-#include "core/math.h"
+#include "specula/core/math.h"
 
 #include <cstdint>
 

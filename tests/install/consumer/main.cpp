@@ -1,6 +1,6 @@
 // Uses only installed headers: builds a world, ticks the schedule, checks the result.
-#include <scene/components.h>
-#include <systems/schedule.h>
+#include <specula/scene/components.h>
+#include <specula/systems/schedule.h>
 
 #include <cstdio>
 
