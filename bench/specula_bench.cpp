@@ -12,10 +12,11 @@
 //   depth    speed against error of the depth and weight cut-offs (reference: depth 32, no
 //            cut-off), with RMSE, PSNR and FLIP on the same frames.
 
-#include "specula/accel/embree/embree_accel.h"
-#include "specula/accel/embree/embree_backend.h"
+#include "specula/accel/embree/embree_tracer.h"
 #include "specula/image/flip.h"
 #include "specula/image/metrics.h"
+#include "specula/render/render_job.h"
+#include "specula/render/scene_layer.h"
 #include "specula/scene/components.h"
 #include "specula/scene/hierarchy.h"
 #include "specula/scene/mesh_io.h"
@@ -23,7 +24,7 @@
 #include "specula/systems/schedule.h"
 #include "specula/trace/camera_rays.h"
 #include "specula/trace/packet_tile.h"
-#include "specula/trace/render_job.h"
+#include "specula/trace/render_frame.h"
 
 #include <CLI/CLI.hpp>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
@@ -77,7 +78,8 @@ TriangleMesh subdivided(const TriangleMesh& base, int levels) {
   using OMesh = OpenMesh::TriMesh_ArrayKernelT<>;
   OMesh om;
   std::vector<OMesh::VertexHandle> handles;
-  for (const vec3& p : base.positions) handles.push_back(om.add_vertex(OMesh::Point(p.x, p.y, p.z)));
+  for (const vec3& p : base.positions)
+    handles.push_back(om.add_vertex(OMesh::Point(p.x, p.y, p.z)));
   for (const uvec3& t : base.triangles) om.add_face(handles[t.x], handles[t.y], handles[t.z]);
   OpenMesh::Subdivider::Uniform::LoopT<OMesh> loop;
   loop.attach(om);
@@ -123,38 +125,50 @@ std::uint64_t embree_minimal_packets(RTCScene scene, const CameraRays& cam, std:
   std::atomic<std::uint64_t> checksum{0};
   tbb::task_arena arena{static_cast<int>(threads)};
   arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tiles_x * tiles_x, 1), [&](const auto& range) {
-      _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
-      _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
-      RTCIntersectContext context;
-      rtcInitIntersectContext(&context);
-      context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-      std::uint64_t local = 0;
-      for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-        const std::uint32_t x0 = (t % tiles_x) * tile, y0 = (t / tiles_x) * tile;
-        // The renderer's packet footprints (PacketTile), so both trace the same packets.
-        const PacketTile footprint = PacketTile::for_width(x0, y0, std::min(x0 + tile, size), std::min(y0 + tile, size), N);
-        footprint.for_each_block([&](std::uint32_t bx, std::uint32_t by, std::uint32_t ex, std::uint32_t ey) {
-            const std::uint32_t pw = footprint.packet_w;
-            alignas(64) RayHitN rh;
-            alignas(64) int valid[N];
-            for (int i = 0; i < N; ++i) {
-              const std::uint32_t x = bx + std::uint32_t(i) % pw, y = by + std::uint32_t(i) / pw;
-              valid[i] = (std::uint32_t(i) < pw * footprint.packet_h && x < ex && y < ey) ? -1 : 0;
-              const Ray r = cam.ray(std::min(x, ex - 1), std::min(y, ey - 1));
-              rh.ray.org_x[i] = r.origin.x; rh.ray.org_y[i] = r.origin.y; rh.ray.org_z[i] = r.origin.z;
-              rh.ray.dir_x[i] = r.direction.x; rh.ray.dir_y[i] = r.direction.y; rh.ray.dir_z[i] = r.direction.z;
-              rh.ray.tnear[i] = 0.0f; rh.ray.tfar[i] = r.tfar; rh.ray.time[i] = 0.0f;
-              rh.ray.mask[i] = 0xFFFFFFFFu; rh.ray.id[i] = 0; rh.ray.flags[i] = 0;
-              rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-              rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
-            }
-            intersect_n(valid, scene, &context, &rh);
-            for (int i = 0; i < N; ++i) local += valid[i] ? rh.hit.primID[i] : 0;
-          });
-      }
-      checksum += local;
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<std::uint32_t>(0, tiles_x * tiles_x, 1), [&](const auto& range) {
+          _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+          _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+          RTCIntersectContext context;
+          rtcInitIntersectContext(&context);
+          context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+          std::uint64_t local = 0;
+          for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+            const std::uint32_t x0 = (t % tiles_x) * tile, y0 = (t / tiles_x) * tile;
+            // The renderer's packet footprints (PacketTile), so both trace the same packets.
+            const PacketTile footprint = PacketTile::for_width(x0, y0, std::min(x0 + tile, size),
+                                                               std::min(y0 + tile, size), N);
+            footprint.for_each_block([&](std::uint32_t bx, std::uint32_t by, std::uint32_t ex,
+                                         std::uint32_t ey) {
+              const std::uint32_t pw = footprint.packet_w;
+              alignas(64) RayHitN rh;
+              alignas(64) int valid[N];
+              for (int i = 0; i < N; ++i) {
+                const std::uint32_t x = bx + std::uint32_t(i) % pw, y = by + std::uint32_t(i) / pw;
+                valid[i] =
+                    (std::uint32_t(i) < pw * footprint.packet_h && x < ex && y < ey) ? -1 : 0;
+                const Ray r = cam.ray(std::min(x, ex - 1), std::min(y, ey - 1));
+                rh.ray.org_x[i] = r.origin.x;
+                rh.ray.org_y[i] = r.origin.y;
+                rh.ray.org_z[i] = r.origin.z;
+                rh.ray.dir_x[i] = r.direction.x;
+                rh.ray.dir_y[i] = r.direction.y;
+                rh.ray.dir_z[i] = r.direction.z;
+                rh.ray.tnear[i] = 0.0f;
+                rh.ray.tfar[i] = r.tfar;
+                rh.ray.time[i] = 0.0f;
+                rh.ray.mask[i] = 0xFFFFFFFFu;
+                rh.ray.id[i] = 0;
+                rh.ray.flags[i] = 0;
+                rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+                rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+              }
+              intersect_n(valid, scene, &context, &rh);
+              for (int i = 0; i < N; ++i) local += valid[i] ? rh.hit.primID[i] : 0;
+            });
+          }
+          checksum += local;
+        });
   });
   return checksum.load();
 }
@@ -166,30 +180,39 @@ std::uint64_t embree_minimal_single(RTCScene scene, const CameraRays& cam, std::
   std::atomic<std::uint64_t> checksum{0};
   tbb::task_arena arena{static_cast<int>(threads)};
   arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tiles_x * tiles_x, 1), [&](const auto& range) {
-      _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
-      _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
-      RTCIntersectContext context;
-      rtcInitIntersectContext(&context);
-      std::uint64_t local = 0;
-      for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
-        const std::uint32_t x0 = (t % tiles_x) * tile, y0 = (t / tiles_x) * tile;
-        for (std::uint32_t y = y0; y < std::min(y0 + tile, size); ++y)
-          for (std::uint32_t x = x0; x < std::min(x0 + tile, size); ++x) {
-            const Ray r = cam.ray(x, y);
-            RTCRayHit rh;
-            rh.ray.org_x = r.origin.x; rh.ray.org_y = r.origin.y; rh.ray.org_z = r.origin.z;
-            rh.ray.dir_x = r.direction.x; rh.ray.dir_y = r.direction.y; rh.ray.dir_z = r.direction.z;
-            rh.ray.tnear = 0.0f; rh.ray.tfar = r.tfar; rh.ray.time = 0.0f;
-            rh.ray.mask = 0xFFFFFFFFu; rh.ray.id = 0; rh.ray.flags = 0;
-            rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-            rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-            rtcIntersect1(scene, &context, &rh);
-            local += rh.hit.primID;
-          }
-      }
-      checksum += local;
-    });
+    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tiles_x * tiles_x, 1),
+                      [&](const auto& range) {
+                        _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+                        _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+                        RTCIntersectContext context;
+                        rtcInitIntersectContext(&context);
+                        std::uint64_t local = 0;
+                        for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
+                          const std::uint32_t x0 = (t % tiles_x) * tile, y0 = (t / tiles_x) * tile;
+                          for (std::uint32_t y = y0; y < std::min(y0 + tile, size); ++y)
+                            for (std::uint32_t x = x0; x < std::min(x0 + tile, size); ++x) {
+                              const Ray r = cam.ray(x, y);
+                              RTCRayHit rh;
+                              rh.ray.org_x = r.origin.x;
+                              rh.ray.org_y = r.origin.y;
+                              rh.ray.org_z = r.origin.z;
+                              rh.ray.dir_x = r.direction.x;
+                              rh.ray.dir_y = r.direction.y;
+                              rh.ray.dir_z = r.direction.z;
+                              rh.ray.tnear = 0.0f;
+                              rh.ray.tfar = r.tfar;
+                              rh.ray.time = 0.0f;
+                              rh.ray.mask = 0xFFFFFFFFu;
+                              rh.ray.id = 0;
+                              rh.ray.flags = 0;
+                              rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+                              rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+                              rtcIntersect1(scene, &context, &rh);
+                              local += rh.hit.primID;
+                            }
+                        }
+                        checksum += local;
+                      });
   });
   return checksum.load();
 }
@@ -197,10 +220,14 @@ std::uint64_t embree_minimal_single(RTCScene scene, const CameraRays& cam, std::
 std::uint64_t embree_minimal(RTCScene scene, const CameraRays& cam, std::uint32_t size,
                              std::uint32_t threads, std::uint32_t width) {
   switch (width) {
-  case 16: return embree_minimal_packets<16, RTCRayHit16>(scene, cam, size, threads, rtcIntersect16);
-  case 8: return embree_minimal_packets<8, RTCRayHit8>(scene, cam, size, threads, rtcIntersect8);
-  case 4: return embree_minimal_packets<4, RTCRayHit4>(scene, cam, size, threads, rtcIntersect4);
-  default: return embree_minimal_single(scene, cam, size, threads);
+  case 16:
+    return embree_minimal_packets<16, RTCRayHit16>(scene, cam, size, threads, rtcIntersect16);
+  case 8:
+    return embree_minimal_packets<8, RTCRayHit8>(scene, cam, size, threads, rtcIntersect8);
+  case 4:
+    return embree_minimal_packets<4, RTCRayHit4>(scene, cam, size, threads, rtcIntersect4);
+  default:
+    return embree_minimal_single(scene, cam, size, threads);
   }
 }
 
@@ -208,10 +235,11 @@ double mrays(std::uint64_t rays, double ms) { return double(rays) / (ms * 1e3); 
 
 void section_primary(const Options& o, const std::string& name, const TriangleMesh& mesh) {
   Scene scene = mesh_scene(mesh, o.size);
-  EmbreeAccel accel;
-  const double build_ms = time_ms([&] { accel.update(scene.registry); });
+  SceneLayer layer;
+  layer.sync(scene.registry);
+  EmbreeTracer tracer;
+  const double build_ms = time_ms([&] { tracer.update(layer); });
   const Camera camera = *active_camera(scene.registry);
-  const std::vector<SceneLight> lights = gather_lights(scene.registry);
   const CameraRays cam(camera, o.size, o.size);
   Framebuffer image(o.size, o.size);
   TraceSettings settings;
@@ -221,19 +249,23 @@ void section_primary(const Options& o, const std::string& name, const TriangleMe
   std::printf("\n### Primary rays: %s (%zu triangles), %ux%u, %u threads\n\n", name.c_str(),
               mesh.triangle_count(), o.size, o.size, o.threads);
   std::printf("Static build (Embree, high quality): %.1f ms.\n\n", build_ms);
-  std::printf("| packet width | Embree minimal loop (Mrays/s) | Specula primary stage (Mrays/s) | primary / Embree | Specula cast mode, shaded (Mrays/s) | cast / Embree |\n");
+  std::printf("| packet width | Embree minimal loop (Mrays/s) | Specula primary stage (Mrays/s) | "
+              "primary / Embree | Specula cast mode, shaded (Mrays/s) | cast / Embree |\n");
   std::printf("|---:|---:|---:|---:|---:|---:|\n");
   for (const std::uint32_t w : {1u, 4u, 8u, 16u}) {
-    const EmbreeBackend backend(accel, w);
+    tracer.set_packet_width(w);
     std::vector<double> embree_ms, primary_ms, cast_ms;
     // Warm-up, then interleave so all three see the same machine state.
-    (void)embree_minimal(accel.scene(), cam, o.size, o.threads, w);
-    (void)trace_primary_frame(backend, camera, o.size, o.size, settings);
-    (void)render_frame(backend, camera, lights, settings, image);
+    (void)embree_minimal(tracer.scene(), cam, o.size, o.threads, w);
+    (void)trace_primary_frame(tracer, camera, o.size, o.size, settings);
+    (void)render_frame(tracer, layer, camera, settings, image);
     for (int r = 0; r < o.repetitions; ++r) {
-      embree_ms.push_back(time_ms([&] { (void)embree_minimal(accel.scene(), cam, o.size, o.threads, w); }));
-      primary_ms.push_back(time_ms([&] { (void)trace_primary_frame(backend, camera, o.size, o.size, settings); }));
-      cast_ms.push_back(time_ms([&] { (void)render_frame(backend, camera, lights, settings, image); }));
+      embree_ms.push_back(
+          time_ms([&] { (void)embree_minimal(tracer.scene(), cam, o.size, o.threads, w); }));
+      primary_ms.push_back(
+          time_ms([&] { (void)trace_primary_frame(tracer, camera, o.size, o.size, settings); }));
+      cast_ms.push_back(
+          time_ms([&] { (void)render_frame(tracer, layer, camera, settings, image); }));
     }
     const double e = mrays(rays, median(embree_ms));
     const double p = mrays(rays, median(primary_ms));
@@ -245,26 +277,29 @@ void section_primary(const Options& o, const std::string& name, const TriangleMe
 
 void section_tiles(const Options& o, const TriangleMesh& mesh) {
   Scene scene = mesh_scene(mesh, o.size);
-  EmbreeAccel accel;
-  accel.update(scene.registry);
+  SceneLayer layer;
+  layer.sync(scene.registry);
+  EmbreeTracer tracer;
+  tracer.update(layer);
   const Camera camera = *active_camera(scene.registry);
-  const std::vector<SceneLight> lights = gather_lights(scene.registry);
   Framebuffer image(o.size, o.size);
   const std::uint64_t rays = std::uint64_t(o.size) * o.size;
-  std::printf("\n### Tile size (bunny, cast mode, %ux%u, %u threads)\n\n", o.size, o.size, o.threads);
-  std::printf("| packet width | 8×8 tiles (Mrays/s) | 16×16 tiles (Mrays/s) | 16×16 / 8×8 |\n|---:|---:|---:|---:|\n");
+  std::printf("\n### Tile size (bunny, cast mode, %ux%u, %u threads)\n\n", o.size, o.size,
+              o.threads);
+  std::printf("| packet width | 8×8 tiles (Mrays/s) | 16×16 tiles (Mrays/s) | 16×16 / 8×8 "
+              "|\n|---:|---:|---:|---:|\n");
   for (const std::uint32_t w : {1u, 16u}) {
-    const EmbreeBackend backend(accel, w);
+    tracer.set_packet_width(w);
     TraceSettings s8, s16;
     s8.mode = s16.mode = TraceMode::Cast;
     s8.threads = s16.threads = o.threads;
     s8.tile_size = 8;
     s16.tile_size = 16;
     std::vector<double> t8, t16;
-    (void)render_frame(backend, camera, lights, s16, image);
+    (void)render_frame(tracer, layer, camera, s16, image);
     for (int r = 0; r < o.repetitions; ++r) {
-      t8.push_back(time_ms([&] { (void)render_frame(backend, camera, lights, s8, image); }));
-      t16.push_back(time_ms([&] { (void)render_frame(backend, camera, lights, s16, image); }));
+      t8.push_back(time_ms([&] { (void)render_frame(tracer, layer, camera, s8, image); }));
+      t16.push_back(time_ms([&] { (void)render_frame(tracer, layer, camera, s16, image); }));
     }
     const double a = mrays(rays, median(t8)), b = mrays(rays, median(t16));
     std::printf("| %u | %.1f | %.1f | %.2f |\n", w, a, b, b / a);
@@ -282,6 +317,7 @@ FrameRun run_frames(const std::filesystem::path& path, std::uint32_t width, std:
                     std::uint32_t threads, int frames, std::uint32_t max_depth, float min_weight) {
   Scene scene = load_scene(path);
   RenderJob job;
+  job.backend = "embree";
   job.settings.mode = TraceMode::Whitted;
   job.settings.threads = threads;
   job.settings.max_depth = max_depth;
@@ -294,7 +330,7 @@ FrameRun run_frames(const std::filesystem::path& path, std::uint32_t width, std:
   std::vector<double> ms, trace_ms;
   for (int f = 0; f < frames; ++f) {
     ms.push_back(time_ms([&] { schedule.tick(scene.registry, 0.0); }));
-    trace_ms.push_back(scene.registry.resource<RenderJob>().last.ms);
+    trace_ms.push_back(scene.registry.resource<RenderJob>().last.trace_ms);
   }
   FrameRun run;
   run.median_ms = median(ms);
@@ -306,13 +342,20 @@ FrameRun run_frames(const std::filesystem::path& path, std::uint32_t width, std:
 
 void section_whitted(const Options& o) {
   const std::filesystem::path scenes = std::filesystem::path(o.source_dir) / "samples/scenes";
-  std::printf("\n### Whitted frames (depth 5, weight cut-off 1/256, %u threads; the first frame's build excluded)\n\n", o.threads);
-  std::printf("| scene | size | frame ms | frames/s | rays/frame | Mrays/s |\n|---|---|---:|---:|---:|---:|\n");
-  const std::uint32_t cornell_w = std::max(16u, o.size / 2), cornell_h = std::max(16u, o.size * 400 / 1024);
-  std::vector<std::tuple<std::string, std::uint32_t, std::uint32_t>> runs = {{"cornell_box", cornell_w, cornell_h}};
-  for (const int n : {0, 1, 2, 4, 8, 16, 32}) runs.emplace_back("mirror_spheres_" + std::to_string(n), o.size, o.size);
+  std::printf("\n### Whitted frames (depth 5, weight cut-off 1/256, %u threads; the first frame's "
+              "build excluded)\n\n",
+              o.threads);
+  std::printf("| scene | size | frame ms | frames/s | rays/frame | Mrays/s "
+              "|\n|---|---|---:|---:|---:|---:|\n");
+  const std::uint32_t cornell_w = std::max(16u, o.size / 2),
+                      cornell_h = std::max(16u, o.size * 400 / 1024);
+  std::vector<std::tuple<std::string, std::uint32_t, std::uint32_t>> runs = {
+      {"cornell_box", cornell_w, cornell_h}};
+  for (const int n : {0, 1, 2, 4, 8, 16, 32})
+    runs.emplace_back("mirror_spheres_" + std::to_string(n), o.size, o.size);
   for (const auto& [name, w, h] : runs) {
-    const FrameRun r = run_frames(scenes / (name + ".json"), w, h, o.threads, o.frames, 5, 1.0f / 256.0f);
+    const FrameRun r =
+        run_frames(scenes / (name + ".json"), w, h, o.threads, o.frames, 5, 1.0f / 256.0f);
     std::printf("| %s | %ux%u | %.1f | %.1f | %llu | %.1f |\n", name.c_str(), w, h, r.median_ms,
                 1000.0 / r.median_ms, static_cast<unsigned long long>(r.rays.total()),
                 mrays(r.rays.total(), r.median_trace_ms));
@@ -322,15 +365,23 @@ void section_whitted(const Options& o) {
 
 void section_depth(const Options& o) {
   const std::filesystem::path scenes = std::filesystem::path(o.source_dir) / "samples/scenes";
-  std::printf("\n### Depth and weight cut-offs: speed against error (reference: depth 32, no weight cut-off)\n\n");
-  std::printf("| scene | max depth | weight cut-off | frame ms | speed-up | RMSE | PSNR (dB) | mean FLIP |\n|---|---:|---:|---:|---:|---:|---:|---:|\n");
+  std::printf("\n### Depth and weight cut-offs: speed against error (reference: depth 32, no "
+              "weight cut-off)\n\n");
+  std::printf("| scene | max depth | weight cut-off | frame ms | speed-up | RMSE | PSNR (dB) | "
+              "mean FLIP |\n|---|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const std::string name : {"cornell_box", "mirror_spheres_8"}) {
     const std::uint32_t w = name == "cornell_box" ? std::max(16u, o.size / 2) : o.size;
     const std::uint32_t h = name == "cornell_box" ? std::max(16u, o.size * 400 / 1024) : o.size;
     const auto path = scenes / (name + ".json");
-    const FrameRun reference = run_frames(path, w, h, o.threads, std::max(1, o.frames / 2), 32, 0.0f);
-    for (const auto& [depth, cutoff] : std::vector<std::pair<std::uint32_t, float>>{
-             {1, 1.0f / 256}, {2, 1.0f / 256}, {3, 1.0f / 256}, {5, 1.0f / 256}, {5, 0.0f}, {8, 1.0f / 256}}) {
+    const FrameRun reference =
+        run_frames(path, w, h, o.threads, std::max(1, o.frames / 2), 32, 0.0f);
+    for (const auto& [depth, cutoff] :
+         std::vector<std::pair<std::uint32_t, float>>{{1, 1.0f / 256},
+                                                      {2, 1.0f / 256},
+                                                      {3, 1.0f / 256},
+                                                      {5, 1.0f / 256},
+                                                      {5, 0.0f},
+                                                      {8, 1.0f / 256}}) {
       const FrameRun r = run_frames(path, w, h, o.threads, o.frames, depth, cutoff);
       const double e = rmse(reference.image, r.image);
       const double p = psnr(reference.image, r.image);
@@ -340,7 +391,8 @@ void section_depth(const Options& o) {
                   std::isinf(p) ? "inf" : std::to_string(p).substr(0, 5).c_str(), f);
       std::fflush(stdout);
     }
-    std::printf("| %s | 32 (reference) | 0 | %.1f | 1.00 | | | |\n", name.c_str(), reference.median_ms);
+    std::printf("| %s | 32 (reference) | 0 | %.1f | 1.00 | | | |\n", name.c_str(),
+                reference.median_ms);
   }
 }
 
@@ -349,20 +401,27 @@ void section_depth(const Options& o) {
 int main(int argc, char** argv) {
   Options o;
   CLI::App app{"Specula speed-against-error report (markdown on stdout)"};
-  app.add_option("--size", o.size, "Image side for primary rays and mirror spheres (Cornell: size/2 × size·400/1024)")
+  app.add_option("--size", o.size,
+                 "Image side for primary rays and mirror spheres (Cornell: size/2 × size·400/1024)")
       ->check(CLI::Range(16u, 8192u));
   app.add_option("--threads", o.threads, "Worker threads")->check(CLI::Range(1u, 256u));
-  app.add_option("--repetitions", o.repetitions, "Interleaved repetitions per comparison")->check(CLI::Range(1, 1000));
-  app.add_option("--frames", o.frames, "Frames per Whitted measurement")->check(CLI::Range(1, 10000));
-  app.add_option("--subdivisions", o.subdivisions, "Loop subdivisions of the bunny for the large mesh")->check(CLI::Range(0, 6));
+  app.add_option("--repetitions", o.repetitions, "Interleaved repetitions per comparison")
+      ->check(CLI::Range(1, 1000));
+  app.add_option("--frames", o.frames, "Frames per Whitted measurement")
+      ->check(CLI::Range(1, 10000));
+  app.add_option("--subdivisions", o.subdivisions,
+                 "Loop subdivisions of the bunny for the large mesh")
+      ->check(CLI::Range(0, 6));
   app.add_option("--sections", o.sections, "Comma-separated: primary,tiles,whitted,depth");
   app.add_option("--source-dir", o.source_dir, "Specula source tree (for samples/)");
   CLI11_PARSE(app, argc, argv);
   try {
     const auto has = [&](const char* s) { return o.sections.find(s) != std::string::npos; };
-    std::printf("## specula_bench --size %u --threads %u --repetitions %d --frames %d --subdivisions %d\n",
-                o.size, o.threads, o.repetitions, o.frames, o.subdivisions);
-    const TriangleMesh bunny = load_mesh_file(std::filesystem::path(o.source_dir) / "samples/models/bunny.obj");
+    std::printf(
+        "## specula_bench --size %u --threads %u --repetitions %d --frames %d --subdivisions %d\n",
+        o.size, o.threads, o.repetitions, o.frames, o.subdivisions);
+    const TriangleMesh bunny =
+        load_mesh_file(std::filesystem::path(o.source_dir) / "samples/models/bunny.obj");
     if (has("primary")) {
       section_primary(o, "bunny", bunny);
       if (o.subdivisions > 0) {

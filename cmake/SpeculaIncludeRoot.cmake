@@ -12,3 +12,5 @@ foreach(dir ${SPECULA_ENGINE_HEADER_DIRS})
   endif()
 endforeach()
 file(CREATE_LINK ${PROJECT_SOURCE_DIR}/systems ${SPECULA_INCLUDE_ROOT}/specula/systems SYMBOLIC)
+# Structs shared by C++ and GLSL: "specula/shared/<file>.h".
+file(CREATE_LINK ${PROJECT_SOURCE_DIR}/shaders/shared ${SPECULA_INCLUDE_ROOT}/specula/shared SYMBOLIC)

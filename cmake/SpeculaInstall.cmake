@@ -10,6 +10,8 @@ install(DIRECTORY ${PROJECT_SOURCE_DIR}/engine/ DESTINATION ${CMAKE_INSTALL_INCL
         FILES_MATCHING PATTERN "*.h")
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/systems DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/specula
         FILES_MATCHING PATTERN "*.h")
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/shaders/shared DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/specula
+        FILES_MATCHING PATTERN "*.h")
 install(EXPORT SpeculaTargets NAMESPACE specula:: FILE SpeculaTargets.cmake
         DESTINATION ${CMAKE_INSTALL_LIBDIR}/cmake/Specula)
 configure_package_config_file(${PROJECT_SOURCE_DIR}/cmake/SpeculaConfig.cmake.in

@@ -1,10 +1,11 @@
 #include "commands.h"
 
 #include "specula/core/error.h"
-#include "specula/scene/scene.h"
 #include "specula/image/image_io.h"
+#include "specula/render/render_job.h"
+#include "specula/render/tracer_factory.h"
+#include "specula/scene/scene.h"
 #include "specula/systems/schedule.h"
-#include "specula/trace/render_job.h"
 #include "specula/trace/stats.h"
 
 #include <nlohmann/json.hpp>
@@ -12,6 +13,7 @@
 #include <algorithm>
 #include <charconv>
 #include <chrono>
+#include <cstdio>
 #include <ostream>
 
 namespace specula::cli {
@@ -48,16 +50,18 @@ int run_info(const InfoOptions& options, std::ostream& out) {
                         {"refractive", s.refractive},
                         {"ray_cache_cubes", s.ray_cache_cubes},
                         {"animated", s.animated},
-                        {"settings", {{"width", scene.settings.width},
-                                      {"height", scene.settings.height},
-                                      {"max_depth", scene.settings.max_depth}}}};
-    if (!s.bounds.empty()) j["bounds"] = {{"min", vec_json(s.bounds.min)}, {"max", vec_json(s.bounds.max)}};
+                        {"settings",
+                         {{"width", scene.settings.width},
+                          {"height", scene.settings.height},
+                          {"max_depth", scene.settings.max_depth}}}};
+    if (!s.bounds.empty())
+      j["bounds"] = {{"min", vec_json(s.bounds.min)}, {"max", vec_json(s.bounds.max)}};
     out << j.dump(2) << "\n";
     return 0;
   }
   out << "scene:      " << options.scene << "\n"
-      << "entities:   " << s.entities << " (" << s.mesh_entities << " with meshes, " << s.unique_meshes
-      << " distinct meshes, " << s.animated << " animated)\n"
+      << "entities:   " << s.entities << " (" << s.mesh_entities << " with meshes, "
+      << s.unique_meshes << " distinct meshes, " << s.animated << " animated)\n"
       << "triangles:  " << s.triangles << "\n"
       << "materials:  " << s.materials << " (" << s.reflective << " reflective, " << s.refractive
       << " refractive entities)\n"
@@ -74,18 +78,23 @@ int run_info(const InfoOptions& options, std::ostream& out) {
   return 0;
 }
 
-int run_render(const RenderOptions& options, std::ostream& out) {
+int run_render(const RenderOptions& options, std::ostream& out, std::ostream* progress,
+               bool progress_is_terminal) {
+  using Clock = std::chrono::steady_clock;
   // Validate everything the user gave before reporting what this build lacks, so a bad scene or
   // option is reported as such (exit 1) rather than hidden behind "not available" (exit 2).
   const std::uint32_t cache_resolution = parse_cache(options.cache);
-  const std::optional<BackendKind> backend = parse_backend(options.backend);
   const std::optional<TraceMode> mode = parse_trace_mode(options.mode);
-  if (!backend) throw Error("--backend", "unknown backend '" + options.backend + "'");
   if (!mode) throw Error("--mode", "unknown mode '" + options.mode + "'");
+  if (options.backend != "auto") {
+    bool known = false;
+    for (const BackendInfo& b : backends()) known = known || b.name == options.backend;
+    if (!known) (void)resolve_backend(options.backend); // throws the "unknown backend" error
+  }
   Scene scene = load_scene(options.scene);
 
   RenderJob job;
-  job.backend = *backend;
+  job.backend = options.backend;
   job.settings.mode = *mode;
   job.settings.max_depth = scene.settings.max_depth;
   job.settings.background = scene.settings.background;
@@ -97,35 +106,60 @@ int run_render(const RenderOptions& options, std::ostream& out) {
     throw UnavailableError("ray-cache cubes (--cache " + options.cache +
                            ") are not available yet: use --cache off");
   prepare_rendering(scene.registry, std::move(job));
+  const std::string backend = scene.registry.resource<RenderJob>().backend;
 
   RunStats stats;
-  stats.settings = {options.scene, options.backend, options.mode, width, height, options.frames,
-                    options.threads, scene.settings.max_depth, cache_resolution};
+  stats.settings = {options.scene,   backend,        options.mode,    width,
+                    height,          options.frames, options.threads, scene.settings.max_depth,
+                    cache_resolution};
   Schedule schedule;
+  const Clock::time_point start = Clock::now();
+  bool progress_shown = false;
   for (std::uint32_t f = 0; f < options.frames; ++f) {
-    const auto start = std::chrono::steady_clock::now();
     schedule.tick(scene.registry, 1.0 / 60.0);
-    FrameStats frame = scene.registry.resource<RenderJob>().last;
-    frame.trace_ms = frame.ms;
-    frame.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    stats.frames.push_back(frame);
+    stats.frames.push_back(scene.registry.resource<RenderJob>().last);
+    const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
+    if (progress != nullptr && progress_is_terminal && elapsed > 1.0 && f + 1 < options.frames) {
+      const double rate = double(f + 1) / elapsed;
+      char line[160];
+      std::snprintf(line, sizeof line, "\r  frame %u/%u, %.1f frames/s, %.0f s left   ", f + 1,
+                    options.frames, rate, double(options.frames - f - 1) / rate);
+      *progress << line << std::flush;
+      progress_shown = true;
+    }
   }
+  if (progress_shown) *progress << "\r" << std::string(60, ' ') << "\r" << std::flush;
   const RenderJob& done = scene.registry.resource<RenderJob>();
   if (!options.out.empty()) write_image(done.image, options.out);
   if (!options.stats.empty()) write_stats_file(stats, options.stats);
 
-  std::vector<double> ms;
-  for (const FrameStats& f : stats.frames) ms.push_back(f.ms);
-  std::sort(ms.begin(), ms.end());
+  std::vector<double> ms, trace_ms;
+  for (const FrameStats& f : stats.frames) {
+    ms.push_back(f.ms);
+    trace_ms.push_back(f.trace_ms);
+  }
+  const auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  const double frame_ms = median(ms);
+  const double trace = median(trace_ms);
   const FrameStats& last = stats.frames.back();
-  const double median = ms[ms.size() / 2];
-  out << options.scene << ": " << width << "x" << height << " " << options.mode << " on "
-      << options.backend << ", " << options.frames << " frame(s)\n"
-      << "  frame ms: median " << median << " (trace " << last.trace_ms << " in the last frame), "
-      << 1000.0 / median << " frames/s\n";
-  for (const RayKind k : {RayKind::Primary, RayKind::Shadow, RayKind::Reflection, RayKind::Refraction})
-    out << "  " << ray_kind_name(k) << " rays: " << last.rays[k] << " ("
-        << (last.trace_ms > 0 ? double(last.rays[k]) / (last.trace_ms * 1e3) : 0.0) << " Mrays/s)\n";
+  out << options.scene << ": " << width << "x" << height << " " << options.mode << " on " << backend
+      << (options.backend == "auto" ? " (auto)" : "") << ", " << options.frames << " frame(s)\n"
+      << "  frame ms: median " << frame_ms << " (tracing " << trace << "), " << 1000.0 / frame_ms
+      << " frames/s\n"
+      << "  rays per frame: " << last.rays.total() << " (";
+  const char* sep = "";
+  for (const RayKind k :
+       {RayKind::Primary, RayKind::Shadow, RayKind::Reflection, RayKind::Refraction}) {
+    out << sep << ray_kind_name(k) << " " << last.rays[k];
+    sep = ", ";
+  }
+  out << "), " << (trace > 0.0 ? double(last.rays.total()) / (trace * 1e3) : 0.0)
+      << " Mrays/s of tracing time\n";
+  if (last.rays.dropped > 0)
+    out << "  dropped rays: " << last.rays.dropped << " (per-pixel ray budget)\n";
   if (!options.out.empty()) out << "  image: " << options.out << "\n";
   if (!options.stats.empty()) out << "  stats: " << options.stats << "\n";
   return 0;

@@ -16,18 +16,22 @@ struct InfoOptions {
 
 struct RenderOptions {
   std::string scene;
-  std::string backend = "embree"; ///< embree | native | vulkan
-  std::string mode = "whitted";   ///< cast | whitted | path | shadow
-  std::uint32_t width = 0;        ///< 0: the scene's settings
-  std::uint32_t height = 0;       ///< 0: the scene's settings
+  std::string backend = "auto"; ///< auto | embree | native | vulkan
+  std::string mode = "whitted"; ///< cast | whitted | path | shadow
+  std::uint32_t width = 0;      ///< 0: the scene's settings
+  std::uint32_t height = 0;     ///< 0: the scene's settings
   std::uint32_t frames = 1;
-  std::uint32_t threads = 0;      ///< 0: every hardware thread
-  std::string cache = "off";      ///< off | face resolution (power of two)
-  std::string out;                ///< PNG path, empty: none
-  std::string stats;              ///< stats JSON path, empty: none
+  std::uint32_t threads = 0; ///< 0: every hardware thread
+  std::string cache = "off"; ///< off | face resolution (power of two)
+  std::string out;           ///< PNG path, empty: none
+  std::string stats;         ///< stats JSON path, empty: none
 };
 
 int run_info(const InfoOptions& options, std::ostream& out);
-int run_render(const RenderOptions& options, std::ostream& out);
+/// Renders options.frames ticks of the scene. `progress` receives a one-line progress report
+/// (frames done, frames/s, time left), rewritten in place, when the render runs longer than a
+/// second and `progress_is_terminal`; pass nullptr for none.
+int run_render(const RenderOptions& options, std::ostream& out, std::ostream* progress = nullptr,
+               bool progress_is_terminal = false);
 
 } // namespace specula::cli

@@ -1,5 +1,5 @@
-// The `specula` program: headless subcommands over the engine (info, render, compare). Bad input ends
-// with a message naming the file and the problem and exit code 1; a feature this build lacks
+// The `specula` program: headless subcommands over the engine (info, render, compare). Bad input
+// ends with a message naming the file and the problem and exit code 1; a feature this build lacks
 // ends with exit code 2.
 
 #include "commands.h"
@@ -8,6 +8,8 @@
 #include "specula/scene/scene.h"
 
 #include <CLI/CLI.hpp>
+
+#include <unistd.h>
 
 #include <exception>
 #include <iostream>
@@ -19,32 +21,45 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", "specula 0.1.0");
 
   cli::InfoOptions info;
-  CLI::App* info_cmd = app.add_subcommand("info", "Print entity, triangle, material and light counts and bounds");
-  info_cmd->add_option("scene", info.scene, "Scene (.json, .gltf, .glb) or mesh (.obj, .ply, .off, .stl)")->required();
+  CLI::App* info_cmd =
+      app.add_subcommand("info", "Print entity, triangle, material and light counts and bounds");
+  info_cmd
+      ->add_option("scene", info.scene,
+                   "Scene (.json, .gltf, .glb) or mesh (.obj, .ply, .off, .stl)")
+      ->required();
   info_cmd->add_flag("--json", info.json, "Print the summary as JSON");
 
   cli::RenderOptions render;
   CLI::App* render_cmd = app.add_subcommand("render", "Trace frames of a scene");
-  render_cmd->add_option("scene", render.scene, "Scene (.json, .gltf, .glb) or mesh (.obj, .ply, .off, .stl)")->required();
-  render_cmd->add_option("--backend", render.backend, "Tracing backend")
-      ->check(CLI::IsMember({"embree", "native", "vulkan"}))->capture_default_str();
+  render_cmd
+      ->add_option("scene", render.scene,
+                   "Scene (.json, .gltf, .glb) or mesh (.obj, .ply, .off, .stl)")
+      ->required();
+  render_cmd
+      ->add_option("--backend", render.backend, "Tracing backend (auto: the best one available)")
+      ->check(CLI::IsMember({"auto", "embree", "native", "vulkan"}))
+      ->capture_default_str();
   render_cmd->add_option("--mode", render.mode, "Integrator")
-      ->check(CLI::IsMember({"cast", "whitted", "path", "shadow"}))->capture_default_str();
+      ->check(CLI::IsMember({"cast", "whitted", "path", "shadow"}))
+      ->capture_default_str();
   render_cmd->add_option("--width", render.width, "Image width (default: the scene's)")
       ->check(CLI::Range(1u, kMaxImageSide));
   render_cmd->add_option("--height", render.height, "Image height (default: the scene's)")
       ->check(CLI::Range(1u, kMaxImageSide));
-  render_cmd->add_option("--frames", render.frames, "Frames to trace")->check(CLI::Range(1u, 1000000u))
+  render_cmd->add_option("--frames", render.frames, "Frames to trace")
+      ->check(CLI::Range(1u, 1000000u))
       ->capture_default_str();
   render_cmd->add_option("--threads", render.threads, "Worker threads (0: all)")
-      ->check(CLI::Range(0u, 1024u))->capture_default_str();
+      ->check(CLI::Range(0u, 1024u))
+      ->capture_default_str();
   render_cmd->add_option("--cache", render.cache, "Ray-cache cubes: off or the face resolution")
       ->capture_default_str();
   render_cmd->add_option("--out", render.out, "Write the last frame as an sRGB PNG");
   render_cmd->add_option("--stats", render.stats, "Write per-frame statistics as JSON");
 
   cli::CompareOptions compare;
-  CLI::App* compare_cmd = app.add_subcommand("compare", "Compare two images: RMSE, PSNR and mean FLIP");
+  CLI::App* compare_cmd =
+      app.add_subcommand("compare", "Compare two images: RMSE, PSNR and mean FLIP");
   compare_cmd->add_option("a", compare.a, "Reference image (.png or .exr)")->required();
   compare_cmd->add_option("b", compare.b, "Test image (.png or .exr)")->required();
   compare_cmd->add_option("--heatmap", compare.heatmap, "Write the FLIP error map as a magma PNG");
@@ -59,7 +74,8 @@ int main(int argc, char** argv) {
 
   try {
     if (info_cmd->parsed()) return cli::run_info(info, std::cout);
-    if (render_cmd->parsed()) return cli::run_render(render, std::cout);
+    if (render_cmd->parsed())
+      return cli::run_render(render, std::cout, &std::cerr, isatty(STDERR_FILENO) == 1);
     if (compare_cmd->parsed()) return cli::run_compare(compare, std::cout);
   } catch (const Error& e) {
     std::cerr << "specula: error: " << e.what() << "\n";

@@ -4,9 +4,8 @@
 
 namespace specula {
 
-/// Brings the chosen backend's acceleration structures up to date with this tick's meshes and
-/// world transforms (only entities that changed cause work: see EmbreeAccel). Does nothing when
-/// no backend was prepared (prepare_rendering).
+/// Applies the scene layer's delta to the active tracer's acceleration structures (only what
+/// changed causes work: see Tracer::update). Does nothing when no rendering was prepared.
 void acceleration_system(ecs::Registry& registry, const FrameContext& ctx);
 
 } // namespace specula

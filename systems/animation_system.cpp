@@ -18,8 +18,13 @@ void animation_system(ecs::Registry& registry, const FrameContext& ctx) {
       if (!anim.scale.empty()) t->scale = sample(anim.scale, anim.time);
     }
     if (!anim.vertices.empty()) {
-      if (Mesh* mesh = registry.try_get<Mesh>(e)) {
+      Mesh* mesh = registry.try_get<Mesh>(e);
+      // Vertices already sampled at this time (a paused or finished animation) are left alone,
+      // tick included: nothing moved, so nothing is refitted.
+      if (mesh != nullptr &&
+          (mesh->deformed_positions.empty() || mesh->deformed_time != anim.time)) {
         sample(anim.vertices, anim.time, mesh->deformed_positions);
+        mesh->deformed_time = anim.time;
         mesh->deformed_tick = ctx.tick;
       }
     }

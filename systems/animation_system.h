@@ -5,8 +5,10 @@
 namespace specula {
 
 /// Advances every Animation by ctx.dt and writes the sampled tracks into the entity's Transform
-/// (only the tracks it has) and, for vertex tracks, into Mesh::deformed_positions (stamping
-/// deformed_tick = ctx.tick). Advances every CameraPath and moves its entity's Camera.
+/// (only the tracks it has) and, for vertex tracks, into Mesh::deformed_positions, stamping
+/// deformed_tick = ctx.tick — only when the animation time differs from the one the positions
+/// were sampled at, so a paused or finished animation causes no refits. Advances every CameraPath
+/// and moves its entity's Camera.
 void animation_system(ecs::Registry& registry, const FrameContext& ctx);
 
 } // namespace specula

@@ -4,10 +4,10 @@
 
 namespace specula {
 
-/// Traces the frame into the RenderJob's image on the job's backend, from the scene's active
-/// camera (active_camera), with every light, and stores the frame's stats (time and ray counts)
-/// in the job. Does nothing when no job was prepared. Throws specula::Error when there is no
-/// camera.
+/// Traces the frame into the RenderJob's image with the active tracer, from the scene's active
+/// camera (active_camera), over the scene layer's tables, and stores the frame's ray counts and
+/// trace time in the job (RenderJob::last; the schedule adds the whole tick's time). Does nothing
+/// when no job was prepared. Throws specula::Error when there is no camera.
 void render_system(ecs::Registry& registry, const FrameContext& ctx);
 
 } // namespace specula

@@ -1,9 +1,13 @@
 #include "specula/systems/schedule.h"
 
+#include "specula/render/render_job.h"
 #include "specula/systems/acceleration_system.h"
 #include "specula/systems/animation_system.h"
 #include "specula/systems/render_system.h"
+#include "specula/systems/scene_layer_system.h"
 #include "specula/systems/transform_system.h"
+
+#include <chrono>
 
 namespace specula {
 namespace {
@@ -14,19 +18,31 @@ struct Stage {
 };
 
 constexpr Stage kStages[] = {
-    {"animation", &animation_system},
-    {"transform", &transform_system},
-    {"acceleration", &acceleration_system},
+    {"animation", &animation_system},     {"transform", &transform_system},
+    {"scene_layer", &scene_layer_system}, {"acceleration", &acceleration_system},
     {"render", &render_system},
 };
 
 } // namespace
 
 FrameContext Schedule::tick(ecs::Registry& registry, double dt) {
+  using Clock = std::chrono::steady_clock;
   ctx_.tick += 1;
   ctx_.dt = dt;
   ctx_.time += dt;
-  for (const Stage& stage : kStages) stage.run(registry, ctx_);
+  FrameTimings timings;
+  const Clock::time_point start = Clock::now();
+  Clock::time_point stage_start = start;
+  for (const Stage& stage : kStages) {
+    stage.run(registry, ctx_);
+    const Clock::time_point now = Clock::now();
+    timings.system_ms.push_back(
+        std::chrono::duration<double, std::milli>(now - stage_start).count());
+    stage_start = now;
+  }
+  timings.ms = std::chrono::duration<double, std::milli>(stage_start - start).count();
+  if (RenderJob* job = registry.try_resource<RenderJob>()) job->last.ms = timings.ms;
+  registry.set_resource<FrameTimings>(std::move(timings));
   return ctx_;
 }
 

@@ -10,18 +10,27 @@
 
 namespace specula {
 
+/// Wall-clock time of the latest tick, whole and per system (in system_names() order): a
+/// registry resource the schedule writes after every tick.
+struct FrameTimings {
+  double ms = 0.0;
+  std::vector<double> system_ms;
+};
+
 /// Runs the frame's systems in a fixed order on each tick:
-///   1. animation_system  (Animation → Transform, Mesh deformations; CameraPath → Camera)
-///   2. transform_system  (Transform/Parent → WorldTransform, moved flags)
-///   3. acceleration_system (moved/deformed entities → acceleration structures)
-///   4. render_system     (the frame, on the backend chosen by prepare_rendering)
-/// Cache invalidation will sit between 3 and 4. Stages 3–4 do nothing until a backend is prepared.
+///   1. animation_system    (Animation → Transform, Mesh deformations; CameraPath → Camera)
+///   2. transform_system    (Transform/Parent → WorldTransform, moved flags, TransformChanges)
+///   3. scene_layer_system  (moved/deformed/added entities → the SceneLayer's tables and delta)
+///   4. acceleration_system (the delta → the active tracer's structures)
+///   5. render_system       (the frame, on the tracer chosen by prepare_rendering)
+/// Cache invalidation will sit between 4 and 5. Stages 3–5 do nothing until rendering is prepared.
+/// After the systems it records FrameTimings, and the whole tick's time in RenderJob::last.ms.
 class Schedule {
 public:
   /// Advances time by dt seconds and runs every system once. Returns the context it ran with.
   FrameContext tick(ecs::Registry& registry, double dt);
 
-  /// The systems' names in run order (for logs, the editor and tests).
+  /// The systems' names in run order (for logs, the editor, stats and tests).
   [[nodiscard]] static std::vector<std::string_view> system_names();
 
   [[nodiscard]] const FrameContext& last() const { return ctx_; }

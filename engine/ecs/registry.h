@@ -20,6 +20,8 @@
 ///    that component from, or destroys, the visited entity.
 /// 4. Resources are one value per type per registry (caches, shared geometry libraries), never
 ///    statics; clear() and the destructor destroy them after the components.
+/// 5. Each pool has a version that grows on every membership change and on emplace_or_replace
+///    and patch; edits through get() are invisible to it.
 
 #include "specula/core/assert.h"
 #include "specula/ecs/entity.h"
@@ -104,7 +106,8 @@ private:
   }
   [[nodiscard]] const PoolBase* smallest() const {
     const PoolBase* best = std::get<0>(pools_);
-    ((best = std::get<Pool<Ts>*>(pools_)->size() < best->size() ? std::get<Pool<Ts>*>(pools_) : best),
+    ((best =
+          std::get<Pool<Ts>*>(pools_)->size() < best->size() ? std::get<Pool<Ts>*>(pools_) : best),
      ...);
     return best;
   }
@@ -164,7 +167,8 @@ public:
 
   /// Whether e names a live entity (false for null_entity and stale handles).
   [[nodiscard]] bool valid(Entity e) const {
-    return e.index < slots_.size() && slots_[e.index].live && slots_[e.index].generation == e.generation;
+    return e.index < slots_.size() && slots_[e.index].live &&
+           slots_[e.index].generation == e.generation;
   }
   /// Number of live entities.
   [[nodiscard]] std::size_t alive() const { return alive_; }
@@ -190,8 +194,29 @@ public:
   T& emplace_or_replace(Entity e, Args&&... args) {
     SPECULA_ASSERT(valid(e));
     Pool<T>& p = pool<T>();
-    if (p.contains(e)) return p.get(e) = make_component<T>(std::forward<Args>(args)...);
+    if (p.contains(e)) {
+      p.touch();
+      return p.get(e) = make_component<T>(std::forward<Args>(args)...);
+    }
     return p.emplace(e, std::forward<Args>(args)...);
+  }
+  /// Calls f(T&) on e's T and records the change (version<T>() grows), so systems that mirror T
+  /// elsewhere (the scene layer's material and mesh tables) pick it up. Edits made through get()
+  /// are not recorded. e must have a T.
+  template <typename T, typename F>
+  T& patch(Entity e, F&& f) {
+    Pool<T>& p = pool<T>();
+    T& component = get<T>(e);
+    f(component);
+    p.touch();
+    return component;
+  }
+  /// The version of T's pool (PoolBase::version): grows on every membership change of T and every
+  /// emplace_or_replace/patch of a T. 0 while no T was ever added.
+  template <typename T>
+  [[nodiscard]] std::uint64_t version() const {
+    const std::size_t id = detail::type_id<T>();
+    return id < pools_.size() && pools_[id] ? pools_[id]->version() : 0;
   }
   /// Removes T from e; returns whether it had one (false for stale handles).
   template <typename T>

@@ -56,16 +56,27 @@ public:
   virtual bool remove(Entity e) = 0;
   virtual void clear() = 0;
 
+  /// Grows whenever the pool's membership changes (a component added or removed, the pool
+  /// cleared) or a component is replaced or touched (Registry::emplace_or_replace, patch). Systems
+  /// that mirror components elsewhere compare it with the value they saw last: equal means no
+  /// entity gained, lost or announced a change of this component since. Edits made through a plain
+  /// reference (Registry::get) are not seen: use Registry::patch for those.
+  [[nodiscard]] std::uint64_t version() const { return version_; }
+  /// Records a change of a component without membership change (see version()).
+  void touch() { ++version_; }
+
 protected:
   /// Makes room for e in sparse and one more entry in dense, so that insert_entity cannot throw
   /// once the component is constructed (a constructed component is never orphaned).
   void reserve_entity(Entity e) {
     if (e.index >= sparse_.size()) sparse_.resize(std::size_t(e.index) + 1, kAbsent);
     // Geometric growth by hand: reserve(size() + 1) would reallocate on every insertion.
-    if (dense_.size() == dense_.capacity()) dense_.reserve(std::max<std::size_t>(8, 2 * dense_.size()));
+    if (dense_.size() == dense_.capacity())
+      dense_.reserve(std::max<std::size_t>(8, 2 * dense_.size()));
   }
   /// Appends e to dense; reserve_entity(e) must have been called.
   std::uint32_t insert_entity(Entity e) noexcept {
+    ++version_;
     const auto pos = static_cast<std::uint32_t>(dense_.size());
     sparse_[e.index] = pos;
     dense_.push_back(e); // capacity reserved: no allocation, no throw
@@ -73,6 +84,7 @@ protected:
   }
   /// Swap-and-pop of e from dense (the last entity takes e's position).
   void erase_entity(Entity e) noexcept {
+    ++version_;
     const std::uint32_t pos = sparse_[e.index];
     const Entity moved = dense_.back();
     dense_[pos] = moved;
@@ -83,6 +95,7 @@ protected:
 
   std::vector<std::uint32_t> sparse_;
   std::vector<Entity> dense_;
+  std::uint64_t version_ = 0;
 };
 
 /// Storage for components of type T.
@@ -144,6 +157,7 @@ public:
   void clear() override {
     for (std::uint32_t i = 0; i < dense_.size(); ++i) address(i)->~T();
     for (const Entity e : dense_) sparse_[e.index] = kAbsent;
+    if (!dense_.empty()) touch();
     dense_.clear();
   }
 
@@ -156,7 +170,9 @@ private:
     return pages_[i / kPageSize]->bytes + sizeof(T) * (i % kPageSize);
   }
   /// The live T at position i.
-  [[nodiscard]] T* address(std::uint32_t i) const { return std::launder(static_cast<T*>(storage(i))); }
+  [[nodiscard]] T* address(std::uint32_t i) const {
+    return std::launder(static_cast<T*>(storage(i)));
+  }
 
   std::vector<std::unique_ptr<Page>> pages_;
 };

@@ -16,20 +16,21 @@ struct Ray {
   float tfar = std::numeric_limits<float>::infinity();
 };
 
-inline constexpr std::uint32_t kNoSurface = 0xFFFFFFFFu;
+/// Hit::instance of a miss.
+inline constexpr std::uint32_t kNoInstance = 0xFFFFFFFFu;
 
-/// A ray's closest hit. `surface` indexes the backend's surface table (kNoSurface: a miss);
-/// `object_normal` is the geometric normal in the surface's object space, not normalised, facing
-/// whichever way the triangle's winding says (Surface::world_normal turns it into world space:
-/// resolving a hit stays cheap, only shaded hits pay for it); `uv` are the barycentrics of
-/// vertices 1 and 2.
+/// A ray's closest hit. `instance` is the scene layer's instance slot (SceneTables::instances;
+/// kNoInstance: a miss) and `primitive` the triangle within its mesh; `object_normal` is the
+/// geometric normal in the space of the instance's mesh (world space for the baked static set),
+/// not normalised, facing whichever way the triangle's winding says — resolving a hit stays cheap,
+/// only shaded hits pay for the transform; `uv` are the barycentrics of vertices 1 and 2.
 struct Hit {
   float t = std::numeric_limits<float>::infinity();
-  std::uint32_t surface = kNoSurface;
+  std::uint32_t instance = kNoInstance;
   std::uint32_t primitive = 0;
   vec2 uv{0.0f};
   vec3 object_normal{0.0f};
-  [[nodiscard]] bool hit() const { return surface != kNoSurface; }
+  [[nodiscard]] bool hit() const { return instance != kNoInstance; }
 };
 
 } // namespace specula

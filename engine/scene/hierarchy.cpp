@@ -59,6 +59,10 @@ std::size_t update_world_transforms(ecs::Registry& registry, std::uint64_t tick,
   std::vector<std::vector<ecs::Entity>> by_depth(std::size_t(max_depth) + 1);
   for (const ecs::Entity e : entities) by_depth[depth[e.index]].push_back(e);
 
+  TransformChanges& changes = registry.resource_or_default<TransformChanges>();
+  changes.moved.clear();
+  ++changes.sequence;
+  changes.tick = tick;
   std::size_t moved = 0;
   for (const auto& level : by_depth) {
     for (const ecs::Entity e : level) {
@@ -77,6 +81,7 @@ std::size_t update_world_transforms(ecs::Registry& registry, std::uint64_t tick,
         wt->world_from_object = world;
         wt->moved = true;
         wt->moved_tick = tick;
+        changes.moved.push_back(e);
         ++moved;
         continue;
       }
@@ -85,6 +90,7 @@ std::size_t update_world_transforms(ecs::Registry& registry, std::uint64_t tick,
       if (changed) {
         wt->world_from_object = world;
         wt->moved_tick = tick;
+        changes.moved.push_back(e);
         ++moved;
       }
     }

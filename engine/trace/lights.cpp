@@ -1,31 +1,12 @@
 #include "specula/trace/lights.h"
 
-#include "specula/scene/components/world_transform.h"
-
 #include <cmath>
 
 namespace specula {
 
-std::vector<SceneLight> gather_lights(ecs::Registry& registry) {
-  std::vector<SceneLight> lights;
-  registry.view<Light, WorldTransform>().each([&](const Light& l, const WorldTransform& wt) {
-    SceneLight s;
-    s.type = l.type;
-    s.position = vec3(wt.world_from_object[3]);
-    const vec3 forward = -vec3(wt.world_from_object[2]);
-    s.direction = glm::length(forward) > 0.0f ? glm::normalize(forward) : vec3(0, 0, -1);
-    s.intensity = l.color * l.intensity;
-    s.range = l.range;
-    s.cos_inner = std::cos(l.inner_cone);
-    s.cos_outer = std::cos(l.outer_cone);
-    lights.push_back(s);
-  });
-  return lights;
-}
-
-LightSample sample_light(const SceneLight& light, const vec3& p) {
+LightSample sample_light(const gpu::GpuLight& light, const vec3& p) {
   LightSample s;
-  if (light.type == Light::Type::Directional) {
+  if (light.type == gpu::kLightDirectional) {
     s.to_light = -light.direction;
     s.irradiance = light.intensity;
     return s;
@@ -42,7 +23,7 @@ LightSample sample_light(const SceneLight& light, const vec3& p) {
     const float w = glm::clamp(1.0f - r * r * r * r, 0.0f, 1.0f);
     attenuation *= w * w;
   }
-  if (light.type == Light::Type::Spot) {
+  if (light.type == gpu::kLightSpot) {
     const float cos_angle = glm::dot(-s.to_light, light.direction);
     const float span = std::max(light.cos_inner - light.cos_outer, 1e-6f);
     const float t = glm::clamp((cos_angle - light.cos_outer) / span, 0.0f, 1.0f);

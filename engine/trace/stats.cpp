@@ -30,10 +30,14 @@ T read(const json& object, const char* key, const std::string& name, const std::
 
 const char* ray_kind_name(RayKind kind) {
   switch (kind) {
-  case RayKind::Primary: return "primary";
-  case RayKind::Shadow: return "shadow";
-  case RayKind::Reflection: return "reflection";
-  case RayKind::Refraction: return "refraction";
+  case RayKind::Primary:
+    return "primary";
+  case RayKind::Shadow:
+    return "shadow";
+  case RayKind::Reflection:
+    return "reflection";
+  case RayKind::Refraction:
+    return "refraction";
   }
   return "unknown";
 }
@@ -46,14 +50,20 @@ std::uint64_t RayCounts::total() const {
 
 RayCounts& RayCounts::operator+=(const RayCounts& o) {
   for (int i = 0; i < kRayKindCount; ++i) count[i] += o.count[i];
+  dropped += o.dropped;
   return *this;
 }
 
 std::string stats_to_json(const RunStats& stats) {
   const RunSettings& s = stats.settings;
-  json settings = {{"scene", s.scene},   {"backend", s.backend}, {"mode", s.mode},
-                   {"width", s.width},   {"height", s.height},   {"frames", s.frames},
-                   {"threads", s.threads}, {"max_depth", s.max_depth},
+  json settings = {{"scene", s.scene},
+                   {"backend", s.backend},
+                   {"mode", s.mode},
+                   {"width", s.width},
+                   {"height", s.height},
+                   {"frames", s.frames},
+                   {"threads", s.threads},
+                   {"max_depth", s.max_depth},
                    {"cache", s.cache_resolution == 0 ? json("off") : json(s.cache_resolution)}};
   json frames = json::array();
   double total_ms = 0.0;
@@ -71,6 +81,7 @@ std::string stats_to_json(const RunStats& stats) {
     frames.push_back({{"ms", f.ms},
                       {"trace_ms", f.trace_ms},
                       {"rays", rays},
+                      {"dropped_rays", f.rays.dropped},
                       {"mrays_per_s", rates},
                       {"cache", {{"lookups", f.cache.lookups}, {"hits", f.cache.hits}}}});
     total_ms += f.ms;
@@ -83,16 +94,18 @@ std::string stats_to_json(const RunStats& stats) {
   for (const FrameStats& f : stats.frames) ms.push_back(f.ms);
   std::sort(ms.begin(), ms.end());
   const double median =
-      ms.empty() ? 0.0
-                 : (ms.size() % 2 ? ms[ms.size() / 2] : 0.5 * (ms[ms.size() / 2 - 1] + ms[ms.size() / 2]));
-  json summary = {{"frames", stats.frames.size()},
-                  {"total_ms", total_ms},
-                  {"median_ms", median},
-                  {"rays", total_rays.total()},
-                  {"mrays_per_s", total_trace_ms > 0.0 ? double(total_rays.total()) / (total_trace_ms * 1e3) : 0.0},
-                  {"cache_hit_rate", total_cache.lookups > 0
-                                         ? double(total_cache.hits) / double(total_cache.lookups)
-                                         : 0.0}};
+      ms.empty()
+          ? 0.0
+          : (ms.size() % 2 ? ms[ms.size() / 2] : 0.5 * (ms[ms.size() / 2 - 1] + ms[ms.size() / 2]));
+  json summary = {
+      {"frames", stats.frames.size()},
+      {"total_ms", total_ms},
+      {"median_ms", median},
+      {"rays", total_rays.total()},
+      {"mrays_per_s",
+       total_trace_ms > 0.0 ? double(total_rays.total()) / (total_trace_ms * 1e3) : 0.0},
+      {"cache_hit_rate",
+       total_cache.lookups > 0 ? double(total_cache.hits) / double(total_cache.lookups) : 0.0}};
   return json{{"settings", settings}, {"frames", frames}, {"summary", summary}}.dump(2) + "\n";
 }
 
@@ -116,7 +129,8 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
   s.threads = read<std::uint32_t>(settings, "threads", name, "settings");
   s.max_depth = read<std::uint32_t>(settings, "max_depth", name, "settings");
   const json cache = read<json>(settings, "cache", name, "settings");
-  s.cache_resolution = cache.is_string() ? 0u : read<std::uint32_t>(settings, "cache", name, "settings");
+  s.cache_resolution =
+      cache.is_string() ? 0u : read<std::uint32_t>(settings, "cache", name, "settings");
   const json frames = read<json>(root, "frames", name, "");
   if (!frames.is_array()) throw Error(name, "frames", "must be an array");
   for (std::size_t i = 0; i < frames.size(); ++i) {
@@ -125,7 +139,9 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
     f.ms = read<double>(frames[i], "ms", name, at);
     f.trace_ms = read<double>(frames[i], "trace_ms", name, at);
     const json rays = read<json>(frames[i], "rays", name, at);
-    for (const RayKind k : kKinds) f.rays[k] = read<std::uint64_t>(rays, ray_kind_name(k), name, at + ".rays");
+    for (const RayKind k : kKinds)
+      f.rays[k] = read<std::uint64_t>(rays, ray_kind_name(k), name, at + ".rays");
+    f.rays.dropped = read<std::uint64_t>(frames[i], "dropped_rays", name, at);
     const json c = read<json>(frames[i], "cache", name, at);
     f.cache.lookups = read<std::uint64_t>(c, "lookups", name, at + ".cache");
     f.cache.hits = read<std::uint64_t>(c, "hits", name, at + ".cache");

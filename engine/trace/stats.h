@@ -18,6 +18,8 @@ inline constexpr int kRayKindCount = 4;
 
 struct RayCounts {
   std::uint64_t count[kRayKindCount] = {};
+  /// Secondary rays not traced because their pixel reached kMaxRaysPerPixel (not in total()).
+  std::uint64_t dropped = 0;
   [[nodiscard]] std::uint64_t& operator[](RayKind k) { return count[static_cast<int>(k)]; }
   [[nodiscard]] std::uint64_t operator[](RayKind k) const { return count[static_cast<int>(k)]; }
   [[nodiscard]] std::uint64_t total() const;
@@ -32,7 +34,7 @@ struct CacheCounts {
 };
 
 struct FrameStats {
-  double ms = 0.0;       ///< wall-clock time of the whole frame (every system of the tick)
+  double ms = 0.0;       ///< wall-clock time of the whole frame: every system of the tick
   double trace_ms = 0.0; ///< of which tracing the image (render_system)
   RayCounts rays;
   CacheCounts cache;

@@ -66,17 +66,20 @@ std::vector<fs::path> files_under(const fs::path& dir, const std::set<std::strin
   for (const auto& entry : fs::recursive_directory_iterator(dir)) {
     if (!entry.is_regular_file()) continue;
     std::string ext = entry.path().extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    std::transform(ext.begin(), ext.end(), ext.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
     if (extensions.count(ext)) files.push_back(entry.path());
   }
   std::sort(files.begin(), files.end());
   return files;
 }
 
-const std::set<std::string> kSceneExtensions = {".json", ".gltf", ".glb", ".obj", ".ply", ".off", ".stl"};
+const std::set<std::string> kSceneExtensions = {".json", ".gltf", ".glb", ".obj",
+                                                ".ply",  ".off",  ".stl"};
 
 TEST(Cli, InfoWorksOnEverySampleScene) {
-  const auto scenes = files_under(fs::path(SPECULA_SOURCE_DIR) / "samples/scenes", {".json", ".gltf", ".glb"});
+  const auto scenes =
+      files_under(fs::path(SPECULA_SOURCE_DIR) / "samples/scenes", {".json", ".gltf", ".glb"});
   ASSERT_GE(scenes.size(), 9u) << "cornell_box, 7 mirror_spheres scenes and a glTF scene";
   for (const auto& scene : scenes) {
     const Result r = run({"info", "--json", scene.string()});
@@ -93,7 +96,8 @@ TEST(Cli, InfoWorksOnEverySampleScene) {
 
 TEST(Cli, MirrorSpheresFamilyHasOnePlusNReflectiveSpheres) {
   for (const int n : {0, 1, 2, 4, 8, 16, 32}) {
-    const fs::path scene = fs::path(SPECULA_SOURCE_DIR) / ("samples/scenes/mirror_spheres_" + std::to_string(n) + ".json");
+    const fs::path scene = fs::path(SPECULA_SOURCE_DIR) /
+                           ("samples/scenes/mirror_spheres_" + std::to_string(n) + ".json");
     const Result r = run({"info", "--json", scene.string()});
     ASSERT_EQ(r.code, 0) << r.err;
     const auto j = nlohmann::json::parse(r.out);
@@ -105,7 +109,8 @@ TEST(Cli, MirrorSpheresFamilyHasOnePlusNReflectiveSpheres) {
 }
 
 TEST(Cli, InfoPrintsCountsAndBounds) {
-  const Result r = run({"info", (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string()});
+  const Result r =
+      run({"info", (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string()});
   ASSERT_EQ(r.code, 0) << r.err;
   for (const char* word : {"entities:", "triangles:", "materials:", "lights:", "bounds:"})
     EXPECT_NE(r.out.find(word), std::string::npos) << word << "\n" << r.out;
@@ -119,19 +124,20 @@ TEST(Cli, MissingFileExitsOneNamingIt) {
 }
 
 TEST(Cli, BadOptionsExitOne) {
-  const std::string scene = (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
-  for (const std::vector<std::string>& args : std::vector<std::vector<std::string>>{
-           {"render", scene, "--backend", "optix"},
-           {"render", scene, "--mode", "radiosity"},
-           {"render", scene, "--width", "0"},
-           {"render", scene, "--height", "100000"},
-           {"render", scene, "--frames", "0"},
-           {"render", scene, "--cache", "100"},
-           {"render", scene, "--cache", "-4"},
-           {"render", scene, "--width", "abc"},
-           {"render"},
-           {"frobnicate"},
-           {}}) {
+  const std::string scene =
+      (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
+  for (const std::vector<std::string>& args :
+       std::vector<std::vector<std::string>>{{"render", scene, "--backend", "optix"},
+                                             {"render", scene, "--mode", "radiosity"},
+                                             {"render", scene, "--width", "0"},
+                                             {"render", scene, "--height", "100000"},
+                                             {"render", scene, "--frames", "0"},
+                                             {"render", scene, "--cache", "100"},
+                                             {"render", scene, "--cache", "-4"},
+                                             {"render", scene, "--width", "abc"},
+                                             {"render"},
+                                             {"frobnicate"},
+                                             {}}) {
     const Result r = run(args);
     ASSERT_TRUE(r.exited);
     std::string joined;
@@ -142,15 +148,17 @@ TEST(Cli, BadOptionsExitOne) {
 }
 
 TEST(Cli, RenderWritesTheImageAndStatsWithEmbree) {
-  const std::string scene = (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
-  const fs::path dir = fs::temp_directory_path() / ("specula_cli_render_" + std::to_string(::getpid()));
+  const std::string scene =
+      (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
+  const fs::path dir =
+      fs::temp_directory_path() / ("specula_cli_render_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   for (const char* mode : {"cast", "whitted"}) {
     const fs::path png = dir / (std::string(mode) + ".png");
     const fs::path stats = dir / (std::string(mode) + ".json");
     const Result r = run({"render", scene, "--backend", "embree", "--mode", mode, "--width", "48",
-                          "--height", "32", "--frames", "2", "--threads", "1", "--out", png.string(),
-                          "--stats", stats.string()});
+                          "--height", "32", "--frames", "2", "--threads", "1", "--out",
+                          png.string(), "--stats", stats.string()});
     ASSERT_TRUE(r.exited);
     ASSERT_EQ(r.code, 0) << mode << "\n" << r.err;
     EXPECT_GT(fs::file_size(png), 0u);
@@ -166,28 +174,59 @@ TEST(Cli, RenderWritesTheImageAndStatsWithEmbree) {
     }
   }
   // compare: an image against itself is exact.
-  const Result same = run({"compare", (dir / "cast.png").string(), (dir / "cast.png").string(), "--json"});
+  const Result same =
+      run({"compare", (dir / "cast.png").string(), (dir / "cast.png").string(), "--json"});
   ASSERT_EQ(same.code, 0) << same.err;
   EXPECT_EQ(nlohmann::json::parse(same.out).at("rmse").get<double>(), 0.0);
-  const Result differ = run({"compare", (dir / "cast.png").string(), (dir / "whitted.png").string()});
+  const Result differ =
+      run({"compare", (dir / "cast.png").string(), (dir / "whitted.png").string()});
   ASSERT_EQ(differ.code, 0) << differ.err;
   EXPECT_NE(differ.out.find("PSNR"), std::string::npos);
   fs::remove_all(dir);
 }
 
 TEST(Cli, BackendsModesAndCachesNotBuiltYetExitTwo) {
-  const std::string scene = (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
-  const std::vector<std::vector<std::string>> unavailable = {
-      {"--backend", "native"}, {"--backend", "vulkan"}, {"--mode", "path"},
-      {"--mode", "shadow"},    {"--cache", "64"}};
+  const std::string scene =
+      (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
+  const std::vector<std::vector<std::string>> unavailable = {{"--backend", "native"},
+                                                             {"--backend", "vulkan"},
+                                                             {"--mode", "path"},
+                                                             {"--mode", "shadow"},
+                                                             {"--cache", "64"}};
   for (const auto& extra : unavailable) {
     std::vector<std::string> args = {"render", scene, "--width", "16", "--height", "16"};
     args.insert(args.end(), extra.begin(), extra.end());
     const Result r = run(args);
     ASSERT_TRUE(r.exited);
     EXPECT_EQ(r.code, 2) << extra[0] << " " << extra[1] << "\n" << r.err;
-    EXPECT_NE(r.err.find("not available yet"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("specula: not available: "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(extra[1]), std::string::npos)
+        << "the message names what is missing: " << r.err;
   }
+}
+
+TEST(Cli, AutoIsTheDefaultBackendAndSaysWhichItPicked) {
+  const std::string scene =
+      (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
+  const Result r = run({"render", scene, "--width", "16", "--height", "16", "--mode", "cast"});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("on embree (auto)"), std::string::npos) << r.out;
+  const Result named =
+      run({"render", scene, "--width", "16", "--height", "16", "--backend", "embree"});
+  ASSERT_EQ(named.code, 0) << named.err;
+  EXPECT_NE(named.out.find("on embree,"), std::string::npos) << named.out;
+}
+
+TEST(Cli, RenderReportsTheFramesRaysPerSecondOfTracingTime) {
+  const std::string scene =
+      (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
+  const Result r = run({"render", scene, "--width", "32", "--height", "32", "--frames", "2"});
+  ASSERT_EQ(r.code, 0) << r.err;
+  // One rate, of all the frame's rays over the tracing time; the per-kind counts beside it.
+  EXPECT_NE(r.out.find("rays per frame: "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("(primary 1024, shadow "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("Mrays/s of tracing time"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("primary rays:"), std::string::npos) << "the old per-kind rates are gone";
 }
 
 TEST(Cli, RenderOfABadSceneIsBadInputNotUnavailable) {
@@ -199,9 +238,9 @@ TEST(Cli, RenderOfABadSceneIsBadInputNotUnavailable) {
 /// every mesh file except the good ones the mesh tests load.
 bool is_bad_input(const fs::path& file) {
   static const std::set<std::string> kGoodMeshes = {
-      "cube.obj",       "cube.off",         "cube_ascii.ply",       "cube_binary.off",
-      "cube_binary.ply", "cube_binary.stl", "cube_face_normals.obj", "nonmanifold_uv.obj",
-      "normals.off",    "quad_uv.obj",      "texcoords.off",        "tri.stl",
+      "cube.obj",           "cube.off",        "cube_ascii.ply",        "cube_binary.off",
+      "cube_binary.ply",    "cube_binary.stl", "cube_face_normals.obj", "nonmanifold_uv.obj",
+      "normals.off",        "quad_uv.obj",     "texcoords.off",         "tri.stl",
       "with_degenerate.obj"};
   const std::string dir = file.parent_path().filename().string();
   const std::string name = file.filename().string();

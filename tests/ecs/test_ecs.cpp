@@ -20,7 +20,9 @@
 // gtest prints handles in failure messages through this (found by ADL).
 namespace specula::ecs {
 void PrintTo(Entity e, std::ostream* os);
-void PrintTo(Entity e, std::ostream* os) { *os << "Entity{" << e.index << ", " << e.generation << "}"; }
+void PrintTo(Entity e, std::ostream* os) {
+  *os << "Entity{" << e.index << ", " << e.generation << "}";
+}
 } // namespace specula::ecs
 
 namespace {
@@ -269,7 +271,9 @@ TEST(EcsStorage, MovedElementKeepsItsValueAndOwner) {
   // Destroying an entity removes its components the same way.
   reg.destroy(es[4]);
   for (std::size_t i = 1; i < es.size(); ++i)
-    if (i != 4) { EXPECT_EQ(reg.get<std::string>(es[i]), "entity " + std::to_string(i)); }
+    if (i != 4) {
+      EXPECT_EQ(reg.get<std::string>(es[i]), "entity " + std::to_string(i));
+    }
 }
 
 TEST(EcsStorage, RemovalMovesAtMostTheLastElementOfThatType) {
@@ -493,9 +497,15 @@ TEST(EcsView, EntitiesLeavingBeforeTheirTurnAreSkippedAndTheRestVisitedOnce) {
       const Entity other = order[i];
       left.insert(other);
       switch (i % 4) {
-      case 0: fx.reg.remove<Position>(other); break;
-      case 1: fx.reg.remove<Velocity>(other); break;
-      case 2: fx.reg.destroy(other); break;
+      case 0:
+        fx.reg.remove<Position>(other);
+        break;
+      case 1:
+        fx.reg.remove<Velocity>(other);
+        break;
+      case 2:
+        fx.reg.destroy(other);
+        break;
       default: { // destroyed, and its slot recycled into a new entity in the view
         fx.reg.destroy(other);
         const Entity reuse = fx.reg.create();
@@ -558,11 +568,21 @@ TEST(EcsView, RandomMutationsDuringEachFollowTheSnapshotRule) {
         const Entity target = random_entity();
         if (!fx.reg.valid(target)) continue;
         switch (std::uniform_int_distribution<int>(0, 5)(rng)) {
-        case 0: fx.reg.remove<Position>(target); break;
-        case 1: fx.reg.remove<Velocity>(target); break;
-        case 2: fx.reg.emplace_or_replace<Position>(target); break;
-        case 3: fx.reg.emplace_or_replace<Velocity>(target); break;
-        case 4: fx.reg.destroy(target); break;
+        case 0:
+          fx.reg.remove<Position>(target);
+          break;
+        case 1:
+          fx.reg.remove<Velocity>(target);
+          break;
+        case 2:
+          fx.reg.emplace_or_replace<Position>(target);
+          break;
+        case 3:
+          fx.reg.emplace_or_replace<Velocity>(target);
+          break;
+        case 4:
+          fx.reg.destroy(target);
+          break;
         default: {
           const Entity fresh = fx.reg.create();
           fx.es.push_back(fresh);
@@ -594,7 +614,8 @@ TEST(EcsResources, AreOnePerTypePerRegistry) {
   EXPECT_EQ(b.resource<FrameCounter>().frames, 10);
   EXPECT_EQ(a.resource<FrameCounter>().frames, 3);
   FrameCounter& same = b.resource_or_default<FrameCounter>();
-  EXPECT_EQ(&same, b.try_resource<FrameCounter>()) << "resource_or_default returns the existing one";
+  EXPECT_EQ(&same, b.try_resource<FrameCounter>())
+      << "resource_or_default returns the existing one";
   EXPECT_EQ(same.frames, 10);
 
   a.set_resource<std::string>("library");
@@ -787,9 +808,15 @@ TEST(EcsProperty, RandomOperationsMatchAReferenceModel) {
         ASSERT_EQ(reg.has<Position>(h), m.position.has_value()) << "step " << step;
         ASSERT_EQ(reg.has<std::string>(h), m.name.has_value()) << "step " << step;
         ASSERT_EQ(reg.has<Counted>(h), m.counted.has_value()) << "step " << step;
-        if (m.position) { ASSERT_EQ(reg.get<Position>(h).x, float(*m.position)) << "step " << step; }
-        if (m.name) { ASSERT_EQ(reg.get<std::string>(h), *m.name) << "step " << step; }
-        if (m.counted) { ASSERT_EQ(reg.get<Counted>(h).value(), *m.counted) << "step " << step; }
+        if (m.position) {
+          ASSERT_EQ(reg.get<Position>(h).x, float(*m.position)) << "step " << step;
+        }
+        if (m.name) {
+          ASSERT_EQ(reg.get<std::string>(h), *m.name) << "step " << step;
+        }
+        if (m.counted) {
+          ASSERT_EQ(reg.get<Counted>(h).value(), *m.counted) << "step " << step;
+        }
         positions += m.position ? 1 : 0;
         names += m.name ? 1 : 0;
         counteds += m.counted ? 1 : 0;
@@ -809,6 +836,61 @@ TEST(EcsProperty, RandomOperationsMatchAReferenceModel) {
     }
   }
   EXPECT_EQ(live_counted, 0);
+}
+
+// --- Rule 5: change versions ---
+
+struct Health {
+  int value = 0;
+};
+struct Speed {
+  float value = 0.0f;
+};
+
+TEST(EcsVersions, GrowOnMembershipChangesOfTheirTypeOnly) {
+  Registry reg;
+  EXPECT_EQ(reg.version<Health>(), 0u);
+  const Entity a = reg.create();
+  const Entity b = reg.create();
+  reg.emplace<Health>(a);
+  const std::uint64_t after_add = reg.version<Health>();
+  EXPECT_GT(after_add, 0u);
+  reg.emplace<Speed>(b); // another type: Health's version stays
+  EXPECT_EQ(reg.version<Health>(), after_add);
+  reg.emplace<Health>(b);
+  const std::uint64_t two = reg.version<Health>();
+  EXPECT_GT(two, after_add);
+  reg.remove<Health>(a);
+  const std::uint64_t removed = reg.version<Health>();
+  EXPECT_GT(removed, two);
+  EXPECT_FALSE(reg.remove<Health>(a)); // nothing to remove: no change
+  EXPECT_EQ(reg.version<Health>(), removed);
+  reg.destroy(b); // destroying an entity removes its Health (and its Speed)
+  EXPECT_GT(reg.version<Health>(), removed);
+  reg.emplace<Speed>(a);
+  const std::uint64_t before_clear = reg.version<Speed>();
+  reg.clear();
+  EXPECT_GT(reg.version<Speed>(), before_clear);
+  const std::uint64_t after_clear = reg.version<Speed>();
+  reg.clear(); // nothing left to clear: no change
+  EXPECT_EQ(reg.version<Speed>(), after_clear);
+}
+
+TEST(EcsVersions, PatchAndReplaceAreRecordedPlainEditsAreNot) {
+  Registry reg;
+  const Entity e = reg.create();
+  reg.emplace<Health>(e, Health{3});
+  const std::uint64_t v0 = reg.version<Health>();
+  reg.get<Health>(e).value = 4; // a plain edit: invisible by contract
+  EXPECT_EQ(reg.version<Health>(), v0);
+  const Health& h = reg.patch<Health>(e, [](Health& x) { x.value = 5; });
+  EXPECT_EQ(h.value, 5);
+  EXPECT_EQ(reg.get<Health>(e).value, 5);
+  const std::uint64_t v1 = reg.version<Health>();
+  EXPECT_GT(v1, v0);
+  reg.emplace_or_replace<Health>(e, Health{6});
+  EXPECT_GT(reg.version<Health>(), v1);
+  EXPECT_EQ(reg.get<Health>(e).value, 6);
 }
 
 } // namespace

@@ -20,7 +20,8 @@ constexpr float kPi = std::numbers::pi_v<float>;
 
 void expect_near(const mat4& a, const mat4& b, float tol = 1e-4f) {
   for (int c = 0; c < 4; ++c)
-    for (int r = 0; r < 4; ++r) EXPECT_NEAR(a[c][r], b[c][r], tol) << "column " << c << " row " << r;
+    for (int r = 0; r < 4; ++r)
+      EXPECT_NEAR(a[c][r], b[c][r], tol) << "column " << c << " row " << r;
 }
 
 /// A rotation track about `axis` turning a full circle in `period` seconds (5 keys, linear).
@@ -92,11 +93,13 @@ TEST(Systems, ThreeLinkArmHasExpectedWorldTransformsAfterNTicks) {
   const mat4 elbow_from_hand = glm::translate(mat4(1.0f), vec3(0.5f, 0, 0));
   // Linear slerp between quarter-turn keys is exact rotation at constant angular speed.
   expect_near(reg.get<WorldTransform>(arm.base).world_from_object, world_from_base);
-  expect_near(reg.get<WorldTransform>(arm.elbow).world_from_object, world_from_base * base_from_elbow);
+  expect_near(reg.get<WorldTransform>(arm.elbow).world_from_object,
+              world_from_base * base_from_elbow);
   expect_near(reg.get<WorldTransform>(arm.hand).world_from_object,
               world_from_base * base_from_elbow * elbow_from_hand);
   // The hand's position has the closed form R_y(a) (x_e + R_z(b) (0.5, 0, 0)).
-  const vec3 hand_base = vec3(1, 0, 0) + 0.5f * vec3(std::cos(elbow_angle), std::sin(elbow_angle), 0);
+  const vec3 hand_base =
+      vec3(1, 0, 0) + 0.5f * vec3(std::cos(elbow_angle), std::sin(elbow_angle), 0);
   const vec3 hand_world(hand_base.x * std::cos(base_angle) + hand_base.z * std::sin(base_angle),
                         hand_base.y,
                         -hand_base.x * std::sin(base_angle) + hand_base.z * std::cos(base_angle));
@@ -313,13 +316,14 @@ TEST(Systems, CameraFollowsItsPath) {
   EXPECT_NEAR(reg.get<Camera>(e).position.x, 10.0f, 1e-5f);
 }
 
-TEST(Systems, ScheduleRunsAnimationTransformAccelerationRenderInThatOrder) {
+TEST(Systems, ScheduleRunsAnimationTransformSceneLayerAccelerationRenderInThatOrder) {
   const auto names = Schedule::system_names();
-  ASSERT_EQ(names.size(), 4u);
+  ASSERT_EQ(names.size(), 5u);
   EXPECT_EQ(names[0], "animation");
   EXPECT_EQ(names[1], "transform");
-  EXPECT_EQ(names[2], "acceleration");
-  EXPECT_EQ(names[3], "render");
+  EXPECT_EQ(names[2], "scene_layer");
+  EXPECT_EQ(names[3], "acceleration");
+  EXPECT_EQ(names[4], "render");
   // The order matters: an animated entity's world transform reflects this tick's animation.
   ecs::Registry reg;
   const ecs::Entity e = reg.create();

@@ -2,12 +2,16 @@
 // Small helpers to build test worlds in code.
 
 #include "specula/geometry/primitives.h"
+#include "specula/render/scene_layer.h"
+#include "specula/render/tracer_factory.h"
 #include "specula/scene/components.h"
 #include "specula/scene/hierarchy.h"
 #include "specula/scene/scene.h"
 
 #include <memory>
+#include <span>
 #include <string>
+#include <string_view>
 
 namespace specula::test {
 
@@ -28,7 +32,8 @@ inline ecs::Entity add_mesh(ecs::Registry& reg, const MeshSource& source, const 
                             Kinematics::Type kinematics = Kinematics::Type::Static) {
   const ecs::Entity e = reg.create();
   reg.emplace<Transform>(e, t);
-  reg.emplace<Mesh>(e, Mesh{std::make_shared<const TriangleMesh>(make_primitive(source, "test")), source, {}, 0});
+  reg.emplace<Mesh>(
+      e, Mesh{std::make_shared<const TriangleMesh>(make_primitive(source, "test")), source, {}, 0});
   reg.emplace<Material>(e, m);
   reg.emplace<Kinematics>(e, Kinematics{kinematics});
   return e;
@@ -62,5 +67,36 @@ inline ecs::Entity add_camera(ecs::Registry& reg, const vec3& position, const ve
   reg.emplace<Camera>(e, c);
   return e;
 }
+
+/// A registry's scene as the integrators see it: the scene layer synced and a tracer of the named
+/// backend built over it, with one-ray conveniences for tests.
+struct TracedWorld {
+  SceneLayer layer;
+  std::unique_ptr<Tracer> tracer;
+  std::uint64_t tick = 0;
+
+  explicit TracedWorld(ecs::Registry& reg, std::string_view backend = "embree",
+                       std::uint32_t packet_width = 1)
+      : tracer(make_tracer(backend, packet_width)) {
+    update(reg);
+  }
+  /// World transforms (as one more tick), layer and tracer brought up to date with the registry.
+  void update(ecs::Registry& reg) {
+    update_world_transforms(reg, ++tick);
+    layer.sync(reg);
+    tracer->update(layer);
+  }
+  [[nodiscard]] const SceneTables& tables() const { return layer.tables(); }
+  [[nodiscard]] Hit intersect(const Ray& ray) const {
+    Hit hit;
+    tracer->intersect(std::span<const Ray>(&ray, 1), std::span<Hit>(&hit, 1));
+    return hit;
+  }
+  [[nodiscard]] bool occluded(const Ray& ray) const {
+    std::uint8_t blocked = 0;
+    tracer->occluded(std::span<const Ray>(&ray, 1), std::span<std::uint8_t>(&blocked, 1));
+    return blocked != 0;
+  }
+};
 
 } // namespace specula::test

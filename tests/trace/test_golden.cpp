@@ -8,9 +8,9 @@
 #include "specula/image/flip.h"
 #include "specula/image/image_io.h"
 #include "specula/image/metrics.h"
+#include "specula/render/render_job.h"
 #include "specula/scene/scene.h"
 #include "specula/systems/schedule.h"
-#include "specula/trace/render_job.h"
 
 #include <gtest/gtest.h>
 
@@ -27,7 +27,8 @@ constexpr double kMinPsnr = 40.0;
 constexpr double kMaxFlip = 0.01;
 
 Framebuffer render_sample(const std::string& scene_name, TraceMode mode) {
-  Scene scene = load_scene(fs::path(SPECULA_SOURCE_DIR) / "samples/scenes" / (scene_name + ".json"));
+  Scene scene =
+      load_scene(fs::path(SPECULA_SOURCE_DIR) / "samples/scenes" / (scene_name + ".json"));
   RenderJob job;
   job.settings.mode = mode;
   job.settings.max_depth = scene.settings.max_depth;
@@ -58,7 +59,8 @@ TEST_P(Golden, MatchesTheReference) {
     write_png(image, fs::path(reference).replace_extension(".png"));
     GTEST_SKIP() << "rewrote " << reference;
   }
-  ASSERT_TRUE(fs::exists(reference)) << reference << " is missing (SPECULA_UPDATE_GOLDEN=1 writes it)";
+  ASSERT_TRUE(fs::exists(reference))
+      << reference << " is missing (SPECULA_UPDATE_GOLDEN=1 writes it)";
   const Framebuffer golden = read_exr(reference);
   const double p = psnr(golden, image);
   const double f = flip(golden, image).mean;
@@ -80,13 +82,15 @@ std::string case_name(const ::testing::TestParamInfo<Case>& info) {
   return info.param.scene + "_" + trace_mode_name(info.param.mode);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Samples, Golden,
-    ::testing::Values(Case{"cornell_box", TraceMode::Cast}, Case{"cornell_box", TraceMode::Whitted},
-                      Case{"mirror_spheres_0", TraceMode::Cast}, Case{"mirror_spheres_0", TraceMode::Whitted},
-                      Case{"mirror_spheres_8", TraceMode::Cast}, Case{"mirror_spheres_8", TraceMode::Whitted},
-                      Case{"mirror_spheres_32", TraceMode::Whitted}),
-    case_name);
+INSTANTIATE_TEST_SUITE_P(Samples, Golden,
+                         ::testing::Values(Case{"cornell_box", TraceMode::Cast},
+                                           Case{"cornell_box", TraceMode::Whitted},
+                                           Case{"mirror_spheres_0", TraceMode::Cast},
+                                           Case{"mirror_spheres_0", TraceMode::Whitted},
+                                           Case{"mirror_spheres_8", TraceMode::Cast},
+                                           Case{"mirror_spheres_8", TraceMode::Whitted},
+                                           Case{"mirror_spheres_32", TraceMode::Whitted}),
+                         case_name);
 
 } // namespace
 } // namespace specula

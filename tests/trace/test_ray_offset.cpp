@@ -1,10 +1,8 @@
 // Self-intersection: a ray spawned from a surface with offset_ray_origin never hits that surface,
 // at any scale and distance from the origin (error-bound offsets, geometry/ray_offset.h).
 
-#include "specula/accel/embree/embree_accel.h"
-#include "specula/accel/embree/embree_backend.h"
-#include "specula/geometry/ray_offset.h"
 #include "scene_builder.h"
+#include "specula/geometry/ray_offset.h"
 
 #include <gtest/gtest.h>
 
@@ -24,24 +22,29 @@ struct Counts {
 Counts spawn_rays(float size, const vec3& center, std::uint32_t seed) {
   ecs::Registry reg;
   const quat tilt = glm::normalize(quat(0.9f, 0.3f, -0.2f, 0.25f));
-  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(size, 1.0f, size), 3, 8), test::at(center, vec3(1.0f), tilt));
-  update_world_transforms(reg, 0);
-  EmbreeAccel accel;
-  accel.update(reg);
-  const EmbreeBackend backend(accel, 1);
-  const Surface& surface = accel.surfaces()[0];
-  const TriangleMesh& mesh = *surface.mesh;
+  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(size, 1.0f, size), 3, 8),
+                 test::at(center, vec3(1.0f), tilt));
+  const test::TracedWorld world(reg);
+  // The plane is static: the layer baked it into world space.
+  const SceneTables& tables = world.tables();
+  const gpu::GpuMesh& mesh = tables.meshes[tables.instances[tables.static_instances.at(0)].mesh];
+  const std::span<const uvec3> triangles(tables.triangles.data() + mesh.first_triangle,
+                                         mesh.triangle_count);
+  const vec3* positions = tables.positions.data() + mesh.first_vertex;
 
   std::mt19937 rng(seed);
-  std::uniform_int_distribution<std::size_t> pick(0, mesh.triangles.size() - 1);
+  std::uniform_int_distribution<std::size_t> pick(0, triangles.size() - 1);
   std::uniform_real_distribution<float> u01(0.0f, 1.0f);
   Counts counts;
   for (int i = 0; i < 20000; ++i) {
-    const uvec3 tri = mesh.triangles[pick(rng)];
-    const vec3 a = surface.positions[tri.x], b = surface.positions[tri.y], c = surface.positions[tri.z];
+    const uvec3 tri = triangles[pick(rng)];
+    const vec3 a = positions[tri.x], b = positions[tri.y], c = positions[tri.z];
     // Barycentrics biased to the edges: every third point sits within 1e-4 of one.
     float u = u01(rng), v = u01(rng);
-    if (u + v > 1.0f) { u = 1.0f - u; v = 1.0f - v; }
+    if (u + v > 1.0f) {
+      u = 1.0f - u;
+      v = 1.0f - v;
+    }
     if (i % 3 == 0) u *= 1e-4f;
     const vec3 p = (1.0f - u - v) * a + u * b + v * c;
     const vec3 p_error = barycentric_error(a, b, c, 1.0f - u - v, u, v);
@@ -53,21 +56,22 @@ Counts spawn_rays(float size, const vec3& center, std::uint32_t seed) {
     const vec3 t = glm::normalize(b - a);
     const vec3 s = glm::cross(n, t);
     const float sin_theta = std::sqrt(1.0f - cos_theta * cos_theta);
-    const vec3 dir = glm::normalize(side * cos_theta * n + sin_theta * (std::cos(phi) * t + std::sin(phi) * s));
+    const vec3 dir =
+        glm::normalize(side * cos_theta * n + sin_theta * (std::cos(phi) * t + std::sin(phi) * s));
 
     Ray ray;
     ray.origin = offset_ray_origin(p, p_error, side * n);
     ray.direction = dir;
-    Hit hit;
-    backend.intersect(ray, hit);
+    Hit hit = world.intersect(ray);
     counts.self_hits_with_offset += hit.hit() ? 1 : 0;
     // The offset origin must lie strictly on the side the ray leaves to (checked in double).
     const glm::dvec3 rel = glm::dvec3(ray.origin) - glm::dvec3(a);
-    const double plane = glm::dot(rel, glm::dvec3(glm::cross(glm::dvec3(b) - glm::dvec3(a), glm::dvec3(c) - glm::dvec3(a))));
+    const double plane = glm::dot(
+        rel, glm::dvec3(glm::cross(glm::dvec3(b) - glm::dvec3(a), glm::dvec3(c) - glm::dvec3(a))));
     counts.on_wrong_side += side * plane > 0.0 ? 0 : 1;
 
     ray.origin = p;
-    backend.intersect(ray, hit);
+    hit = world.intersect(ray);
     counts.self_hits_without_offset += hit.hit() ? 1 : 0;
   }
   return counts;

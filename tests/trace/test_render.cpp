@@ -1,11 +1,12 @@
-// Properties of rendered frames and of the Whitted integrator's rays, on the Embree backend.
+// Properties of rendered frames and of the Whitted integrator's rays (on the default backend; the
+// conformance suite runs the backend-specific properties on every backend).
 
-#include "specula/accel/embree/embree_accel.h"
-#include "specula/accel/embree/embree_backend.h"
 #include "scene_builder.h"
+#include "specula/render/render_job.h"
 #include "specula/systems/schedule.h"
-#include "specula/trace/render_job.h"
-#include "specula/trace/renderer_impl.h"
+#include "specula/trace/shading.h"
+
+#include <xmmintrin.h>
 
 #include <gtest/gtest.h>
 
@@ -15,8 +16,8 @@
 namespace specula {
 namespace {
 
-Framebuffer render(ecs::Registry& reg, TraceMode mode, std::uint32_t size, std::uint32_t threads = 2,
-                   std::uint32_t packet = 16, std::uint32_t tile = 16) {
+Framebuffer render(ecs::Registry& reg, TraceMode mode, std::uint32_t size,
+                   std::uint32_t threads = 2, std::uint32_t packet = 16, std::uint32_t tile = 16) {
   RenderJob job;
   job.settings.mode = mode;
   job.settings.threads = threads;
@@ -36,7 +37,8 @@ void closed_box(ecs::Registry& reg, float scale, const vec3& center) {
   // A sphere on the floor: its own shadow is inside the box too (the light must still reach
   // every wall point it can see directly).
   test::add_point_light(reg, center + scale * vec3(0.5f, 1.2f, 0.3f), scale * scale * 4.0f);
-  test::add_camera(reg, center + scale * vec3(0.0f, 0.0f, 1.8f), center + scale * vec3(0.1f, -0.2f, -2.0f), 100.0f);
+  test::add_camera(reg, center + scale * vec3(0.0f, 0.0f, 1.8f),
+                   center + scale * vec3(0.1f, -0.2f, -2.0f), 100.0f);
 }
 
 /// A tessellated sphere and a box hovering just above a large plane, lit by a light at the camera
@@ -44,10 +46,13 @@ void closed_box(ecs::Registry& reg, float scale, const vec3& center) {
 /// is acne. They hover (2% of their size) rather than touch: in a contact crease two surfaces come
 /// closer than any offset can resolve, which is a different limit (docs/design/ray-offsets.md).
 void headlight_scene(ecs::Registry& reg, float scale, const vec3& center) {
-  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(40.0f), 3, 20), test::at(center, vec3(scale)));
-  test::add_mesh(reg, test::primitive("sphere", 1.0f, vec3(1), 48, 24), test::at(center + scale * vec3(0, 1.02f, 0), vec3(scale)));
+  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(40.0f), 3, 20),
+                 test::at(center, vec3(scale)));
+  test::add_mesh(reg, test::primitive("sphere", 1.0f, vec3(1), 48, 24),
+                 test::at(center + scale * vec3(0, 1.02f, 0), vec3(scale)));
   test::add_mesh(reg, test::primitive("box", 1.0f, vec3(1.5f)),
-                 test::at(center + scale * vec3(-2.5f, 0.78f, 0.5f), vec3(scale), glm::angleAxis(0.6f, vec3(0, 1, 0))));
+                 test::at(center + scale * vec3(-2.5f, 0.78f, 0.5f), vec3(scale),
+                          glm::angleAxis(0.6f, vec3(0, 1, 0))));
   const vec3 eye = center + scale * vec3(1.5f, 2.5f, 6.0f);
   test::add_camera(reg, eye, center + scale * vec3(-0.5f, 0.5f, 0.0f), 50.0f);
   test::add_point_light(reg, eye, scale * scale * 40.0f);
@@ -68,7 +73,9 @@ struct Scale {
   float scale;
   vec3 center;
 };
-const Scale kScales[] = {{1.0f, vec3(0.0f)}, {1e5f, vec3(1e5f, -2e5f, 1e5f)}, {1e-3f, vec3(0.0f)},
+const Scale kScales[] = {{1.0f, vec3(0.0f)},
+                         {1e5f, vec3(1e5f, -2e5f, 1e5f)},
+                         {1e-3f, vec3(0.0f)},
                          {1e-3f, vec3(3.0f, 1.0f, -2.0f)}};
 
 TEST(Render, PointLightInsideAClosedBoxLightsEveryPixel) {
@@ -95,7 +102,8 @@ TEST(Render, NoShadowAcneOnUnitLargeFarAndTinyScenes) {
     headlight_scene(b, s.scale, s.center);
     const Framebuffer whitted = render(a, TraceMode::Whitted, 160);
     const Framebuffer cast = render(b, TraceMode::Cast, 160);
-    EXPECT_EQ(count_shadowed_pixels(whitted, cast), 0) << "scale " << s.scale << " centre " << s.center.x;
+    EXPECT_EQ(count_shadowed_pixels(whitted, cast), 0)
+        << "scale " << s.scale << " centre " << s.center.x;
     int lit = 0;
     for (const vec3& p : whitted.pixels()) lit += p.x > 0.0f ? 1 : 0;
     EXPECT_GT(lit, 160 * 160 / 2) << "the scene must fill the frame for the test to mean something";
@@ -117,51 +125,50 @@ TEST(Render, ShadowsAreCastWhereTheyShouldBe) {
 }
 
 /// A world with a slab of glass: 4 × 0.5 × 4 at the origin.
-struct GlassSlab {
-  ecs::Registry reg;
-  GlassSlab() {
-    Material glass;
-    glass.base_color = vec3(1.0f);
-    glass.transmission = 1.0f;
-    glass.ior = 1.5f;
-    test::add_mesh(reg, test::primitive("box", 1.0f, vec3(4.0f, 0.5f, 4.0f)), test::at(vec3(0)), glass);
-    update_world_transforms(reg, 0);
-    reg.set_resource<EmbreeAccel>().update(reg);
-  }
-  EmbreeBackend backend() { return EmbreeBackend(reg.resource<EmbreeAccel>(), 1); }
-};
+ecs::Registry& glass_slab(ecs::Registry& reg) {
+  Material glass;
+  glass.base_color = vec3(1.0f);
+  glass.transmission = 1.0f;
+  glass.ior = 1.5f;
+  test::add_mesh(reg, test::primitive("box", 1.0f, vec3(4.0f, 0.5f, 4.0f)), test::at(vec3(0)),
+                 glass);
+  return reg;
+}
+
+const gpu::GpuMaterial& material_of(const test::TracedWorld& world, const Hit& hit) {
+  return world.tables().materials[world.tables().instances[hit.instance].material];
+}
 
 /// Follows the refracted branch of the integrator's split through the scene.
 struct Step {
-  detail::ShadingPoint sp;
-  detail::SpecularSplit split;
+  ShadingPoint sp;
+  SpecularSplit split;
   Ray next;
 };
-Step follow_refraction(const EmbreeBackend& backend, const Ray& ray) {
-  Hit hit;
-  backend.intersect(ray, hit);
+Step follow_refraction(const test::TracedWorld& world, const Ray& ray) {
+  const Hit hit = world.intersect(ray);
   EXPECT_TRUE(hit.hit());
-  const Surface& s = backend.surfaces()[hit.surface];
   Step step;
-  step.sp = detail::shading_point(s, hit, ray.direction);
-  step.split = detail::split_specular(s.material, step.sp, ray.direction);
-  step.next.origin = offset_ray_origin(step.sp.position, step.sp.position_error, -step.sp.geometric_normal);
+  step.sp = shading_point(world.tables(), hit, ray.direction);
+  step.split = split_specular(material_of(world, hit), step.sp, ray.direction);
+  step.next.origin =
+      offset_ray_origin(step.sp.position, step.sp.position_error, -step.sp.geometric_normal);
   step.next.direction = step.split.refract_direction;
   return step;
 }
 
 TEST(Render, ARayThroughAGlassSlabExitsParallelToItsEntry) {
-  GlassSlab slab;
-  const EmbreeBackend backend = slab.backend();
+  ecs::Registry reg;
+  const test::TracedWorld world(glass_slab(reg));
   for (const float degrees : {0.0f, 10.0f, 30.0f, 60.0f, 80.0f}) {
     const float theta = glm::radians(degrees);
     Ray ray;
     ray.direction = vec3(std::sin(theta), -std::cos(theta), 0.0f);
     ray.origin = vec3(-0.5f, 0.25f, 0.1f) - 3.0f * ray.direction; // aimed at the top face
-    const Step in = follow_refraction(backend, ray);
+    const Step in = follow_refraction(world, ray);
     ASSERT_GT(in.split.refract_weight, 0.0f);
     EXPECT_TRUE(in.sp.front_face);
-    const Step out = follow_refraction(backend, in.next);
+    const Step out = follow_refraction(world, in.next);
     ASSERT_GT(out.split.refract_weight, 0.0f) << degrees;
     EXPECT_FALSE(out.sp.front_face);
     EXPECT_NEAR(glm::dot(out.split.refract_direction, ray.direction), 1.0f, 1e-5f) << degrees;
@@ -177,21 +184,19 @@ TEST(Render, ARayThroughAGlassSlabExitsParallelToItsEntry) {
 }
 
 TEST(Render, TotalInternalReflectionBeyondTheCriticalAngle) {
-  GlassSlab slab;
-  const EmbreeBackend backend = slab.backend();
+  ecs::Registry reg;
+  const test::TracedWorld world(glass_slab(reg));
   const float critical = std::asin(1.0f / 1.5f);
   for (const float delta : {0.02f, 0.2f, 0.5f}) {
     const float theta = critical + delta;
     Ray ray; // inside the slab, heading up to the top face
     ray.origin = vec3(0.0f, 0.0f, 0.0f);
     ray.direction = vec3(std::sin(theta), std::cos(theta), 0.0f);
-    Hit hit;
-    backend.intersect(ray, hit);
+    const Hit hit = world.intersect(ray);
     ASSERT_TRUE(hit.hit());
-    const Surface& s = backend.surfaces()[hit.surface];
-    const auto sp = detail::shading_point(s, hit, ray.direction);
+    const auto sp = shading_point(world.tables(), hit, ray.direction);
     EXPECT_FALSE(sp.front_face);
-    const auto split = detail::split_specular(s.material, sp, ray.direction);
+    const auto split = split_specular(material_of(world, hit), sp, ray.direction);
     EXPECT_EQ(split.refract_weight, 0.0f) << delta;
     EXPECT_EQ(split.reflect_weight, 1.0f) << delta;
     EXPECT_NEAR(split.reflect_direction.y, -ray.direction.y, 1e-5f);
@@ -200,10 +205,10 @@ TEST(Render, TotalInternalReflectionBeyondTheCriticalAngle) {
   // Just below the critical angle some light gets out.
   Ray ray;
   ray.direction = vec3(std::sin(critical - 0.02f), std::cos(critical - 0.02f), 0.0f);
-  Hit hit;
-  backend.intersect(ray, hit);
-  const Surface& s = backend.surfaces()[hit.surface];
-  const auto split = detail::split_specular(s.material, detail::shading_point(s, hit, ray.direction), ray.direction);
+  const Hit hit = world.intersect(ray);
+  ASSERT_TRUE(hit.hit());
+  const auto split = split_specular(
+      material_of(world, hit), shading_point(world.tables(), hit, ray.direction), ray.direction);
   EXPECT_GT(split.refract_weight, 0.0f);
 }
 
@@ -212,21 +217,17 @@ TEST(Render, ReflectionOffAMirrorPreservesTheAngle) {
   Material mirror;
   mirror.reflectivity = 1.0f;
   test::add_mesh(reg, test::primitive("sphere", 2.0f, vec3(1), 64, 32), test::at(vec3(0)), mirror);
-  update_world_transforms(reg, 0);
-  reg.set_resource<EmbreeAccel>().update(reg);
-  const EmbreeBackend backend(reg.resource<EmbreeAccel>(), 1);
+  const test::TracedWorld world(reg);
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> u(-1.3f, 1.3f); // inside the tessellated outline
   for (int i = 0; i < 500; ++i) {
     Ray ray;
     ray.origin = vec3(u(rng), u(rng), 10.0f);
     ray.direction = vec3(0, 0, -1);
-    Hit hit;
-    backend.intersect(ray, hit);
+    const Hit hit = world.intersect(ray);
     ASSERT_TRUE(hit.hit());
-    const Surface& s = backend.surfaces()[hit.surface];
-    const auto sp = detail::shading_point(s, hit, ray.direction);
-    const auto split = detail::split_specular(s.material, sp, ray.direction);
+    const auto sp = shading_point(world.tables(), hit, ray.direction);
+    const auto split = split_specular(material_of(world, hit), sp, ray.direction);
     EXPECT_EQ(split.reflect_weight, 1.0f);
     EXPECT_EQ(split.refract_weight, 0.0f);
     EXPECT_NEAR(glm::dot(split.reflect_direction, sp.shading_normal),
@@ -243,7 +244,8 @@ ecs::Registry& cornell(ecs::Registry& reg) {
   glass.transmission = 0.95f;
   glass.ior = 1.5f;
   test::add_mesh(reg, test::primitive("box", 1.0f, vec3(4.0f)), test::at(vec3(0, 2, 0)), white);
-  test::add_mesh(reg, test::primitive("box", 1.0f, vec3(0.2f, 4.0f, 4.0f)), test::at(vec3(-1.9f, 2, 0)), red);
+  test::add_mesh(reg, test::primitive("box", 1.0f, vec3(0.2f, 4.0f, 4.0f)),
+                 test::at(vec3(-1.9f, 2, 0)), red);
   test::add_mesh(reg, test::primitive("sphere", 0.7f), test::at(vec3(-0.8f, 0.7f, -0.5f)), mirror);
   test::add_mesh(reg, test::primitive("sphere", 0.6f), test::at(vec3(0.9f, 0.6f, 0.4f)), glass);
   test::add_point_light(reg, vec3(0, 3.6f, 0), 8.0f);
@@ -303,8 +305,10 @@ TEST(Render, MaxDepthBoundsTheBounces) {
   mirror.reflectivity = 1.0f;
   for (const std::uint32_t depth : {0u, 1u, 5u, 12u}) {
     ecs::Registry r2;
-    test::add_mesh(r2, test::primitive("box", 1.0f, vec3(0.1f, 10, 10)), test::at(vec3(-2, 0, 0)), mirror);
-    test::add_mesh(r2, test::primitive("box", 1.0f, vec3(0.1f, 10, 10)), test::at(vec3(2, 0, 0)), mirror);
+    test::add_mesh(r2, test::primitive("box", 1.0f, vec3(0.1f, 10, 10)), test::at(vec3(-2, 0, 0)),
+                   mirror);
+    test::add_mesh(r2, test::primitive("box", 1.0f, vec3(0.1f, 10, 10)), test::at(vec3(2, 0, 0)),
+                   mirror);
     test::add_camera(r2, vec3(0, 0, 0), vec3(-1, 0, 0.001f), 10.0f);
     RenderJob job;
     job.settings.max_depth = depth;

@@ -35,6 +35,9 @@ struct Mesh {
   MeshSource source;
   std::vector<vec3> deformed_positions;
   std::uint64_t deformed_tick = 0;
+  /// The animation time deformed_positions were sampled at (animation_system resamples only when
+  /// the time changed, so a paused animation causes no refits).
+  float deformed_time = 0.0f;
 
   /// The positions to trace: the deformed ones when present, else the shared geometry's.
   [[nodiscard]] const std::vector<vec3>& positions() const {

@@ -1,0 +1,390 @@
+#include "specula/accel/embree/embree_tracer.h"
+
+#include "specula/core/assert.h"
+#include "specula/core/error.h"
+#include "specula/render/scene_layer.h"
+
+#include <cstring>
+#include <limits>
+
+namespace specula {
+
+static_assert(sizeof(vec3) == 3 * sizeof(float) && sizeof(uvec3) == 3 * sizeof(std::uint32_t),
+              "Embree buffers are filled with memcpy from GLM vectors");
+
+void EmbreeTracer::on_error(void* user, RTCError code, const char* message) {
+  // Embree may call this from its own build threads: keep the text under a lock for check().
+  auto* self = static_cast<EmbreeTracer*>(user);
+  const std::lock_guard lock(self->error_mutex_);
+  self->last_error_ = "Embree error " + std::to_string(int(code)) + ": " + (message ? message : "");
+}
+
+EmbreeTracer::EmbreeTracer(std::uint32_t packet_width) : packet_width_(packet_width) {
+  set_packet_width(packet_width);
+  device_ = rtcNewDevice("verbose=0");
+  if (device_ == nullptr) throw Error("embree", "cannot create an Embree device");
+  rtcSetDeviceErrorFunction(device_, &EmbreeTracer::on_error, this);
+  top_ = rtcNewScene(device_);
+  rtcSetSceneFlags(top_, RTC_SCENE_FLAG_DYNAMIC | RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneBuildQuality(top_, RTC_BUILD_QUALITY_LOW);
+  rtcCommitScene(top_);
+  check("creating the top-level scene");
+}
+
+EmbreeTracer::~EmbreeTracer() {
+  for (auto& [slot, d] : dynamic_) {
+    if (d.instance) rtcReleaseGeometry(d.instance);
+    if (d.own_blas) rtcReleaseScene(d.own_blas);
+  }
+  for (auto& [mesh, blas] : blas_) rtcReleaseScene(blas);
+  if (static_instance_) rtcReleaseGeometry(static_instance_);
+  if (static_scene_) rtcReleaseScene(static_scene_);
+  if (top_) rtcReleaseScene(top_);
+  if (device_) rtcReleaseDevice(device_);
+}
+
+void EmbreeTracer::set_packet_width(std::uint32_t width) {
+  SPECULA_ASSERT(width == 1 || width == 4 || width == 8 || width == 16);
+  packet_width_ = width;
+}
+
+void EmbreeTracer::check(const char* what) {
+  const RTCError code = rtcGetDeviceError(device_);
+  if (code == RTC_ERROR_NONE) return;
+  std::string message;
+  {
+    const std::lock_guard lock(error_mutex_);
+    message.swap(last_error_);
+  }
+  if (message.empty()) message = "Embree error " + std::to_string(int(code));
+  throw Error("embree", std::string(what) + ": " + message);
+}
+
+RTCGeometry EmbreeTracer::make_triangles(const SceneTables& tables, std::uint32_t mesh,
+                                         RTCBuildQuality quality) {
+  const gpu::GpuMesh& m = tables.meshes[mesh];
+  RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
+      geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), m.vertex_count));
+  auto* indices = static_cast<std::uint32_t*>(
+      rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                              3 * sizeof(std::uint32_t), m.triangle_count));
+  if (vertices == nullptr || indices == nullptr) {
+    rtcReleaseGeometry(geom);
+    check("allocating a mesh");
+    throw Error("embree",
+                "cannot allocate a mesh of " + std::to_string(m.triangle_count) + " triangles");
+  }
+  std::memcpy(vertices, tables.positions.data() + m.first_vertex, m.vertex_count * sizeof(vec3));
+  std::memcpy(indices, tables.triangles.data() + m.first_triangle,
+              m.triangle_count * sizeof(uvec3));
+  rtcSetGeometryBuildQuality(geom, quality);
+  rtcCommitGeometry(geom);
+  return geom;
+}
+
+void EmbreeTracer::rebuild_static(const SceneTables& tables) {
+  if (static_instance_ != nullptr) {
+    rtcDetachGeometry(top_, 0);
+    rtcReleaseGeometry(static_instance_);
+    static_instance_ = nullptr;
+  }
+  if (static_scene_ != nullptr) rtcReleaseScene(static_scene_);
+  static_scene_ = nullptr;
+  static_slot_of_geom_.clear();
+  static_triangles_ = 0;
+  if (tables.static_instances.empty()) return;
+
+  static_scene_ = rtcNewScene(device_);
+  rtcSetSceneFlags(static_scene_, RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneBuildQuality(static_scene_, RTC_BUILD_QUALITY_HIGH);
+  // One geometry per static instance, in the layer's order: geometry id g is static_instances[g].
+  for (const std::uint32_t slot : tables.static_instances) {
+    RTCGeometry geom = make_triangles(tables, tables.instances[slot].mesh, RTC_BUILD_QUALITY_HIGH);
+    rtcAttachGeometry(static_scene_, geom);
+    rtcReleaseGeometry(geom);
+    static_slot_of_geom_.push_back(slot);
+  }
+  static_triangles_ = tables.static_triangle_count;
+  rtcCommitScene(static_scene_);
+  check("building the static scene");
+  static_instance_ = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_INSTANCE);
+  rtcSetGeometryInstancedScene(static_instance_, static_scene_);
+  const mat4 identity(1.0f);
+  rtcSetGeometryTransform(static_instance_, 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR, &identity[0][0]);
+  rtcCommitGeometry(static_instance_);
+  rtcAttachGeometryByID(top_, static_instance_, 0);
+  ++last_.static_builds;
+}
+
+RTCScene EmbreeTracer::shared_blas(const SceneTables& tables, std::uint32_t mesh) {
+  // Built when the first instance needs it (a mesh only deforming instances use needs none).
+  RTCScene& blas = blas_[mesh];
+  if (blas == nullptr) {
+    blas = rtcNewScene(device_);
+    rtcSetSceneFlags(blas, RTC_SCENE_FLAG_ROBUST);
+    rtcSetSceneBuildQuality(blas, RTC_BUILD_QUALITY_HIGH);
+    RTCGeometry geom = make_triangles(tables, mesh, RTC_BUILD_QUALITY_HIGH);
+    rtcAttachGeometry(blas, geom);
+    rtcReleaseGeometry(geom);
+    rtcCommitScene(blas);
+    check("building a mesh's structure");
+    ++last_.blas_builds;
+  }
+  return blas;
+}
+
+void EmbreeTracer::release_dynamic(std::uint32_t slot) {
+  const auto it = dynamic_.find(slot);
+  if (it == dynamic_.end()) return;
+  rtcDetachGeometry(top_, slot + 1);
+  rtcReleaseGeometry(it->second.instance);
+  if (it->second.own_blas != nullptr) rtcReleaseScene(it->second.own_blas); // owns own_mesh
+  dynamic_.erase(it);
+}
+
+const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
+  last_ = TracerUpdateStats{};
+  const SceneTables& tables = layer.tables();
+  const SceneDelta& delta = layer.delta();
+  bool top_dirty = false;
+
+  if (delta.static_rebuilt) {
+    rebuild_static(tables);
+    top_dirty = true;
+  }
+  for (const std::uint32_t slot : delta.instances_removed) {
+    release_dynamic(slot);
+    ++last_.instances_removed;
+    top_dirty = true;
+  }
+  for (const std::uint32_t slot : delta.instances_added) {
+    const gpu::GpuInstance& inst = tables.instances[slot];
+    Dynamic d;
+    RTCScene blas = nullptr;
+    if ((inst.flags & gpu::kInstanceDeforming) != 0) {
+      d.own_blas = rtcNewScene(device_);
+      rtcSetSceneFlags(d.own_blas, RTC_SCENE_FLAG_DYNAMIC | RTC_SCENE_FLAG_ROBUST);
+      d.own_mesh = make_triangles(tables, inst.mesh, RTC_BUILD_QUALITY_REFIT);
+      rtcAttachGeometry(d.own_blas, d.own_mesh);
+      rtcReleaseGeometry(d.own_mesh); // the scene keeps it
+      rtcCommitScene(d.own_blas);
+      check("building a deforming mesh's structure");
+      ++last_.blas_builds;
+      blas = d.own_blas;
+    } else {
+      blas = shared_blas(tables, inst.mesh);
+    }
+    d.instance = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(d.instance, blas);
+    rtcSetGeometryTransform(d.instance, 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR,
+                            &inst.world_from_object[0][0]);
+    rtcCommitGeometry(d.instance);
+    rtcAttachGeometryByID(top_, d.instance, slot + 1);
+    check("adding an instance");
+    dynamic_[slot] = d;
+    ++last_.instances_added;
+    top_dirty = true;
+  }
+  for (const std::uint32_t slot : delta.instances_moved) {
+    const Dynamic& d = dynamic_.at(slot);
+    rtcSetGeometryTransform(d.instance, 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR,
+                            &tables.instances[slot].world_from_object[0][0]);
+    rtcCommitGeometry(d.instance);
+    ++last_.instances_moved;
+    top_dirty = true;
+  }
+  for (const std::uint32_t slot : delta.instances_deformed) {
+    const Dynamic& d = dynamic_.at(slot);
+    const gpu::GpuMesh& m = tables.meshes[tables.instances[slot].mesh];
+    auto* vertices =
+        static_cast<float*>(rtcGetGeometryBufferData(d.own_mesh, RTC_BUFFER_TYPE_VERTEX, 0));
+    std::memcpy(vertices, tables.positions.data() + m.first_vertex, m.vertex_count * sizeof(vec3));
+    rtcUpdateGeometryBuffer(d.own_mesh, RTC_BUFFER_TYPE_VERTEX, 0);
+    rtcCommitGeometry(d.own_mesh);
+    rtcCommitScene(d.own_blas); // refit: the topology is unchanged
+    check("refitting a deforming mesh");
+    ++last_.blas_refits;
+    top_dirty = true; // the instance's bounds changed
+  }
+  for (const std::uint32_t mesh : delta.meshes_removed) {
+    if (const auto it = blas_.find(mesh); it != blas_.end()) {
+      rtcReleaseScene(it->second);
+      blas_.erase(it);
+    }
+  }
+  if (top_dirty) {
+    rtcCommitScene(top_);
+    check("committing the top-level scene");
+    last_.top_committed = true;
+  }
+  last_.static_triangles = static_triangles_;
+  last_.dynamic_instances = std::uint32_t(dynamic_.size());
+  return last_;
+}
+
+void EmbreeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
+  SPECULA_ASSERT(hits.size() == rays.size());
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const Ray& ray = rays[i];
+    RTCRayHit rh;
+    rh.ray.org_x = ray.origin.x;
+    rh.ray.org_y = ray.origin.y;
+    rh.ray.org_z = ray.origin.z;
+    rh.ray.tnear = ray.tnear;
+    rh.ray.dir_x = ray.direction.x;
+    rh.ray.dir_y = ray.direction.y;
+    rh.ray.dir_z = ray.direction.z;
+    rh.ray.time = 0.0f;
+    rh.ray.tfar = ray.tfar;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.id = 0;
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(top_, &context, &rh);
+    Hit& hit = hits[i];
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
+      hit = Hit{};
+      continue;
+    }
+    hit.t = rh.ray.tfar;
+    hit.instance = slot_of(rh.hit.geomID, rh.hit.instID[0]);
+    hit.primitive = rh.hit.primID;
+    hit.uv = vec2(rh.hit.u, rh.hit.v);
+    hit.object_normal = vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
+  }
+}
+
+void EmbreeTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded) const {
+  SPECULA_ASSERT(occluded.size() == rays.size());
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const Ray& ray = rays[i];
+    RTCRay r;
+    r.org_x = ray.origin.x;
+    r.org_y = ray.origin.y;
+    r.org_z = ray.origin.z;
+    r.tnear = ray.tnear;
+    r.dir_x = ray.direction.x;
+    r.dir_y = ray.direction.y;
+    r.dir_z = ray.direction.z;
+    r.time = 0.0f;
+    r.tfar = ray.tfar;
+    r.mask = 0xFFFFFFFFu;
+    r.id = 0;
+    r.flags = 0;
+    rtcOccluded1(top_, &context, &r);
+    occluded[i] = r.tfar < 0.0f ? 1 : 0; // Embree sets tfar to -inf on occlusion
+  }
+}
+
+template <int N, typename RayHitN, typename IntersectN>
+void EmbreeTracer::intersect_camera_packets(const CameraRays& camera, const PacketTile& tile,
+                                            PrimaryHits& hits, IntersectN intersect_n) const {
+  SPECULA_ASSERT(tile.packet_w * tile.packet_h <= std::uint32_t(N));
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  std::size_t next = 0;
+  tile.for_each_block(
+      [&](std::uint32_t bx0, std::uint32_t by0, std::uint32_t bx1, std::uint32_t by1) {
+        alignas(64) RayHitN rh;
+        alignas(64) int valid[N];
+        int lanes = 0;
+        for (std::uint32_t y = by0; y < by1; ++y)
+          for (std::uint32_t x = bx0; x < bx1; ++x, ++lanes) {
+            const Ray r = camera.ray(x, y);
+            rh.ray.org_x[lanes] = r.origin.x;
+            rh.ray.org_y[lanes] = r.origin.y;
+            rh.ray.org_z[lanes] = r.origin.z;
+            rh.ray.dir_x[lanes] = r.direction.x;
+            rh.ray.dir_y[lanes] = r.direction.y;
+            rh.ray.dir_z[lanes] = r.direction.z;
+            rh.ray.tnear[lanes] = r.tnear;
+            rh.ray.tfar[lanes] = r.tfar;
+          }
+        for (int i = 0; i < N; ++i) {
+          valid[i] = i < lanes ? -1 : 0;
+          if (i >= lanes) { // inactive lanes still hold finite data
+            rh.ray.org_x[i] = rh.ray.org_x[0];
+            rh.ray.org_y[i] = rh.ray.org_y[0];
+            rh.ray.org_z[i] = rh.ray.org_z[0];
+            rh.ray.dir_x[i] = rh.ray.dir_x[0];
+            rh.ray.dir_y[i] = rh.ray.dir_y[0];
+            rh.ray.dir_z[i] = rh.ray.dir_z[0];
+            rh.ray.tnear[i] = rh.ray.tnear[0];
+            rh.ray.tfar[i] = rh.ray.tfar[0];
+          }
+          rh.ray.time[i] = 0.0f;
+          rh.ray.mask[i] = 0xFFFFFFFFu;
+          rh.ray.id[i] = unsigned(i);
+          rh.ray.flags[i] = 0;
+          rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+          rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+        }
+        intersect_n(valid, top_, &context, &rh);
+        for (int i = 0; i < lanes; ++i) {
+          const std::size_t k = next + std::size_t(i);
+          hits.dir_x[k] = rh.ray.dir_x[i];
+          hits.dir_y[k] = rh.ray.dir_y[i];
+          hits.dir_z[k] = rh.ray.dir_z[i];
+          if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) {
+            hits.instance[k] = kNoInstance;
+            hits.primitive[k] = 0;
+            hits.t[k] = std::numeric_limits<float>::infinity();
+            continue;
+          }
+          hits.instance[k] = slot_of(rh.hit.geomID[i], rh.hit.instID[0][i]);
+          hits.primitive[k] = rh.hit.primID[i];
+          hits.t[k] = rh.ray.tfar[i];
+          hits.u[k] = rh.hit.u[i];
+          hits.v[k] = rh.hit.v[i];
+          hits.ng_x[k] = rh.hit.Ng_x[i];
+          hits.ng_y[k] = rh.hit.Ng_y[i];
+          hits.ng_z[k] = rh.hit.Ng_z[i];
+        }
+        next += std::size_t(lanes);
+      });
+}
+
+void EmbreeTracer::intersect_camera(const CameraRays& camera, const PacketTile& tile,
+                                    PrimaryHits& hits) const {
+  hits.resize(tile.pixel_count());
+  switch (packet_width_) {
+  case 16:
+    intersect_camera_packets<16, RTCRayHit16>(camera, tile, hits, rtcIntersect16);
+    return;
+  case 8:
+    intersect_camera_packets<8, RTCRayHit8>(camera, tile, hits, rtcIntersect8);
+    return;
+  case 4:
+    intersect_camera_packets<4, RTCRayHit4>(camera, tile, hits, rtcIntersect4);
+    return;
+  default: {
+    std::size_t i = 0;
+    Hit hit;
+    tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
+      const Ray ray = camera.ray(x, y);
+      intersect(std::span<const Ray>(&ray, 1), std::span<Hit>(&hit, 1));
+      hits.instance[i] = hit.instance;
+      hits.primitive[i] = hit.primitive;
+      hits.t[i] = hit.t;
+      hits.u[i] = hit.uv.x;
+      hits.v[i] = hit.uv.y;
+      hits.ng_x[i] = hit.object_normal.x;
+      hits.ng_y[i] = hit.object_normal.y;
+      hits.ng_z[i] = hit.object_normal.z;
+      hits.dir_x[i] = ray.direction.x;
+      hits.dir_y[i] = ray.direction.y;
+      hits.dir_z[i] = ray.direction.z;
+      ++i;
+    });
+  }
+  }
+}
+
+} // namespace specula

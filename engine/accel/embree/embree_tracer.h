@@ -1,0 +1,87 @@
+#pragma once
+/// \file
+/// The Embree backend: Embree's structures built from the scene layer's tables, and the batch
+/// queries the integrators ask for. Two levels, as the real-time ray tracer paper (Bui Phu & Le,
+/// after Wald) separates static from dynamic geometry:
+///   - the static set, already baked in world space by the layer, is one Embree scene built with
+///     RTC_BUILD_QUALITY_HIGH, rebuilt only when the layer says the static set changed;
+///   - each object-space mesh the layer shares between dynamic instances gets one scene (BLAS);
+///     moving an instance only rewrites its transform;
+///   - a deforming instance owns a BLAS built with RTC_BUILD_QUALITY_REFIT and refitted when the
+///     layer reports its vertices rewritten;
+///   - the top level holds the static scene (geometry id 0) and one instance per dynamic instance
+///     slot s (geometry id s + 1), and is recommitted only when one of them changed.
+/// Only the layer's delta causes work; last_update() counts what was done.
+
+#include "specula/trace/tracer.h"
+
+#include <embree3/rtcore.h>
+
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+namespace specula {
+
+struct SceneTables;
+
+class EmbreeTracer final : public Tracer {
+public:
+  /// packet_width: 1, 4, 8 or 16. Throws specula::Error when Embree cannot create a device.
+  explicit EmbreeTracer(std::uint32_t packet_width = 16);
+  ~EmbreeTracer() override;
+  EmbreeTracer(const EmbreeTracer&) = delete;
+  EmbreeTracer& operator=(const EmbreeTracer&) = delete;
+
+  [[nodiscard]] std::string_view name() const override { return "embree"; }
+  const TracerUpdateStats& update(const SceneLayer& layer) override;
+  [[nodiscard]] const TracerUpdateStats& last_update() const override { return last_; }
+  void intersect(std::span<const Ray> rays, std::span<Hit> hits) const override;
+  void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded) const override;
+  void intersect_camera(const CameraRays& camera, const PacketTile& tile,
+                        PrimaryHits& hits) const override;
+  [[nodiscard]] std::uint32_t packet_width() const override { return packet_width_; }
+  void set_packet_width(std::uint32_t width) override;
+
+  /// The top-level scene (for benchmarks that call Embree directly on the same structure).
+  [[nodiscard]] RTCScene scene() const { return top_; }
+
+private:
+  struct Dynamic {
+    RTCGeometry instance = nullptr;
+    RTCScene own_blas = nullptr; ///< deforming instances only
+    RTCGeometry own_mesh = nullptr;
+  };
+
+  /// The instance slot of an Embree hit (instance id 0: the static scene, by geometry id).
+  [[nodiscard]] std::uint32_t slot_of(unsigned geom_id, unsigned inst_id) const {
+    return inst_id == 0 ? static_slot_of_geom_[geom_id] : inst_id - 1;
+  }
+  template <int N, typename RayHitN, typename IntersectN>
+  void intersect_camera_packets(const CameraRays& camera, const PacketTile& tile, PrimaryHits& hits,
+                                IntersectN intersect_n) const;
+  void rebuild_static(const SceneTables& tables);
+  RTCScene shared_blas(const SceneTables& tables, std::uint32_t mesh);
+  void release_dynamic(std::uint32_t slot);
+  RTCGeometry make_triangles(const SceneTables& tables, std::uint32_t mesh,
+                             RTCBuildQuality quality);
+  void check(const char* what);
+  static void on_error(void* user, RTCError code, const char* message);
+
+  std::uint32_t packet_width_;
+  RTCDevice device_ = nullptr;
+  RTCScene top_ = nullptr;
+  RTCScene static_scene_ = nullptr;
+  RTCGeometry static_instance_ = nullptr;
+  std::vector<std::uint32_t> static_slot_of_geom_;
+  std::unordered_map<std::uint32_t, RTCScene> blas_;   ///< by shared mesh record
+  std::unordered_map<std::uint32_t, Dynamic> dynamic_; ///< by instance slot
+  TracerUpdateStats last_;
+  std::uint32_t static_triangles_ = 0;
+  std::mutex error_mutex_;
+  std::string last_error_; ///< the latest message Embree reported, consumed by check()
+};
+
+} // namespace specula

@@ -1,0 +1,27 @@
+#include "specula/render/render_job.h"
+
+#include "specula/core/error.h"
+#include "specula/render/tracer_factory.h"
+
+#include <string>
+
+namespace specula {
+
+void prepare_rendering(ecs::Registry& registry, RenderJob job) {
+  if (job.settings.max_depth > 32)
+    throw Error("render settings",
+                "max depth must be at most 32, got " + std::to_string(job.settings.max_depth));
+  if (job.settings.tile_size == 0 || job.settings.tile_size > 1024)
+    throw Error("render settings", "tile size must be 1 to 1024");
+  if (job.settings.mode == TraceMode::Path || job.settings.mode == TraceMode::Shadow)
+    throw UnavailableError(std::string("mode '") + trace_mode_name(job.settings.mode) +
+                           "' is not available yet (it lands with the streaming ray tracer)");
+  std::unique_ptr<Tracer> tracer = make_tracer(job.backend, job.packet_width);
+  job.backend = std::string(tracer->name());
+  registry.set_resource<ActiveTracer>(ActiveTracer{std::move(tracer)});
+  // A new layer: its first sync hands the new tracer the whole scene.
+  registry.set_resource<SceneLayer>();
+  registry.set_resource<RenderJob>(std::move(job));
+}
+
+} // namespace specula

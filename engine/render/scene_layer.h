@@ -1,0 +1,164 @@
+#pragma once
+/// \file
+/// The backend-neutral scene layer: each frame the ECS becomes one flat description of what is
+/// traced — the static set, the instances (entity, mesh, world-from-object), deformed meshes,
+/// lights, and material and mesh tables keyed by instance — plus a delta saying what changed.
+/// Every backend builds its structures from these tables and applies the delta; none reads the
+/// ECS. The tables hold no pointers: 32-bit indices and offsets into flat geometry pools, laid out
+/// as shaders/shared/scene_layout.h says, so the GPU path can upload them as they are.
+///
+/// Change comes from the transform system (TransformChanges: the entities whose world transform
+/// changed), the meshes' deformation ticks (Mesh::deformed_tick) and the ECS pool versions of the
+/// components the layer mirrors (ecs/registry.h rule 5): a frame in which nothing moved, deformed
+/// or was added does no work proportional to the scene — no entity is visited, no vertex copied.
+
+#include "specula/core/math.h"
+#include "specula/ecs/registry.h"
+#include "specula/geometry/triangle_mesh.h"
+#include "specula/shared/scene_layout.h"
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <unordered_map>
+#include <vector>
+
+namespace specula {
+
+/// The flat tables. Instance slots are stable while their entity stays an instance of the same
+/// kind; freed slots (GpuInstance::mesh == gpu::kNoIndex) are reused. Mesh records likewise.
+struct SceneTables {
+  std::vector<gpu::GpuInstance> instances;
+  std::vector<gpu::GpuMaterial> materials; ///< one per instance slot (GpuInstance::material)
+  std::vector<gpu::GpuMesh> meshes;
+  std::vector<gpu::GpuLight> lights;
+  /// Geometry pools. The static set's meshes come first, baked in world space and contiguous:
+  /// triangles [0, static_triangle_count) are every static triangle, in static_instances order.
+  std::vector<vec3> positions;
+  std::vector<vec3> normals;
+  std::vector<uvec3> triangles;
+  /// The static set: instance slots sorted by entity index (the order of their baked meshes).
+  std::vector<std::uint32_t> static_instances;
+  std::uint32_t static_triangle_count = 0;
+
+  [[nodiscard]] bool live(std::uint32_t instance) const {
+    return instance < instances.size() && instances[instance].mesh != gpu::kNoIndex;
+  }
+  [[nodiscard]] ecs::Entity entity(std::uint32_t instance) const {
+    return ecs::Entity{instances[instance].entity_index, instances[instance].entity_generation};
+  }
+};
+
+/// What changed in the latest sync. A consumer applies it in field order: when static_rebuilt,
+/// drop the static structure and build it again from static_instances; then meshes_added;
+/// instances_removed (their table entries are already freed), instances_added, instances_moved,
+/// instances_deformed; last meshes_removed. Only dynamic (hierarchical and free) instances appear
+/// in the instance lists: static ones are covered by static_rebuilt.
+struct SceneDelta {
+  bool static_rebuilt = false;
+  std::vector<std::uint32_t> meshes_added;   ///< object-space meshes dynamic instances share
+  std::vector<std::uint32_t> meshes_removed; ///< no instance uses them any more
+  std::vector<std::uint32_t> instances_removed;
+  std::vector<std::uint32_t> instances_added;
+  std::vector<std::uint32_t> instances_moved;    ///< world_from_object changed
+  std::vector<std::uint32_t> instances_deformed; ///< vertices rewritten in place: refit
+  bool materials_changed = false;
+  bool lights_changed = false;
+  /// Pool offsets changed (a compaction or a static rebuild): copies of the pools are stale.
+  bool geometry_relocated = false;
+
+  [[nodiscard]] bool empty() const {
+    return !static_rebuilt && meshes_added.empty() && meshes_removed.empty() &&
+           instances_removed.empty() && instances_added.empty() && instances_moved.empty() &&
+           instances_deformed.empty() && !materials_changed && !lights_changed &&
+           !geometry_relocated;
+  }
+};
+
+/// The work one sync did (tests assert on it; the stats file reports it).
+struct SceneLayerStats {
+  std::uint32_t full_scans = 0;       ///< every mesh entity was looked at (membership changed)
+  std::uint32_t entities_visited = 0; ///< entities looked at, in scans and from the moved list
+  std::uint32_t static_bakes = 0;     ///< the static set was baked into world space
+  std::uint32_t relayouts = 0;        ///< the geometry pools were rewritten (bake or compaction)
+  std::uint64_t vertices_written = 0; ///< vertex positions written to the pools
+  std::uint32_t instances_added = 0;  ///< dynamic instances (static ones count in static_bakes)
+  std::uint32_t instances_removed = 0;
+  std::uint32_t instances_moved = 0;
+  std::uint32_t instances_deformed = 0;
+  std::uint32_t static_instances = 0; ///< in the static set after the sync
+  std::uint32_t static_triangles = 0;
+  std::uint32_t dynamic_instances = 0;
+};
+
+class SceneLayer {
+public:
+  /// Brings the tables up to date with the registry's Mesh, WorldTransform, Kinematics,
+  /// Material and Light components (world transforms must be current: run after the transform
+  /// system). Entities without Kinematics get the inferred kind (inferred_kinematics). Returns the
+  /// delta since the previous sync; the first sync adds everything.
+  const SceneDelta& sync(ecs::Registry& registry);
+
+  [[nodiscard]] const SceneTables& tables() const { return tables_; }
+  [[nodiscard]] const SceneDelta& delta() const { return delta_; }
+  [[nodiscard]] const SceneLayerStats& stats() const { return stats_; }
+  /// The instance slot of a live entity, if it is one.
+  [[nodiscard]] std::optional<std::uint32_t> instance_of(ecs::Entity entity) const;
+  /// Number of syncs so far (0: never synced).
+  [[nodiscard]] std::uint64_t syncs() const { return syncs_; }
+
+private:
+  struct Slot {
+    ecs::Entity entity = ecs::null_entity;
+    const TriangleMesh* source = nullptr; ///< Mesh::geometry as last seen
+    std::uint32_t kinematics = gpu::kKinematicsStatic;
+    bool deforming = false;
+    std::uint64_t moved_tick = 0;              ///< WorldTransform::moved_tick as last applied
+    std::uint64_t deformed_tick = 0;           ///< Mesh::deformed_tick as last applied
+    std::uint32_t shared_mesh = gpu::kNoIndex; ///< the object-space mesh record it uses
+  };
+  struct SharedMesh {
+    std::shared_ptr<const TriangleMesh> source;
+    std::uint32_t record = gpu::kNoIndex;
+    std::uint32_t users = 0;
+  };
+  struct Desired {
+    const std::shared_ptr<const TriangleMesh>* geometry;
+    std::uint32_t kinematics;
+    bool deforming;
+  };
+
+  /// Every mesh entity looked at: membership, kinds and sources checked; `moved` is the
+  /// transform system's complete list since the last sync, or nullptr when there is none.
+  void full_scan(ecs::Registry& registry, const std::vector<ecs::Entity>* moved);
+  void apply_moved(ecs::Registry& registry, const std::vector<ecs::Entity>& moved);
+  void apply_deformations(ecs::Registry& registry);
+  void refresh_materials(ecs::Registry& registry);
+  void refresh_lights(ecs::Registry& registry);
+  void add_instance(ecs::Registry& registry, ecs::Entity e, const Desired& d);
+  void remove_instance(std::uint32_t slot);
+  void write_transform(std::uint32_t slot, const mat4& world_from_object);
+  std::uint32_t acquire_shared_mesh(const std::shared_ptr<const TriangleMesh>& geometry);
+  void release_shared_mesh(const TriangleMesh* source);
+  std::uint32_t new_mesh_record();
+  /// Rewrites the pools: the static set (baked again from the registry when rebake), then every
+  /// shared mesh, then every deforming instance's vertices. Offsets change.
+  void relayout(ecs::Registry& registry, bool rebake);
+
+  SceneTables tables_;
+  SceneDelta delta_;
+  SceneLayerStats stats_;
+  std::vector<Slot> slots_;
+  std::vector<std::uint32_t> free_slots_;
+  std::vector<std::uint32_t> free_meshes_;
+  std::unordered_map<std::uint32_t, std::uint32_t> slot_of_entity_; ///< by entity slot index
+  std::unordered_map<const TriangleMesh*, SharedMesh> shared_;
+  std::vector<std::uint32_t> deforming_; ///< slots of deforming instances
+  std::uint64_t syncs_ = 0;
+  std::uint64_t transform_sequence_ = 0;
+  std::uint64_t version_mesh_ = 0, version_transform_ = 0, version_kinematics_ = 0,
+                version_animation_ = 0, version_parent_ = 0, version_material_ = 0;
+  std::size_t live_vertices_ = 0; ///< pool vertices in use (the rest is garbage until relayout)
+};
+
+} // namespace specula

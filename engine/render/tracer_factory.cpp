@@ -1,0 +1,58 @@
+#include "specula/render/tracer_factory.h"
+
+#include "specula/core/error.h"
+
+#if SPECULA_HAS_EMBREE
+#include "specula/accel/embree/embree_tracer.h"
+#endif
+
+namespace specula {
+
+std::vector<BackendInfo> backends() {
+  std::vector<BackendInfo> list;
+  // The order is auto's preference: a real GPU first (lavapipe, the software Vulkan device, is
+  // slower than the CPU backends), then the CPU backends.
+  list.push_back(
+      {"vulkan", false, "not in this build yet (it lands with the Vulkan compute path)", true});
+#if SPECULA_HAS_EMBREE
+  list.push_back({"embree", true, "", false});
+#else
+  list.push_back(
+      {"embree", false, "not in this build (configured with SPECULA_WITH_EMBREE=OFF)", false});
+#endif
+  list.push_back(
+      {"native", false, "not in this build yet (it lands with Specula's own structures)", true});
+  return list;
+}
+
+std::string resolve_backend(std::string_view requested) {
+  const std::vector<BackendInfo> all = backends();
+  if (requested == "auto") {
+    for (const BackendInfo& b : all)
+      if (b.available) return std::string(b.name);
+    throw UnavailableError("no tracing backend is available in this build");
+  }
+  for (const BackendInfo& b : all) {
+    if (b.name != requested) continue;
+    if (!b.available)
+      throw UnavailableError("backend '" + std::string(requested) + "' is " + b.reason);
+    return std::string(b.name);
+  }
+  std::string names = "auto";
+  for (const BackendInfo& b : all) names += ", " + std::string(b.name);
+  throw Error("--backend",
+              "unknown backend '" + std::string(requested) + "' (expected one of " + names + ")");
+}
+
+std::unique_ptr<Tracer> make_tracer(std::string_view name, std::uint32_t packet_width) {
+  if (packet_width != 1 && packet_width != 4 && packet_width != 8 && packet_width != 16)
+    throw Error("render settings",
+                "packet width must be 1, 4, 8 or 16, got " + std::to_string(packet_width));
+  const std::string backend = resolve_backend(name);
+#if SPECULA_HAS_EMBREE
+  if (backend == "embree") return std::make_unique<EmbreeTracer>(packet_width);
+#endif
+  throw UnavailableError("backend '" + backend + "' has no tracer in this build");
+}
+
+} // namespace specula

@@ -1,0 +1,74 @@
+#pragma once
+/// \file
+/// The integrators, one per mode, each shading a tile's wave of primary hits (internal to the
+/// renderer: render_frame.h is the public entry). Cast and Whitted are separate functions over
+/// the same inputs, not branches of one.
+
+#include "specula/render/scene_layer.h"
+#include "specula/trace/camera_rays.h"
+#include "specula/trace/packet_tile.h"
+#include "specula/trace/radiance_hook.h"
+#include "specula/trace/render_frame.h"
+#include "specula/trace/stats.h"
+#include "specula/trace/tracer.h"
+
+#include <span>
+#include <vector>
+
+namespace specula::detail {
+
+/// What every tile of a frame shares.
+struct FrameInputs {
+  const Tracer& tracer;
+  const SceneTables& tables;
+  const TraceSettings& settings;
+  const CameraRays& camera;
+  RadianceHook* hook;
+  std::span<vec3> pixels; ///< the image, row-major
+  std::uint32_t width;
+};
+
+/// A ray of a Whitted tree: one per primary hit and one per reflection or refraction ray. Its
+/// radiance is what it brings back: local shading where it lands (filled by its shadow rays) plus,
+/// once every wave is done, its children's radiance × their weights.
+struct WhittedNode {
+  vec3 radiance;
+  vec3 weight;     ///< relative to the parent ray
+  vec3 throughput; ///< relative to the pixel: decides the weight cut-off
+  Ray ray;
+  std::uint32_t parent;     ///< node index (kNoInstance for primaries)
+  std::uint32_t pixel;      ///< image index
+  std::uint32_t tile_pixel; ///< index of the primary node of its pixel
+  std::uint32_t depth;
+  std::uint32_t from; ///< instance the ray leaves (kNoInstance for primaries)
+  RayKind kind;
+};
+
+/// A worker's scratch, reused from tile to tile.
+struct TileScratch {
+  PrimaryHits primary;
+  // Whitted waves.
+  std::vector<WhittedNode> nodes;
+  std::vector<std::uint32_t> wave, next_wave;
+  std::vector<Ray> rays;
+  std::vector<Hit> hits;
+  std::vector<Ray> shadow_rays;
+  std::vector<std::uint32_t> shadow_node;
+  std::vector<vec3> shadow_value;
+  std::vector<std::uint8_t> blocked;
+  std::vector<std::uint32_t> rays_of_pixel;
+  std::vector<LeavingRadiance> leaving;
+};
+
+/// Local shading of every primary hit: emission plus the diffuse term of every light, no shadow
+/// rays, no secondary rays; misses get the background.
+void cast_tile(const FrameInputs& frame, const PacketTile& tile, const PrimaryHits& hits,
+               RayCounts& counts);
+
+/// The Whitted tree of every primary hit, traced in waves: shading a wave emits shadow rays
+/// (traced as one batch, then added to the ray they serve) and reflection/refraction rays (the
+/// next wave). Leaving rays are delivered to frame.hook after the last wave.
+void whitted_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& scratch,
+                  RayCounts& counts);
+
+} // namespace specula::detail

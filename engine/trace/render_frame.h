@@ -1,0 +1,58 @@
+#pragma once
+/// \file
+/// Frame rendering: the image is cut into square tiles handed out dynamically to worker threads
+/// (TBB work stealing inside an arena of the requested size). Each tile's camera rays are traced
+/// by the backend as coherent packets into a wave of primary hits; the integrator of the chosen
+/// mode then shades the wave — cast mode locally, Whitted mode by emitting shadow and secondary
+/// rays into batches that the backend traces wave after wave until no ray is left (the streaming
+/// model of Purcell et al. 2002: no recursion, every ray carries its pixel, weight, kind and the
+/// entity it leaves). Pixels are independent and nothing is random, so the image is bit-identical
+/// whatever the thread count, tile size or packet width.
+
+#include "specula/image/framebuffer.h"
+#include "specula/render/scene_layer.h"
+#include "specula/scene/components/camera.h"
+#include "specula/trace/radiance_hook.h"
+#include "specula/trace/stats.h"
+#include "specula/trace/tracer.h"
+
+#include <cstdint>
+#include <optional>
+#include <string_view>
+
+namespace specula {
+
+enum class TraceMode { Cast, Whitted, Path, Shadow };
+[[nodiscard]] std::optional<TraceMode> parse_trace_mode(std::string_view name);
+[[nodiscard]] const char* trace_mode_name(TraceMode mode);
+
+struct TraceSettings {
+  TraceMode mode = TraceMode::Whitted;
+  /// Longest chain of reflection/refraction bounces after the primary hit.
+  std::uint32_t max_depth = 5;
+  /// A secondary ray whose weight (largest channel of its throughput) falls below this is not
+  /// traced: its contribution cannot show in an 8-bit image (1/256).
+  float min_weight = 1.0f / 256.0f;
+  vec3 background{0.0f};
+  std::uint32_t tile_size = 16;
+  std::uint32_t threads = 0; ///< 0: every hardware thread
+};
+
+/// Most secondary rays one pixel may spawn in a frame (a bound on memory for pathological
+/// scenes, e.g. facing glass with no weight cut-off); rays beyond it are counted as dropped.
+inline constexpr std::uint32_t kMaxRaysPerPixel = 4096;
+
+/// Renders one frame of the scene layer's tables into `out` (its size is the image size) with
+/// `tracer`, whose structures must be up to date with `layer`. Leaving rays go to `hook` when one
+/// is given. Returns the ray counts (FrameStats::trace_ms and ms are left to the caller).
+/// Throws UnavailableError for modes this build does not have.
+FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Camera& camera,
+                        const TraceSettings& settings, Framebuffer& out,
+                        RadianceHook* hook = nullptr);
+
+/// The primary-ray stage of render_frame alone (camera rays, coherent packets, hits resolved to
+/// instances), for measuring the tracer's own overhead against its backend. Returns a checksum.
+std::uint64_t trace_primary_frame(const Tracer& tracer, const Camera& camera, std::uint32_t width,
+                                  std::uint32_t height, const TraceSettings& settings);
+
+} // namespace specula

@@ -1,0 +1,119 @@
+#pragma once
+/// \file
+/// Surface geometry at a hit, read from the scene layer's flat tables, and how a Whitted hit
+/// continues (reflection and refraction weights and directions). Shared by every integrator.
+
+#include "specula/geometry/ray.h"
+#include "specula/geometry/ray_offset.h"
+#include "specula/render/scene_layer.h"
+#include "specula/trace/optics.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace specula {
+
+struct ShadingPoint {
+  vec3 position;
+  vec3 position_error;   ///< bound on the rounding error of position (ray_offset.h)
+  vec3 geometric_normal; ///< facing the incoming ray
+  vec3 shading_normal;   ///< facing the same side as geometric_normal
+  bool front_face;       ///< the ray hit the side the triangle's winding faces (entering)
+};
+
+[[nodiscard]] inline mat3 normal_matrix(const gpu::GpuInstance& inst) {
+  return mat3(vec3(inst.normal_from_object[0]), vec3(inst.normal_from_object[1]),
+              vec3(inst.normal_from_object[2]));
+}
+
+/// Hit position from barycentrics on the triangle (more accurate than origin + t·d far from the
+/// ray origin), normals oriented towards the incoming direction. Instances baked in world space
+/// (kInstanceIdentity) skip the transforms; the results equal those of an identity transform.
+[[nodiscard]] inline ShadingPoint shading_point(const SceneTables& tables, const Hit& hit,
+                                                const vec3& direction,
+                                                bool with_error_bound = true) {
+  const gpu::GpuInstance& inst = tables.instances[hit.instance];
+  const gpu::GpuMesh& mesh = tables.meshes[inst.mesh];
+  const uvec3 tri = tables.triangles[mesh.first_triangle + hit.primitive];
+  const vec3* positions = tables.positions.data() + mesh.first_vertex;
+  const float w = 1.0f - hit.uv.x - hit.uv.y;
+  const vec3& p0 = positions[tri.x];
+  const vec3& p1 = positions[tri.y];
+  const vec3& p2 = positions[tri.z];
+  const vec3 p_object = w * p0 + hit.uv.x * p1 + hit.uv.y * p2;
+  const bool identity = (inst.flags & gpu::kInstanceIdentity) != 0;
+  ShadingPoint sp;
+  sp.position = identity ? p_object : vec3(inst.world_from_object * vec4(p_object, 1.0f));
+  if (with_error_bound) {
+    const vec3 e = barycentric_error(p0, p1, p2, w, hit.uv.x, hit.uv.y);
+    // transformed_error with the identity is exactly this.
+    sp.position_error = identity ? (gamma_bound(3) + 1.0f) * e + gamma_bound(3) * glm::abs(p_object)
+                                 : transformed_error(inst.world_from_object, p_object, e);
+  } else {
+    sp.position_error = vec3(0.0f);
+  }
+  const mat3 n_from_o = normal_matrix(inst);
+  const vec3 normal = glm::normalize(identity ? hit.object_normal : n_from_o * hit.object_normal);
+  sp.front_face = glm::dot(normal, direction) < 0.0f;
+  sp.geometric_normal = sp.front_face ? normal : -normal;
+  sp.shading_normal = sp.geometric_normal;
+  if ((inst.flags & gpu::kInstanceSmooth) != 0 && mesh.first_normal != gpu::kNoIndex) {
+    const vec3* n = tables.normals.data() + mesh.first_normal;
+    const vec3 n_object = w * n[tri.x] + hit.uv.x * n[tri.y] + hit.uv.y * n[tri.z];
+    vec3 ns = identity ? n_object : n_from_o * n_object;
+    const float len = glm::length(ns);
+    if (len > 0.0f && std::isfinite(len)) {
+      ns /= len;
+      sp.shading_normal = glm::dot(ns, sp.geometric_normal) < 0.0f ? -ns : ns;
+    }
+  }
+  return sp;
+}
+
+/// How a Whitted hit continues: mirror reflection with the material's reflectivity plus the
+/// Fresnel-reflected part of its transmission; refraction with the rest (none on total internal
+/// reflection). Directions are unit and leave on the correct side of the geometric surface even
+/// where the interpolated shading normal disagrees with it.
+struct SpecularSplit {
+  float reflect_weight = 0.0f;
+  vec3 reflect_direction{0.0f};
+  float refract_weight = 0.0f;
+  vec3 refract_direction{0.0f};
+};
+
+[[nodiscard]] inline SpecularSplit split_specular(const gpu::GpuMaterial& m, const ShadingPoint& sp,
+                                                  const vec3& d) {
+  SpecularSplit split;
+  split.reflect_weight = m.reflectivity;
+  if (m.transmission > 0.0f) {
+    const float eta = sp.front_face ? 1.0f / m.ior : m.ior;
+    float cos_i = -glm::dot(d, sp.shading_normal);
+    std::optional<vec3> t = refract_direction(d, sp.shading_normal, eta);
+    // The refracted ray must cross the geometric surface; where the shading normal bends it back,
+    // refract about the geometric normal instead.
+    if (t && glm::dot(*t, sp.geometric_normal) >= 0.0f) {
+      t = refract_direction(d, sp.geometric_normal, eta);
+      cos_i = -glm::dot(d, sp.geometric_normal);
+    }
+    if (t) {
+      const float f = fresnel_dielectric(cos_i, eta);
+      split.reflect_weight += m.transmission * f;
+      split.refract_weight = m.transmission * (1.0f - f);
+      split.refract_direction = *t;
+    } else {
+      split.reflect_weight += m.transmission; // total internal reflection
+    }
+  }
+  if (split.reflect_weight > 0.0f) {
+    vec3 r = reflect_direction(d, sp.shading_normal);
+    if (glm::dot(r, sp.geometric_normal) <= 0.0f) r = reflect_direction(d, sp.geometric_normal);
+    split.reflect_direction = glm::normalize(r);
+  }
+  return split;
+}
+
+[[nodiscard]] inline float max_component(const vec3& v) {
+  return std::max(v.x, std::max(v.y, v.z));
+}
+
+} // namespace specula
