@@ -21,6 +21,12 @@ std::string describe(ecs::Registry& registry, ecs::Entity e) {
 
 } // namespace
 
+std::string entity_label(const ecs::Registry& registry, ecs::Entity e) {
+  const Name* name = registry.try_get<Name>(e);
+  if (name != nullptr && !name->value.empty()) return "\"" + name->value + "\"";
+  return "entity " + std::to_string(e.index);
+}
+
 std::size_t update_world_transforms(ecs::Registry& registry, std::uint64_t tick,
                                     const std::string& context) {
   // Order entities so that every parent precedes its children: depth by walking up the chain

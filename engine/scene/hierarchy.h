@@ -10,6 +10,10 @@
 
 namespace specula {
 
+/// How messages name an entity: its Name in double quotes ("arm"), or "entity 7" (its slot
+/// index) when it has no Name or an empty one.
+[[nodiscard]] std::string entity_label(const ecs::Registry& registry, ecs::Entity e);
+
 /// Recomputes WorldTransform for every entity with a Transform (adding WorldTransform where
 /// missing), parents before children. Sets `moved` (and `moved_tick = tick`) on exactly the
 /// entities whose world matrix differs from the previous one, or that are new. Returns the number

@@ -4,6 +4,7 @@
 #include "specula/scene/animation_sampling.h"
 #include "specula/scene/components.h"
 #include "specula/scene/gltf_loader.h"
+#include "specula/scene/kinematics_rules.h"
 #include "specula/scene/mesh_io.h"
 #include "specula/scene/mesh_library.h"
 #include "specula/scene/strict_json.h"
@@ -482,28 +483,12 @@ std::optional<Kinematics::Type> parse_kinematics(const std::string& name) {
   return std::nullopt;
 }
 
-const char* kinematics_name(Kinematics::Type type) {
-  switch (type) {
-  case Kinematics::Type::Static:
-    return "static";
-  case Kinematics::Type::Hierarchical:
-    return "hierarchical";
-  case Kinematics::Type::Free:
-    return "free";
-  }
-  return "static";
-}
-
-/// What the later passes (parents, kinematics) need to know about one entity.
+/// What linking parents needs to know about one entity.
 struct EntityInfo {
   ecs::Entity entity;
   std::string name;
   std::optional<std::string> parent_name;
   std::optional<std::size_t> parent;
-  std::optional<Kinematics::Type> kinematics;
-  bool has_mesh = false;
-  bool rigid_animation = false;  ///< translation/rotation/scale tracks
-  bool vertex_animation = false; ///< deforming
 };
 
 void read_entity(const Reader& r, Scene& scene, const json& j, const std::string& path,
@@ -521,18 +506,20 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
   if (const json* v = o.find("parent")) {
     info.parent_name = read_string(r, *v, o.path("parent"));
   }
+  // Only a stated kinematics is emplaced; load_scene checks it against the animations and infers
+  // the others (settle_kinematics).
   if (const json* v = o.find("kinematics")) {
     const std::string name = read_string(r, *v, o.path("kinematics"));
-    info.kinematics = parse_kinematics(name);
-    if (!info.kinematics)
+    const std::optional<Kinematics::Type> type = parse_kinematics(name);
+    if (!type)
       r.fail(o.path("kinematics"),
              "unknown kinematics \"" + name + "\" (expected static, hierarchical or free)");
+    reg.emplace<Kinematics>(e, Kinematics{*type});
   }
 
   const Mesh* mesh = nullptr;
   if (const json* v = o.find("mesh")) {
     mesh = &reg.emplace<Mesh>(e, read_mesh(r, reg, *v, o.path("mesh"), base_dir));
-    info.has_mesh = true;
   }
   if (const json* v = o.find("material")) {
     r.check(mesh != nullptr, o.path("material"), "a material needs a mesh on the same entity");
@@ -566,16 +553,11 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
             "a camera path moves a camera: add \"camera\" to this entity");
     reg.emplace<CameraPath>(e, read_camera_path(r, *v, o.path("camera_path")));
   }
-  if (const json* v = o.find("animation")) {
-    const Animation& a =
-        reg.emplace<Animation>(e, read_animation(r, *v, o.path("animation"), mesh));
-    info.rigid_animation = !a.translation.empty() || !a.rotation.empty() || !a.scale.empty();
-    info.vertex_animation = !a.vertices.empty();
-  }
+  if (const json* v = o.find("animation"))
+    reg.emplace<Animation>(e, read_animation(r, *v, o.path("animation"), mesh));
 }
 
-/// Resolves parent names, rejects cycles, then settles Kinematics: an entity that an animation
-/// moves (its own or an ancestor's) cannot be static, and a deforming one must be free.
+/// Resolves parent names and rejects cycles.
 void link_entities(const Reader& r, Scene& scene, std::vector<EntityInfo>& infos) {
   std::map<std::string, std::vector<std::size_t>> by_name;
   for (std::size_t i = 0; i < infos.size(); ++i) by_name[infos[i].name].push_back(i);
@@ -615,60 +597,9 @@ void link_entities(const Reader& r, Scene& scene, std::vector<EntityInfo>& infos
     for (const std::size_t k : walk) state[k] = 2;
   }
 
-  // For each entity, the nearest one on its chain to the root (itself included) whose animation
-  // moves it; vertex animation deforms a mesh but moves nothing. Memoized, so long chains cost
-  // O(n) rather than O(n * depth).
-  constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
-  std::vector<std::optional<std::size_t>> mover_of(infos.size());
-  std::vector<bool> known(infos.size(), false);
-  for (std::size_t start = 0; start < infos.size(); ++start) {
-    std::vector<std::size_t> walk;
-    std::size_t k = start;
-    while (!known[k] && !infos[k].rigid_animation && infos[k].parent) {
-      walk.push_back(k);
-      k = *infos[k].parent;
-    }
-    std::size_t found = kNone;
-    if (known[k]) {
-      found = mover_of[k] ? *mover_of[k] : kNone;
-    } else {
-      found = infos[k].rigid_animation ? k : kNone;
-      walk.push_back(k);
-    }
-    for (const std::size_t w : walk) {
-      known[w] = true;
-      if (found != kNone) mover_of[w] = found;
-    }
-  }
-
   ecs::Registry& reg = scene.registry;
-  for (std::size_t i = 0; i < infos.size(); ++i) {
-    EntityInfo& info = infos[i];
+  for (const EntityInfo& info : infos)
     if (info.parent) reg.emplace<Parent>(info.entity, Parent{infos[*info.parent].entity});
-    const std::optional<std::size_t> mover = mover_of[i];
-    const bool moves = mover.has_value();
-    const std::string at = member_path(element_path("entities", i), "kinematics");
-    if (info.kinematics) {
-      if (info.vertex_animation && *info.kinematics != Kinematics::Type::Free)
-        r.fail(at,
-               std::string("\"") + kinematics_name(*info.kinematics) +
-                   "\" but the entity has vertex animation, which deforms the mesh: use \"free\"");
-      if (moves && *info.kinematics == Kinematics::Type::Static)
-        r.fail(at, "\"static\" but the entity is moved by the animation of " +
-                       (*mover == i ? std::string("itself")
-                                    : "its ancestor \"" + infos[*mover].name + "\"") +
-                       ": use \"hierarchical\" or \"free\"");
-      reg.emplace<Kinematics>(info.entity, Kinematics{*info.kinematics});
-    } else if (info.has_mesh) {
-      Kinematics k;
-      if (info.vertex_animation) {
-        k.type = Kinematics::Type::Free;
-      } else if (moves) {
-        k.type = Kinematics::Type::Hierarchical;
-      }
-      reg.emplace<Kinematics>(info.entity, k);
-    }
-  }
 }
 
 Scene read_document(const Reader& r, const json& root, const fs::path& base_dir) {
