@@ -1264,6 +1264,7 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
                                " is out of range (the file has " +
                                std::to_string(model.nodes.size()) + " nodes)");
     const auto node_index = static_cast<std::size_t>(item.node);
+    // A format check this traversal needs to terminate, not the ECS cycle check of load_scene.
     if (visited[node_index])
       ctx.fail(item.field, "node " + std::to_string(item.node) +
                                " is reached twice: the node graph has a cycle or a node with two "

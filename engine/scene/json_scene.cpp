@@ -557,7 +557,8 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
     reg.emplace<Animation>(e, read_animation(r, *v, o.path("animation"), mesh));
 }
 
-/// Resolves parent names and rejects cycles.
+/// Resolves parent names: each must belong to exactly one entity of the file. Cycles are left to
+/// update_world_transforms, which load_scene runs for every format.
 void link_entities(const Reader& r, Scene& scene, std::vector<EntityInfo>& infos) {
   std::map<std::string, std::vector<std::size_t>> by_name;
   for (std::size_t i = 0; i < infos.size(); ++i) by_name[infos[i].name].push_back(i);
@@ -573,28 +574,6 @@ void link_entities(const Reader& r, Scene& scene, std::vector<EntityInfo>& infos
                      std::to_string(it->second[0]) + "] and entities[" +
                      std::to_string(it->second[1]) + "]); parents must have unique names");
     infos[i].parent = it->second[0];
-  }
-
-  // Cycles: follow each chain; meeting an entity of the current walk again closes a loop.
-  std::vector<int> state(infos.size(), 0); // 0 unvisited, 1 on the current walk, 2 known acyclic
-  for (std::size_t start = 0; start < infos.size(); ++start) {
-    std::vector<std::size_t> walk;
-    std::optional<std::size_t> i = start;
-    while (i && state[*i] == 0) {
-      state[*i] = 1;
-      walk.push_back(*i);
-      i = infos[*i].parent;
-    }
-    if (i && state[*i] == 1) {
-      std::string chain = "\"" + infos[*i].name + "\"";
-      for (std::optional<std::size_t> k = infos[*i].parent; k; k = infos[*k].parent) {
-        chain += " -> \"" + infos[*k].name + "\"";
-        if (*k == *i) break;
-      }
-      r.fail(member_path(element_path("entities", *i), "parent"),
-             "parent chain forms a cycle: " + chain);
-    }
-    for (const std::size_t k : walk) state[k] = 2;
   }
 
   ecs::Registry& reg = scene.registry;
