@@ -63,11 +63,6 @@ private:
   std::vector<ecs::Entity> walk_;
 };
 
-Kinematics::Type infer(const ecs::Registry& registry, ecs::Entity e, Movers& movers) {
-  if (deforms(registry, e)) return Kinematics::Type::Free;
-  return movers.of(e).is_null() ? Kinematics::Type::Static : Kinematics::Type::Hierarchical;
-}
-
 /// The entities of a view in slot (= creation, = file) order, so the first bad entity of a file
 /// is the one reported.
 std::vector<ecs::Entity> in_slot_order(std::vector<ecs::Entity> entities) {
@@ -79,8 +74,18 @@ std::vector<ecs::Entity> in_slot_order(std::vector<ecs::Entity> entities) {
 } // namespace
 
 Kinematics::Type inferred_kinematics(const ecs::Registry& registry, ecs::Entity e) {
-  Movers movers(registry);
-  return infer(registry, e, movers);
+  if (deforms(registry, e)) return Kinematics::Type::Free;
+  // Allocation-free, for callers that ask per entity (accelerators); settle_kinematics memoises
+  // the same walk (Movers).
+  const std::size_t limit = registry.alive();
+  ecs::Entity cur = e;
+  for (std::size_t steps = 0; steps <= limit; ++steps) {
+    if (animates_transform(registry, cur)) return Kinematics::Type::Hierarchical;
+    const Parent* parent = registry.try_get<Parent>(cur);
+    if (parent == nullptr || !registry.valid(parent->entity)) break;
+    cur = parent->entity;
+  }
+  return Kinematics::Type::Static;
 }
 
 const char* kinematics_name(Kinematics::Type type) {
@@ -99,22 +104,31 @@ void settle_kinematics(ecs::Registry& registry, const std::string& source) {
   Movers movers(registry);
   for (const ecs::Entity e : in_slot_order(registry.view<Kinematics>().entities())) {
     const Kinematics::Type stated = registry.get<Kinematics>(e).type;
-    const std::string claim =
-        "kinematics of " + entity_label(registry, e) + " is \"" + kinematics_name(stated) + "\"";
+    const auto claim = [&] {
+      return "kinematics of " + entity_label(registry, e) + " is \"" + kinematics_name(stated) +
+             "\"";
+    };
     if (stated != Kinematics::Type::Free && deforms(registry, e))
-      throw Error(source, claim + " but its vertex animation deforms its mesh: use \"free\"");
+      throw Error(source, claim() + " but its vertex animation deforms its mesh: use \"free\"");
     if (stated != Kinematics::Type::Static) continue;
     const ecs::Entity mover = movers.of(e);
     if (mover.is_null()) continue;
-    throw Error(source, claim + " but it is moved by " +
+    throw Error(source, claim() + " but it is moved by " +
                             (mover == e ? std::string("its own animation")
                                         : "the animation of its ancestor " +
                                               entity_label(registry, mover)) +
                             ": use \"hierarchical\" or \"free\"");
   }
-  for (const ecs::Entity e : in_slot_order(registry.view<Mesh>().entities()))
-    if (!registry.has<Kinematics>(e))
-      registry.emplace<Kinematics>(e, Kinematics{infer(registry, e, movers)});
+  for (const ecs::Entity e : in_slot_order(registry.view<Mesh>().entities())) {
+    if (registry.has<Kinematics>(e)) continue;
+    Kinematics::Type type = Kinematics::Type::Static;
+    if (deforms(registry, e)) {
+      type = Kinematics::Type::Free;
+    } else if (!movers.of(e).is_null()) {
+      type = Kinematics::Type::Hierarchical;
+    }
+    registry.emplace<Kinematics>(e, Kinematics{type});
+  }
 }
 
 } // namespace specula

@@ -18,7 +18,8 @@ namespace specula {
 /// An ancestor's vertex animation deforms that ancestor's mesh only and moves nothing; camera
 /// paths move cameras, not meshes. The walk up the Parent chain stops at a stale parent and
 /// after as many steps as the registry has live entities, so a cycle (which
-/// update_world_transforms rejects) gives an answer rather than a hang. O(chain length).
+/// update_world_transforms rejects) gives an answer rather than a hang. O(chain length), allocates
+/// nothing.
 [[nodiscard]] Kinematics::Type inferred_kinematics(const ecs::Registry& registry, ecs::Entity e);
 
 /// The spelling of a kinematics type in scene files and messages: "static", "hierarchical" or

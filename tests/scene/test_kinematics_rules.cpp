@@ -187,7 +187,8 @@ TEST(SettleKinematics, UnnamedEntitiesAreNamedBySlot) {
 }
 
 TEST(SettleKinematics, AgreesWithInferredKinematicsOnARandomForest) {
-  // settle_kinematics memoises ancestor lookups; each answer must still be the per-entity rule.
+  // settle_kinematics memoises ancestor lookups, inferred_kinematics walks each chain: the two
+  // must give the same answer for every entity.
   std::mt19937 rng(20240917);
   ecs::Registry reg;
   std::vector<ecs::Entity> entities;
