@@ -7,7 +7,6 @@
 #include "specula/scene/components/light.h"
 #include "specula/scene/components/material.h"
 #include "specula/scene/components/mesh.h"
-#include "specula/scene/components/name.h"
 #include "specula/scene/components/parent.h"
 #include "specula/scene/components/world_transform.h"
 #include "specula/scene/hierarchy.h"
@@ -71,12 +70,6 @@ Aabb bounds_of(const vec3* p, std::size_t n) {
   return b;
 }
 
-std::string describe(ecs::Registry& registry, ecs::Entity e) {
-  const Name* name = registry.try_get<Name>(e);
-  std::string s = "entity " + std::to_string(e.index);
-  if (name != nullptr && !name->value.empty()) s += " '" + name->value + "'";
-  return s;
-}
 
 bool deforms(ecs::Registry& registry, ecs::Entity e, const Mesh& mesh) {
   if (!mesh.deformed_positions.empty()) return true;
@@ -219,7 +212,7 @@ void SceneLayer::apply_deformations(ecs::Registry& registry) {
     gpu::GpuMesh& record = tables_.meshes[tables_.instances[slot].mesh];
     const std::vector<vec3>& positions = mesh.positions();
     if (positions.size() != record.vertex_count)
-      throw Error("scene", describe(registry, s.entity) + " deformed to " +
+      throw Error("scene", entity_label(registry, s.entity) + " deformed to " +
                                std::to_string(positions.size()) + " vertices, but its mesh has " +
                                std::to_string(record.vertex_count));
     std::copy(positions.begin(), positions.end(), tables_.positions.begin() + record.first_vertex);
@@ -373,7 +366,7 @@ void SceneLayer::add_instance(ecs::Registry& registry, ecs::Entity e, const Desi
     const gpu::GpuMesh shared = tables_.meshes[s.shared_mesh];
     const std::vector<vec3>& positions = mesh.positions();
     if (positions.size() != shared.vertex_count)
-      throw Error("scene", describe(registry, e) + " has " + std::to_string(positions.size()) +
+      throw Error("scene", entity_label(registry, e) + " has " + std::to_string(positions.size()) +
                                " deformed vertices, but its mesh has " +
                                std::to_string(shared.vertex_count));
     inst.mesh = new_mesh_record();

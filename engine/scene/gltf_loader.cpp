@@ -67,9 +67,8 @@
 //   an earlier animation keeps it, with a warning). LINEAR → Linear, STEP → Step, CUBICSPLINE →
 //   the key values only, Linear (the tangents are dropped). Morph weights → vertex keys
 //   (base + Σ weight_i · target_i) on the mesh entities of the node.
-// - Kinematics: entities of TRS-animated nodes and all their descendants are Hierarchical (they
-//   move rigidly with their animated ancestor); entities with vertex animation are Free; the
-//   rest is Static.
+// - Kinematics: none (glTF cannot state them); load_scene infers them from the animations
+//   (settle_kinematics in kinematics_rules.h), as for every format.
 // - Skins are ignored (meshes stay in their bind pose), with a warning.
 // - Unsupported entries of extensionsRequired (KHR_draco_mesh_compression among them) are
 //   errors naming the extension; optional extensions the loader does not know are ignored.
@@ -1013,9 +1012,6 @@ struct WeightTrack {
 struct NodeAnimation {
   Animation trs; ///< translation/rotation/scale tracks (no vertices)
   std::optional<WeightTrack> weights;
-  [[nodiscard]] bool has_trs() const {
-    return !trs.translation.empty() || !trs.rotation.empty() || !trs.scale.empty();
-  }
 };
 
 std::size_t morph_target_count(const Context& ctx, const tinygltf::Node& node) {
@@ -1252,13 +1248,12 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
     int node = -1;
     ecs::Entity parent = ecs::null_entity;
     mat4 world_from_parent{1.0f};
-    bool animated_ancestor = false;
     std::string field; ///< where the node index was found, for messages
   };
   std::vector<Pending> stack;
   for (std::size_t i = roots.size(); i-- > 0;)
-    stack.push_back({roots[i], ecs::null_entity, mat4(1.0f), false,
-                     roots_field + "[" + std::to_string(i) + "]"});
+    stack.push_back(
+        {roots[i], ecs::null_entity, mat4(1.0f), roots_field + "[" + std::to_string(i) + "]"});
   std::vector<bool> visited(model.nodes.size(), false);
 
   while (!stack.empty()) {
@@ -1269,6 +1264,7 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
                                " is out of range (the file has " +
                                std::to_string(model.nodes.size()) + " nodes)");
     const auto node_index = static_cast<std::size_t>(item.node);
+    // A format check this traversal needs to terminate, not the ECS cycle check of load_scene.
     if (visited[node_index])
       ctx.fail(item.field, "node " + std::to_string(item.node) +
                                " is reached twice: the node graph has a cycle or a node with two "
@@ -1279,9 +1275,6 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
 
     const auto anim_it = animations.find(item.node);
     const NodeAnimation* node_anim = anim_it == animations.end() ? nullptr : &anim_it->second;
-    // An animated node moves its whole subtree rigidly: Hierarchical for all of it.
-    const bool moves = item.animated_ancestor || (node_anim != nullptr && node_anim->has_trs());
-    const Kinematics rigid{moves ? Kinematics::Type::Hierarchical : Kinematics::Type::Static};
     const bool deforms = node_anim != nullptr && node_anim->weights.has_value();
 
     const ecs::Entity e = reg.create();
@@ -1294,7 +1287,6 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
 
     Animation node_animation;
     if (node_anim != nullptr) node_animation = node_anim->trs;
-    bool node_deforms = false;         // the node's own entity carries vertex keys
     std::size_t node_vertex_count = 0; // vertices of the mesh on the node's own entity
 
     if (node.skin >= 0 && !warned_skin) {
@@ -1356,16 +1348,13 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
                              node_anim->weights->field);
         }
         if (split) {
-          reg.emplace<Kinematics>(target, deforms ? Kinematics{Kinematics::Type::Free} : rigid);
           if (deforms) reg.emplace<Animation>(target, std::move(part_animation));
         } else {
-          node_deforms = deforms;
           node_vertex_count = part.geometry.vertex_count();
         }
       }
     }
 
-    reg.emplace<Kinematics>(e, node_deforms ? Kinematics{Kinematics::Type::Free} : rigid);
     if (!node_animation.translation.empty() || !node_animation.rotation.empty() ||
         !node_animation.scale.empty() || !node_animation.vertices.empty()) {
       // Each track was checked where it was read (naming its channel); this checks the whole.
@@ -1379,8 +1368,7 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
     if (const auto light = map_light(ctx, node, field)) reg.emplace<Light>(e, *light);
 
     for (std::size_t c = node.children.size(); c-- > 0;)
-      stack.push_back(
-          {node.children[c], e, world_from_node, moves, field + index_field(".children", c)});
+      stack.push_back({node.children[c], e, world_from_node, field + index_field(".children", c)});
   }
   return scene;
 }

@@ -11,7 +11,8 @@
 namespace specula {
 
 /// Reads the file's default scene (or scene 0) into a Scene. Throws specula::Error naming the
-/// file (and the glTF object, e.g. "meshes[2].primitives[0]") for anything malformed.
+/// file (and the glTF object, e.g. "meshes[2].primitives[0]") for anything malformed. Emplaces
+/// no Kinematics (glTF cannot state them): load_scene infers them.
 [[nodiscard]] Scene load_gltf_scene(const std::filesystem::path& path);
 
 /// One mesh of a glTF file, all its triangle primitives merged, in the mesh's own space.

@@ -6,20 +6,40 @@
 #include "specula/scene/components/transform.h"
 #include "specula/scene/components/world_transform.h"
 
+#include <algorithm>
+#include <limits>
 #include <unordered_map>
 #include <vector>
 
 namespace specula {
 namespace {
 
-std::string describe(ecs::Registry& registry, ecs::Entity e) {
-  const Name* name = registry.try_get<Name>(e);
-  std::string s = "entity " + std::to_string(e.index);
-  if (name != nullptr && !name->value.empty()) s += " '" + name->value + "'";
-  return s;
+/// Marks, in the depth table, an entity on the chain being walked: meeting one again closes a
+/// cycle. Real depths stay far below it (one per entity at most).
+constexpr std::uint32_t kOnChain = std::numeric_limits<std::uint32_t>::max();
+
+/// "parent chain forms a cycle: "a" -> "c" -> "b" -> "a"" for the cycle that `chain` (an
+/// entity, its parent, ...) closes at `again`: from the entity created first (lowest slot), so
+/// the message does not depend on where the walk entered the cycle.
+std::string cycle_message(const ecs::Registry& registry, const std::vector<ecs::Entity>& chain,
+                          ecs::Entity again) {
+  std::vector<ecs::Entity> cycle(std::find(chain.begin(), chain.end(), again), chain.end());
+  std::rotate(cycle.begin(),
+              std::min_element(cycle.begin(), cycle.end(),
+                               [](ecs::Entity a, ecs::Entity b) { return a.index < b.index; }),
+              cycle.end());
+  std::string message = "parent chain forms a cycle: ";
+  for (const ecs::Entity e : cycle) message += entity_label(registry, e) + " -> ";
+  return message + entity_label(registry, cycle.front());
 }
 
 } // namespace
+
+std::string entity_label(const ecs::Registry& registry, ecs::Entity e) {
+  const Name* name = registry.try_get<Name>(e);
+  if (name != nullptr && !name->value.empty()) return "\"" + name->value + "\"";
+  return "entity " + std::to_string(e.index);
+}
 
 std::size_t update_world_transforms(ecs::Registry& registry, std::uint64_t tick,
                                     const std::string& context) {
@@ -36,18 +56,18 @@ std::size_t update_world_transforms(ecs::Registry& registry, std::uint64_t tick,
     std::uint32_t base = 0;
     while (true) {
       if (auto it = depth.find(cur.index); it != depth.end()) {
+        if (it->second == kOnChain) throw Error(context, cycle_message(registry, chain, cur));
         base = it->second + 1;
         break;
       }
-      const Parent* parent = registry.try_get<Parent>(cur);
+      depth.emplace(cur.index, kOnChain);
       chain.push_back(cur);
+      const Parent* parent = registry.try_get<Parent>(cur);
       if (parent == nullptr || parent->entity.is_null()) break;
       if (!registry.valid(parent->entity))
-        throw Error(context, describe(registry, cur) + " has a parent that no longer exists");
+        throw Error(context, entity_label(registry, cur) + " has a parent that no longer exists");
       if (!registry.has<Transform>(parent->entity))
-        throw Error(context, describe(registry, cur) + " has a parent without a transform");
-      if (chain.size() > entities.size())
-        throw Error(context, describe(registry, e) + " is part of a parent cycle");
+        throw Error(context, entity_label(registry, cur) + " has a parent without a transform");
       cur = parent->entity;
     }
     for (std::size_t i = chain.size(); i-- > 0;) {

@@ -4,8 +4,10 @@
 #include "specula/scene/animation_sampling.h"
 #include "specula/scene/components.h"
 #include "specula/scene/gltf_loader.h"
+#include "specula/scene/kinematics_rules.h"
 #include "specula/scene/mesh_io.h"
 #include "specula/scene/mesh_library.h"
+#include "specula/scene/strict_json.h"
 
 #include <nlohmann/json.hpp>
 
@@ -27,7 +29,7 @@
 namespace specula {
 namespace {
 
-using nlohmann::json;
+using namespace strict_json;
 namespace fs = std::filesystem;
 
 constexpr std::string_view kFormatName = "specula-scene";
@@ -47,12 +49,6 @@ constexpr double kPi = 3.14159265358979323846;
 float radians_from_degrees(double degrees) { return static_cast<float>(degrees * (kPi / 180.0)); }
 double degrees_from_radians(float radians) { return static_cast<double>(radians) * (180.0 / kPi); }
 
-std::string format_double(double v) {
-  char buf[64];
-  const auto result = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, result.ptr);
-}
-
 double parse_double(const std::string& text) {
   double v = 0.0;
   std::from_chars(text.data(), text.data() + text.size(), v);
@@ -60,204 +56,13 @@ double parse_double(const std::string& text) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Paths into the document, as messages show them: entities[3].material.ior
-
-std::string member_path(const std::string& parent, std::string_view key) {
-  return parent.empty() ? std::string(key) : parent + "." + std::string(key);
-}
-std::string element_path(const std::string& parent, std::size_t index) {
-  return parent + "[" + std::to_string(index) + "]";
-}
-
-/// Edit distance, for "did you mean" hints on unknown keys.
-std::size_t edit_distance(std::string_view a, std::string_view b) {
-  std::vector<std::size_t> row(b.size() + 1);
-  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (std::size_t i = 1; i <= a.size(); ++i) {
-    std::size_t diagonal = row[0];
-    row[0] = i;
-    for (std::size_t j = 1; j <= b.size(); ++j) {
-      const std::size_t above = row[j];
-      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
-      diagonal = above;
-    }
-  }
-  return row[b.size()];
-}
-
-std::string describe(const json& j) {
-  if (j.is_number_integer() || j.is_number_unsigned()) return "the integer " + j.dump();
-  if (j.is_number_float()) return "the number " + j.dump();
-  if (j.is_string()) return "the string " + j.dump(-1, ' ', false, json::error_handler_t::replace);
-  if (j.is_boolean()) return j.get<bool>() ? "true" : "false";
-  if (j.is_null()) return "null";
-  if (j.is_array()) return "an array of " + std::to_string(j.size());
-  return "an object";
-}
-
-// ---------------------------------------------------------------------------------------------
-// Reading
-
-/// Throws specula::Error for the scene file, pointing at a JSON path.
-class Reader {
-public:
-  explicit Reader(std::string file) : file_(std::move(file)) {}
-
-  [[noreturn]] void fail(const std::string& path, const std::string& message) const {
-    if (path.empty()) throw Error(file_, message);
-    throw Error(file_, path, message);
-  }
-  void check(bool ok, const std::string& path, const std::string& message) const {
-    if (!ok) fail(path, message);
-  }
-  [[nodiscard]] const std::string& file() const { return file_; }
-
-private:
-  std::string file_;
-};
-
-/// A JSON object whose keys are checked against those the format allows at its place, so a typo
-/// is an error instead of a silently ignored field.
-class Object {
-public:
-  Object(const Reader& reader, const json& j, std::string path,
-         std::initializer_list<std::string_view> allowed, std::string_view what = "")
-      : reader_(reader), json_(j), path_(std::move(path)) {
-    if (!j.is_object())
-      reader.fail(path_, "expected an object" +
-                             (what.empty() ? "" : " (" + std::string(what) + ")") + ", got " +
-                             describe(j));
-    for (const auto& item : j.items()) {
-      const std::string& key = item.key();
-      if (std::find(allowed.begin(), allowed.end(), key) != allowed.end()) continue;
-      std::string message = "unknown key \"" + key + "\"";
-      std::string_view closest;
-      std::size_t best = 3; // at most two edits away counts as a likely typo
-      for (const std::string_view candidate : allowed) {
-        const std::size_t d = edit_distance(key, candidate);
-        if (d < best) {
-          best = d;
-          closest = candidate;
-        }
-      }
-      if (!closest.empty()) message += " (did you mean \"" + std::string(closest) + "\"?)";
-      message += "; allowed here:";
-      for (const std::string_view candidate : allowed) message += " " + std::string(candidate);
-      reader.fail(member_path(path_, key), message);
-    }
-  }
-
-  [[nodiscard]] const json* find(std::string_view key) const {
-    const auto it = json_.find(key);
-    return it == json_.end() ? nullptr : &*it;
-  }
-  [[nodiscard]] const json& require(std::string_view key) const {
-    const json* j = find(key);
-    if (!j) reader_.fail(path_, "missing required key \"" + std::string(key) + "\"");
-    return *j;
-  }
-  [[nodiscard]] bool has(std::string_view key) const { return find(key) != nullptr; }
-  [[nodiscard]] std::string path(std::string_view key) const { return member_path(path_, key); }
-
-private:
-  const Reader& reader_;
-  const json& json_;
-  std::string path_;
-};
-
-double read_number(const Reader& r, const json& j, const std::string& path) {
-  if (!j.is_number()) r.fail(path, "expected a number, got " + describe(j));
-  const double v = j.get<double>();
-  // The parser already rejects overflowing literals; this guards hand-built documents.
-  if (!std::isfinite(v)) r.fail(path, "number is not finite");
-  return v;
-}
-
-float read_float(const Reader& r, const json& j, const std::string& path) {
-  const double v = read_number(r, j, path);
-  if (std::abs(v) > static_cast<double>(std::numeric_limits<float>::max()))
-    r.fail(path, "number " + format_double(v) + " is outside the single-precision range");
-  return static_cast<float>(v);
-}
-
-std::uint64_t read_unsigned(const Reader& r, const json& j, const std::string& path,
-                            std::uint64_t min, std::uint64_t max) {
-  const std::string range = "[" + std::to_string(min) + ", " + std::to_string(max) + "]";
-  if (j.is_number_float()) {
-    r.fail(path, "expected an integer in " + range + ", got " + describe(j));
-  }
-  if (!j.is_number_integer()) r.fail(path, "expected an integer, got " + describe(j));
-  if (j.is_number_unsigned()) {
-    const auto v = j.get<std::uint64_t>();
-    if (v < min || v > max) r.fail(path, "must be in " + range + ", got " + std::to_string(v));
-    return v;
-  }
-  const auto v = j.get<std::int64_t>();
-  if (v < 0 || static_cast<std::uint64_t>(v) < min || static_cast<std::uint64_t>(v) > max)
-    r.fail(path, "must be in " + range + ", got " + std::to_string(v));
-  return static_cast<std::uint64_t>(v);
-}
-
-std::uint32_t read_u32(const Reader& r, const json& j, const std::string& path, std::uint32_t min,
-                       std::uint32_t max) {
-  return static_cast<std::uint32_t>(read_unsigned(r, j, path, min, max));
-}
-
-bool read_bool(const Reader& r, const json& j, const std::string& path) {
-  if (!j.is_boolean()) r.fail(path, "expected true or false, got " + describe(j));
-  return j.get<bool>();
-}
-
-std::string read_string(const Reader& r, const json& j, const std::string& path) {
-  if (!j.is_string()) r.fail(path, "expected a string, got " + describe(j));
-  return j.get<std::string>();
-}
-
-const json& read_array(const Reader& r, const json& j, const std::string& path,
-                       std::string_view what) {
-  if (!j.is_array())
-    r.fail(path, "expected an array (" + std::string(what) + "), got " + describe(j));
-  return j;
-}
-
-template <int N>
-glm::vec<N, float> read_vec(const Reader& r, const json& j, const std::string& path) {
-  static constexpr std::string_view kShape[] = {"", "", "[x, y]", "[x, y, z]", "[x, y, z, w]"};
-  if (!j.is_array() || j.size() != N)
-    r.fail(path, "expected an array of " + std::to_string(N) + " numbers " +
-                     std::string(kShape[N]) + ", got " + describe(j));
-  glm::vec<N, float> v;
-  for (int i = 0; i < N; ++i)
-    v[i] = read_float(r, j[static_cast<std::size_t>(i)],
-                      element_path(path, static_cast<std::size_t>(i)));
-  return v;
-}
+// Reading: scene values on top of the strict JSON readers
 
 vec3 read_color(const Reader& r, const json& j, const std::string& path) {
   const vec3 c = read_vec<3>(r, j, path);
   r.check(c.x >= 0.0f && c.y >= 0.0f && c.z >= 0.0f, path,
           "colour components must be >= 0 (linear RGB)");
   return c;
-}
-
-float read_float_in(const Reader& r, const json& j, const std::string& path, float min, float max) {
-  const float v = read_float(r, j, path);
-  r.check(v >= min && v <= max, path,
-          "must be in [" + format_double(min) + ", " + format_double(max) + "], got " +
-              format_double(v));
-  return v;
-}
-
-float read_positive(const Reader& r, const json& j, const std::string& path) {
-  const float v = read_float(r, j, path);
-  r.check(v > 0.0f, path, "must be > 0, got " + format_double(v));
-  return v;
-}
-
-float read_non_negative(const Reader& r, const json& j, const std::string& path) {
-  const float v = read_float(r, j, path);
-  r.check(v >= 0.0f, path, "must be >= 0, got " + format_double(v));
-  return v;
 }
 
 /// Unit quaternions pass through untouched and others are normalized, so a written rotation
@@ -678,28 +483,12 @@ std::optional<Kinematics::Type> parse_kinematics(const std::string& name) {
   return std::nullopt;
 }
 
-const char* kinematics_name(Kinematics::Type type) {
-  switch (type) {
-  case Kinematics::Type::Static:
-    return "static";
-  case Kinematics::Type::Hierarchical:
-    return "hierarchical";
-  case Kinematics::Type::Free:
-    return "free";
-  }
-  return "static";
-}
-
-/// What the later passes (parents, kinematics) need to know about one entity.
+/// What linking parents needs to know about one entity.
 struct EntityInfo {
   ecs::Entity entity;
   std::string name;
   std::optional<std::string> parent_name;
   std::optional<std::size_t> parent;
-  std::optional<Kinematics::Type> kinematics;
-  bool has_mesh = false;
-  bool rigid_animation = false;  ///< translation/rotation/scale tracks
-  bool vertex_animation = false; ///< deforming
 };
 
 void read_entity(const Reader& r, Scene& scene, const json& j, const std::string& path,
@@ -717,18 +506,20 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
   if (const json* v = o.find("parent")) {
     info.parent_name = read_string(r, *v, o.path("parent"));
   }
+  // Only a stated kinematics is emplaced; load_scene checks it against the animations and infers
+  // the others (settle_kinematics).
   if (const json* v = o.find("kinematics")) {
     const std::string name = read_string(r, *v, o.path("kinematics"));
-    info.kinematics = parse_kinematics(name);
-    if (!info.kinematics)
+    const std::optional<Kinematics::Type> type = parse_kinematics(name);
+    if (!type)
       r.fail(o.path("kinematics"),
              "unknown kinematics \"" + name + "\" (expected static, hierarchical or free)");
+    reg.emplace<Kinematics>(e, Kinematics{*type});
   }
 
   const Mesh* mesh = nullptr;
   if (const json* v = o.find("mesh")) {
     mesh = &reg.emplace<Mesh>(e, read_mesh(r, reg, *v, o.path("mesh"), base_dir));
-    info.has_mesh = true;
   }
   if (const json* v = o.find("material")) {
     r.check(mesh != nullptr, o.path("material"), "a material needs a mesh on the same entity");
@@ -762,16 +553,12 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
             "a camera path moves a camera: add \"camera\" to this entity");
     reg.emplace<CameraPath>(e, read_camera_path(r, *v, o.path("camera_path")));
   }
-  if (const json* v = o.find("animation")) {
-    const Animation& a =
-        reg.emplace<Animation>(e, read_animation(r, *v, o.path("animation"), mesh));
-    info.rigid_animation = !a.translation.empty() || !a.rotation.empty() || !a.scale.empty();
-    info.vertex_animation = !a.vertices.empty();
-  }
+  if (const json* v = o.find("animation"))
+    reg.emplace<Animation>(e, read_animation(r, *v, o.path("animation"), mesh));
 }
 
-/// Resolves parent names, rejects cycles, then settles Kinematics: an entity that an animation
-/// moves (its own or an ancestor's) cannot be static, and a deforming one must be free.
+/// Resolves parent names: each must belong to exactly one entity of the file. Cycles are left to
+/// update_world_transforms, which load_scene runs for every format.
 void link_entities(const Reader& r, Scene& scene, std::vector<EntityInfo>& infos) {
   std::map<std::string, std::vector<std::size_t>> by_name;
   for (std::size_t i = 0; i < infos.size(); ++i) by_name[infos[i].name].push_back(i);
@@ -789,82 +576,9 @@ void link_entities(const Reader& r, Scene& scene, std::vector<EntityInfo>& infos
     infos[i].parent = it->second[0];
   }
 
-  // Cycles: follow each chain; meeting an entity of the current walk again closes a loop.
-  std::vector<int> state(infos.size(), 0); // 0 unvisited, 1 on the current walk, 2 known acyclic
-  for (std::size_t start = 0; start < infos.size(); ++start) {
-    std::vector<std::size_t> walk;
-    std::optional<std::size_t> i = start;
-    while (i && state[*i] == 0) {
-      state[*i] = 1;
-      walk.push_back(*i);
-      i = infos[*i].parent;
-    }
-    if (i && state[*i] == 1) {
-      std::string chain = "\"" + infos[*i].name + "\"";
-      for (std::optional<std::size_t> k = infos[*i].parent; k; k = infos[*k].parent) {
-        chain += " -> \"" + infos[*k].name + "\"";
-        if (*k == *i) break;
-      }
-      r.fail(member_path(element_path("entities", *i), "parent"),
-             "parent chain forms a cycle: " + chain);
-    }
-    for (const std::size_t k : walk) state[k] = 2;
-  }
-
-  // For each entity, the nearest one on its chain to the root (itself included) whose animation
-  // moves it; vertex animation deforms a mesh but moves nothing. Memoized, so long chains cost
-  // O(n) rather than O(n * depth).
-  constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
-  std::vector<std::optional<std::size_t>> mover_of(infos.size());
-  std::vector<bool> known(infos.size(), false);
-  for (std::size_t start = 0; start < infos.size(); ++start) {
-    std::vector<std::size_t> walk;
-    std::size_t k = start;
-    while (!known[k] && !infos[k].rigid_animation && infos[k].parent) {
-      walk.push_back(k);
-      k = *infos[k].parent;
-    }
-    std::size_t found = kNone;
-    if (known[k]) {
-      found = mover_of[k] ? *mover_of[k] : kNone;
-    } else {
-      found = infos[k].rigid_animation ? k : kNone;
-      walk.push_back(k);
-    }
-    for (const std::size_t w : walk) {
-      known[w] = true;
-      if (found != kNone) mover_of[w] = found;
-    }
-  }
-
   ecs::Registry& reg = scene.registry;
-  for (std::size_t i = 0; i < infos.size(); ++i) {
-    EntityInfo& info = infos[i];
+  for (const EntityInfo& info : infos)
     if (info.parent) reg.emplace<Parent>(info.entity, Parent{infos[*info.parent].entity});
-    const std::optional<std::size_t> mover = mover_of[i];
-    const bool moves = mover.has_value();
-    const std::string at = member_path(element_path("entities", i), "kinematics");
-    if (info.kinematics) {
-      if (info.vertex_animation && *info.kinematics != Kinematics::Type::Free)
-        r.fail(at,
-               std::string("\"") + kinematics_name(*info.kinematics) +
-                   "\" but the entity has vertex animation, which deforms the mesh: use \"free\"");
-      if (moves && *info.kinematics == Kinematics::Type::Static)
-        r.fail(at, "\"static\" but the entity is moved by the animation of " +
-                       (*mover == i ? std::string("itself")
-                                    : "its ancestor \"" + infos[*mover].name + "\"") +
-                       ": use \"hierarchical\" or \"free\"");
-      reg.emplace<Kinematics>(info.entity, Kinematics{*info.kinematics});
-    } else if (info.has_mesh) {
-      Kinematics k;
-      if (info.vertex_animation) {
-        k.type = Kinematics::Type::Free;
-      } else if (moves) {
-        k.type = Kinematics::Type::Hierarchical;
-      }
-      reg.emplace<Kinematics>(info.entity, k);
-    }
-  }
 }
 
 Scene read_document(const Reader& r, const json& root, const fs::path& base_dir) {
@@ -900,137 +614,6 @@ Scene read_document(const Reader& r, const json& root, const fs::path& base_dir)
     read_entity(r, scene, entities[i], element_path("entities", i), base_dir, infos[i]);
   link_entities(r, scene, infos);
   return scene;
-}
-
-/// Builds the document from nlohmann's SAX events. Doing it here rather than with nlohmann's
-/// callback parser (quadratic in the length of an array of objects) lets it reject duplicate keys,
-/// which the DOM would silently collapse to the last, and name the JSON path and line of errors
-/// the parser raises itself, such as a number literal that overflows (1e999).
-class DocumentBuilder {
-public:
-  using string_t = json::string_t;
-
-  bool null() { return add(nullptr); }
-  bool boolean(bool v) { return add(v); }
-  bool number_integer(json::number_integer_t v) { return add(v); }
-  bool number_unsigned(json::number_unsigned_t v) { return add(v); }
-  bool number_float(json::number_float_t v, const string_t&) { return add(v); }
-  bool string(string_t& v) { return add(std::move(v)); }
-  bool binary(json::binary_t&) { return add(nullptr); } // not produced by the text parser
-  bool start_object(std::size_t) { return open(json::value_t::object); }
-  bool start_array(std::size_t) { return open(json::value_t::array); }
-  bool end_object() { return close(); }
-  bool end_array() { return close(); }
-  bool key(string_t& k) {
-    Frame& f = stack_.back();
-    f.key = k;
-    if (f.value->contains(k)) {
-      duplicate_ = path();
-      return false;
-    }
-    f.member = &(*f.value)[k];
-    return true;
-  }
-  bool parse_error(std::size_t position, const std::string&, const nlohmann::detail::exception& e) {
-    error_position_ = position;
-    error_message_ = e.what();
-    error_path_ = path();
-    return false;
-  }
-
-  /// Path of the value being read now.
-  [[nodiscard]] std::string path() const {
-    std::string p;
-    for (std::size_t i = 0; i < stack_.size(); ++i) {
-      const Frame& f = stack_[i];
-      if (f.value->is_object()) {
-        p = member_path(p, f.key);
-      } else {
-        // The innermost array is between elements; outer ones are inside their last element.
-        const std::size_t n = f.value->size();
-        p = element_path(p, i + 1 == stack_.size() ? n : n - 1);
-      }
-    }
-    return p;
-  }
-
-  json root;
-  std::optional<std::string> duplicate_;
-  std::size_t error_position_ = 0;
-  std::string error_message_;
-  std::string error_path_;
-
-private:
-  struct Frame {
-    json* value;
-    json* member = nullptr; ///< objects: the slot the next value fills
-    std::string key;
-  };
-
-  template <typename V>
-  json* place(V&& v) {
-    if (stack_.empty()) {
-      root = json(std::forward<V>(v));
-      return &root;
-    }
-    Frame& f = stack_.back();
-    if (f.value->is_array()) {
-      f.value->emplace_back(std::forward<V>(v));
-      return &f.value->back();
-    }
-    *f.member = json(std::forward<V>(v));
-    return f.member;
-  }
-  template <typename V>
-  bool add(V&& v) {
-    place(std::forward<V>(v));
-    return true;
-  }
-  bool open(json::value_t type) {
-    // Children are only appended to the innermost open container, so pointers to the open chain
-    // stay valid.
-    stack_.push_back(Frame{place(type), nullptr, {}});
-    return true;
-  }
-  bool close() {
-    stack_.pop_back();
-    return true;
-  }
-
-  std::vector<Frame> stack_;
-};
-
-json parse_text(const Reader& r, const std::string& text) {
-  DocumentBuilder builder;
-  if (json::sax_parse(text, &builder, json::input_format_t::json, /*strict=*/true,
-                      /*ignore_comments=*/false))
-    return std::move(builder.root);
-  if (builder.duplicate_) r.fail(*builder.duplicate_, "key appears twice in the same object");
-
-  // nlohmann's position counts the characters read, the offending one included.
-  const std::size_t at =
-      std::min(builder.error_position_ > 0 ? builder.error_position_ - 1 : 0, text.size());
-  const auto line = 1 + std::count(text.begin(), text.begin() + std::ptrdiff_t(at), '\n');
-  const std::size_t previous_newline = at == 0 ? std::string::npos : text.rfind('\n', at - 1);
-  const std::size_t column =
-      at + 1 - (previous_newline == std::string::npos ? 0 : previous_newline + 1);
-  const std::string where = "line " + std::to_string(line) + " column " + std::to_string(column);
-
-  // Drop nlohmann's "[json.exception.parse_error.101] parse error at line 1, column 2: " prefix.
-  std::string detail = builder.error_message_;
-  const std::size_t column_colon = detail.find(": ", detail.find("column"));
-  const std::size_t bracket = detail.find("] ");
-  if (detail.find("parse_error") != std::string::npos && column_colon != std::string::npos) {
-    detail = detail.substr(column_colon + 2);
-  } else if (bracket != std::string::npos) {
-    detail = detail.substr(bracket + 2);
-  }
-  if (builder.error_message_.find("out_of_range") != std::string::npos)
-    r.fail(builder.error_path_, where + ": " + detail + " (numbers must be finite)");
-  throw Error(r.file(), int(line),
-              "malformed JSON at " + where +
-                  (builder.error_path_.empty() ? "" : " (in " + builder.error_path_ + ")") + ": " +
-                  detail);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1347,7 +930,7 @@ std::vector<std::string> written_names(const ecs::Registry& reg,
 
 Scene parse_json_scene(const std::string& text, const std::string& name, const fs::path& base_dir) {
   const Reader reader(name);
-  const json root = parse_text(reader, text);
+  const json root = strict_json::parse(reader, text);
   return read_document(reader, root, base_dir);
 }
 

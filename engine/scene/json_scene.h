@@ -11,6 +11,9 @@ namespace specula {
 
 /// Reads a JSON scene. Mesh files are resolved relative to the scene file. Throws specula::Error
 /// naming the file and the JSON path of the bad field (e.g. "entities[3].transform.scale").
+/// The format's reader only: Kinematics are those the file states, and the parent links are
+/// checked for the format (names exist, are unique) but not for cycles; load_scene does the
+/// checks and inference common to every format.
 [[nodiscard]] Scene load_json_scene(const std::filesystem::path& path);
 
 /// Parses JSON text; `name` is used in messages, `base_dir` resolves mesh files.

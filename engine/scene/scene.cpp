@@ -5,6 +5,7 @@
 #include "specula/scene/gltf_loader.h"
 #include "specula/scene/hierarchy.h"
 #include "specula/scene/json_scene.h"
+#include "specula/scene/kinematics_rules.h"
 #include "specula/scene/mesh_io.h"
 
 #include <algorithm>
@@ -35,7 +36,6 @@ Scene scene_from_mesh_file(const std::filesystem::path& path) {
   source.path = path.filename().string();
   reg.emplace<Mesh>(e, Mesh{std::move(mesh), source, {}, 0});
   reg.emplace<Material>(e);
-  reg.emplace<Kinematics>(e);
   return scene;
 }
 
@@ -62,6 +62,7 @@ Scene load_scene(const std::filesystem::path& path) {
   if (scene.registry.alive() > kMaxEntities)
     throw Error(path.string(), "scene has more than " + std::to_string(kMaxEntities) + " entities");
   update_world_transforms(scene.registry, 0, path.string());
+  settle_kinematics(scene.registry, path.string());
   add_defaults(scene);
   return scene;
 }

@@ -37,8 +37,10 @@ inline constexpr std::uint64_t kMaxTriangles = 100'000'000;
 inline constexpr std::uint64_t kMaxEntities = 10'000'000;
 
 /// Reads a scene by extension: .json (Specula), .gltf/.glb (glTF 2.0), .obj/.ply/.off/.stl (one
-/// mesh). Adds the default camera and light when the file has none (add_defaults), and computes
-/// world transforms. Throws specula::Error naming the file and the problem.
+/// mesh). Then, whatever the format: computes world transforms, which checks the hierarchy
+/// (update_world_transforms), settles Kinematics (settle_kinematics: stated ones checked, the
+/// others inferred), and adds the default camera and light when the file has none
+/// (add_defaults). Throws specula::Error naming the file and the problem.
 [[nodiscard]] Scene load_scene(const std::filesystem::path& path);
 
 /// Marks the entity added by add_defaults, so the writer leaves it out of the saved file.
@@ -67,8 +69,8 @@ struct SceneSummary {
   std::size_t materials = 0;   ///< distinct Material values
   std::size_t lights = 0;
   std::size_t cameras = 0;
-  std::size_t reflective = 0;  ///< entities with reflectivity > 0
-  std::size_t refractive = 0;  ///< entities with transmission > 0
+  std::size_t reflective = 0; ///< entities with reflectivity > 0
+  std::size_t refractive = 0; ///< entities with transmission > 0
   std::size_t ray_cache_cubes = 0;
   std::size_t animated = 0;
   Aabb bounds;

@@ -11,7 +11,10 @@ struct Camera {
   vec3 look_at{0.0f};
   vec3 up{0.0f, 1.0f, 0.0f};
   float vertical_fov = glm::radians(45.0f); ///< radians
-  float aspect = 1.0f;                      ///< width / height
+  /// Width / height as the scene file gives it (JSON "aspect", default the settings' width /
+  /// height; glTF aspectRatio), kept so that the scene writes back unchanged. Informational only:
+  /// renders use the image's own width / height (CameraRays), so pixels stay square at any size.
+  float aspect = 1.0f;
   friend bool operator==(const Camera&, const Camera&) = default;
 };
 

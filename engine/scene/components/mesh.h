@@ -13,8 +13,11 @@ namespace specula {
 struct MeshSource {
   enum class Kind { Inline, File, Primitive };
   Kind kind = Kind::Inline;
-  /// Kind::File: the path as written in the scene file (relative to it) and, for glTF, the mesh
-  /// index inside the file (-1: the whole file merged).
+  /// Kind::File: the path as written in the scene file (relative to it) and, for glTF, the index
+  /// of the mesh inside the file, whose triangle primitives are merged (load_gltf_mesh).
+  /// -1 means "not stated": a .gltf/.glb file then gives its mesh 0, as the format's default
+  /// (MeshLibrary), and the writer leaves "gltf_mesh" out, so the file writes back as read;
+  /// other mesh formats ignore it. The glTF loader always states the index.
   std::string path;
   int gltf_mesh = -1;
   /// Kind::Primitive: "sphere", "box", "plane", "cylinder" or "cone" with its parameters.

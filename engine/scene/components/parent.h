@@ -4,7 +4,8 @@
 namespace specula {
 
 /// Places this entity's Transform in the parent's space. Cycles and stale parents are reported by
-/// transform_system (specula::Error); scene loaders reject them up front.
+/// update_world_transforms (specula::Error), which load_scene runs once after loading and
+/// transform_system every tick.
 struct Parent {
   ecs::Entity entity = ecs::null_entity;
 };
