@@ -70,7 +70,6 @@ Aabb bounds_of(const vec3* p, std::size_t n) {
   return b;
 }
 
-
 bool deforms(ecs::Registry& registry, ecs::Entity e, const Mesh& mesh) {
   if (!mesh.deformed_positions.empty()) return true;
   const Animation* a = registry.try_get<Animation>(e);

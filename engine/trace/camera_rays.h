@@ -24,7 +24,8 @@ struct CameraRays {
     origin = camera.position;
     forward = glm::normalize(camera.look_at - camera.position);
     vec3 r = glm::cross(forward, camera.up);
-    if (glm::length(r) < 1e-6f) r = glm::cross(forward, std::abs(forward.y) < 0.9f ? vec3(0, 1, 0) : vec3(1, 0, 0));
+    if (glm::length(r) < 1e-6f)
+      r = glm::cross(forward, std::abs(forward.y) < 0.9f ? vec3(0, 1, 0) : vec3(1, 0, 0));
     const float tan_half = std::tan(0.5f * camera.vertical_fov);
     const float aspect = float(width) / float(height);
     right = glm::normalize(r) * tan_half * aspect;

@@ -44,9 +44,35 @@ struct WhittedNode {
   RayKind kind;
 };
 
+/// Cast mode's wave, one array per component: the gathered triangle data (vertex positions and
+/// normals), then the shading inputs computed from them (world position, geometric and shading
+/// normals facing the ray, albedo / π, radiance so far). Misses are marked.
+struct CastWave {
+  std::vector<float> p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z;
+  std::vector<float> n0x, n0y, n0z, n1x, n1y, n1z, n2x, n2y, n2z;
+  std::vector<float> px, py, pz;
+  std::vector<float> gx, gy, gz;
+  std::vector<float> sx, sy, sz;
+  std::vector<float> ar, ag, ab;
+  std::vector<float> lr, lg, lb;
+  std::vector<std::uint32_t> hit;     ///< 32-bit like the floats, so mixed loops vectorise
+  std::vector<std::uint32_t> smooth;  ///< the n* arrays hold vertex normals to interpolate
+  std::vector<std::uint32_t> general; ///< hits on transformed instances, shaded one by one
+
+  void resize(std::size_t n) {
+    for (auto* a : {&p0x, &p0y, &p0z, &p1x, &p1y, &p1z, &p2x, &p2y, &p2z, &n0x, &n0y,
+                    &n0z, &n1x, &n1y, &n1z, &n2x, &n2y, &n2z, &px,  &py,  &pz,  &gx,
+                    &gy,  &gz,  &sx,  &sy,  &sz,  &ar,  &ag,  &ab,  &lr,  &lg,  &lb})
+      a->resize(n);
+    hit.resize(n);
+    smooth.resize(n);
+  }
+};
+
 /// A worker's scratch, reused from tile to tile.
 struct TileScratch {
   PrimaryHits primary;
+  CastWave cast;
   // Whitted waves.
   std::vector<WhittedNode> nodes;
   std::vector<std::uint32_t> wave, next_wave;
@@ -62,7 +88,7 @@ struct TileScratch {
 
 /// Local shading of every primary hit: emission plus the diffuse term of every light, no shadow
 /// rays, no secondary rays; misses get the background.
-void cast_tile(const FrameInputs& frame, const PacketTile& tile, const PrimaryHits& hits,
+void cast_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& scratch,
                RayCounts& counts);
 
 /// The Whitted tree of every primary hit, traced in waves: shading a wave emits shadow rays

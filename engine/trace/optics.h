@@ -18,7 +18,8 @@ namespace specula {
 
 /// Unit direction d refracted through a surface with unit normal n facing the incoming side
 /// (dot(d, n) < 0), eta = n_incident / n_transmitted. Empty on total internal reflection.
-[[nodiscard]] inline std::optional<vec3> refract_direction(const vec3& d, const vec3& n, float eta) {
+[[nodiscard]] inline std::optional<vec3> refract_direction(const vec3& d, const vec3& n,
+                                                           float eta) {
   const float cos_i = -glm::dot(d, n);
   const float sin2_t = eta * eta * std::max(0.0f, 1.0f - cos_i * cos_i);
   if (sin2_t >= 1.0f) return std::nullopt;

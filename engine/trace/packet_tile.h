@@ -16,8 +16,8 @@ struct PacketTile {
   std::uint32_t packet_w = 1, packet_h = 1;
 
   /// The footprint for a packet width: 4×4 for 16, 4×2 for 8, 2×2 for 4, 1×1 for single rays.
-  static PacketTile for_width(std::uint32_t x0, std::uint32_t y0, std::uint32_t x1, std::uint32_t y1,
-                              std::uint32_t packet_width) {
+  static PacketTile for_width(std::uint32_t x0, std::uint32_t y0, std::uint32_t x1,
+                              std::uint32_t y1, std::uint32_t packet_width) {
     const std::uint32_t w = packet_width >= 8 ? 4 : packet_width >= 4 ? 2 : 1;
     return PacketTile{x0, y0, x1, y1, w, std::max(1u, packet_width / w)};
   }

@@ -112,7 +112,7 @@ FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Cam
                   if (whitted)
                     detail::whitted_tile(frame, tile, scratch, counts.local());
                   else
-                    detail::cast_tile(frame, tile, scratch.primary, counts.local());
+                    detail::cast_tile(frame, tile, scratch, counts.local());
                 });
   FrameStats stats;
   counts.combine_each([&](const RayCounts& c) { stats.rays += c; });
