@@ -119,7 +119,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
     schedule.tick(scene.registry, 1.0 / 60.0);
     stats.frames.push_back(scene.registry.resource<RenderJob>().last);
     const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
-    if (progress != nullptr && progress_is_terminal && elapsed > 1.0 && f + 1 < options.frames) {
+    if (progress != nullptr && progress_is_terminal && elapsed > options.progress_after_s &&
+        f + 1 < options.frames) {
       const double rate = double(f + 1) / elapsed;
       char line[160];
       std::snprintf(line, sizeof line, "\r  frame %u/%u, %.1f frames/s, %.0f s left   ", f + 1,

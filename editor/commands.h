@@ -25,12 +25,15 @@ struct RenderOptions {
   std::string cache = "off"; ///< off | face resolution (power of two)
   std::string out;           ///< PNG path, empty: none
   std::string stats;         ///< stats JSON path, empty: none
+  /// Progress is shown once the render has run this long (seconds), on a terminal only.
+  double progress_after_s = 1.0;
 };
 
 int run_info(const InfoOptions& options, std::ostream& out);
 /// Renders options.frames ticks of the scene. `progress` receives a one-line progress report
-/// (frames done, frames/s, time left), rewritten in place, when the render runs longer than a
-/// second and `progress_is_terminal`; pass nullptr for none.
+/// (frames done, frames/s, time left), rewritten in place and cleared at the end, once the render
+/// has run longer than options.progress_after_s and when `progress_is_terminal`; pass nullptr for
+/// none.
 int run_render(const RenderOptions& options, std::ostream& out, std::ostream* progress = nullptr,
                bool progress_is_terminal = false);
 

@@ -11,8 +11,12 @@ trap 'rm -rf "$work"' EXIT
 cmake --install "$build_dir" --prefix "$work/prefix" >/dev/null
 test -f "$work/prefix/lib/cmake/Specula/SpeculaConfig.cmake"
 test -f "$work/prefix/include/specula/ecs/registry.h"
+test -f "$work/prefix/include/specula/scene/scene.h"
+test -f "$work/prefix/include/specula/shared/scene_layout.h"
+# No project header lands outside include/specula/ (nothing to collide with other libraries).
+test -z "$(find "$work/prefix/include" -mindepth 1 -maxdepth 1 ! -name specula)"
 cmake -S "$source_dir/tests/install/consumer" -B "$work/build" -G Ninja \
       -DCMAKE_PREFIX_PATH="$work/prefix" -DCMAKE_BUILD_TYPE=Release \
       -DCMAKE_CXX_FLAGS="$cxx_flags" -DCMAKE_EXE_LINKER_FLAGS="$linker_flags" >/dev/null
 cmake --build "$work/build" >/dev/null
-"$work/build/consumer"
+"$work/build/consumer" "$source_dir/samples/scenes/cornell_box.json"
