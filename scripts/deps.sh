@@ -10,6 +10,7 @@ packages=(
   build-essential cmake ninja-build pkg-config
   libembree-dev libtbb-dev libglm-dev libopenmesh-dev
   libtinygltf-dev libstb-dev nlohmann-json3-dev libcli11-dev
+  libopenexr-dev
   libgtest-dev
   assimp-testmodels
 )

@@ -7,16 +7,28 @@
 #include <stb_image.h>
 #include <stb_image_write.h>
 
+#include <Iex.h>
+#include <ImfChannelList.h>
+#include <ImfFrameBuffer.h>
+#include <ImfHeader.h>
+#include <ImfIO.h>
+#include <ImfInputFile.h>
+#include <ImfOutputFile.h>
+#include <ImfPartType.h>
+#include <ImfTileDescription.h>
+#include <ImfVersion.h>
+#include <openexr.h>
+
 #include <algorithm>
 #include <array>
-#include <bit>
 #include <cctype>
 #include <cerrno>
 #include <climits>
 #include <cmath>
+#include <cstring>
 #include <fstream>
-#include <limits>
 #include <memory>
+#include <new>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -85,185 +97,409 @@ std::string stbi_reason() {
   return reason != nullptr ? reason : "unknown reason";
 }
 
-// --- OpenEXR -----------------------------------------------------------------------------------
-// Everything below follows "OpenEXR File Layout" (openexr.com/en/latest/OpenEXRFileLayout.html):
-// magic number, version field, header (attributes terminated by a null byte), line offset table
-// (one uint64 per scan-line block, from the start of the file), then the blocks. All integers and
-// floats are little-endian; they are packed byte by byte so the code is independent of the host.
+// --- OpenEXR ----------------------------------------------------------------------------------
+// Through the OpenEXR library (Debian's libopenexr 3.1). Files are read into memory first, so a
+// missing or empty file gets the same messages as a PNG, and the library reads from a
+// bounds-checked stream. In order: the header's attribute framing is walked (declared sizes
+// within the file, channels sorted), the header alone is read and checked (required attributes
+// present, data window within kMaxFramebufferSide, R, G, B or Y present and not subsampled),
+// every chunk is decoded once by OpenEXRCore, and only then does Imf::InputFile read the pixels.
+// Each step answers a way OpenEXR 3.1 misbehaves on bad input: docs/design/openexr-quirks.md.
 
-constexpr std::array<std::uint8_t, 4> kExrMagic = {0x76, 0x2F, 0x31, 0x01}; // 20000630 LE
-constexpr std::uint32_t kExrVersion = 2;
-constexpr std::uint32_t kExrFlagTiled = 0x200;
-constexpr std::uint32_t kExrFlagLongNames = 0x400;
-constexpr std::uint32_t kExrFlagNonImage = 0x800; // deep data
-constexpr std::uint32_t kExrFlagMultipart = 0x1000;
-constexpr std::int32_t kExrPixelUint = 0;
-constexpr std::int32_t kExrPixelHalf = 1;
-constexpr std::int32_t kExrPixelFloat = 2;
-
-class ByteWriter {
+/// An Imf::IStream over bytes in memory. Reading past the end throws, as the library expects.
+class ExrMemoryInput final : public Imf::IStream {
 public:
-  void u8(std::uint8_t v) { bytes_.push_back(v); }
-  void u32(std::uint32_t v) {
-    for (int i = 0; i < 4; ++i) u8(static_cast<std::uint8_t>(v >> (8 * i)));
-  }
-  void i32(std::int32_t v) { u32(static_cast<std::uint32_t>(v)); }
-  void u64(std::uint64_t v) {
-    for (int i = 0; i < 8; ++i) u8(static_cast<std::uint8_t>(v >> (8 * i)));
-  }
-  void f32(float v) { u32(std::bit_cast<std::uint32_t>(v)); }
-  void text(std::string_view s) { // null-terminated
-    bytes_.insert(bytes_.end(), s.begin(), s.end());
-    u8(0);
-  }
-  void append(const Bytes& other) { bytes_.insert(bytes_.end(), other.begin(), other.end()); }
-  [[nodiscard]] const Bytes& bytes() const { return bytes_; }
-  [[nodiscard]] std::size_t size() const { return bytes_.size(); }
+  ExrMemoryInput(std::span<const std::uint8_t> bytes, const std::string& name)
+      : Imf::IStream(name.c_str()), bytes_(bytes) {}
 
-private:
-  Bytes bytes_;
-};
-
-/// One header attribute: name, type name, int32 size, value.
-void write_attribute(ByteWriter& out, std::string_view name, std::string_view type,
-                     const ByteWriter& value) {
-  out.text(name);
-  out.text(type);
-  out.i32(static_cast<std::int32_t>(value.size()));
-  out.append(value.bytes());
-}
-
-/// Bounds-checked little-endian reads; running past the end is a truncated file.
-class ByteReader {
-public:
-  ByteReader(std::span<const std::uint8_t> bytes, const std::filesystem::path& path,
-             std::size_t position = 0)
-      : bytes_(bytes), path_(path), position_(position) {}
-
-  [[nodiscard]] std::size_t position() const { return position_; }
-  [[nodiscard]] std::size_t remaining() const { return bytes_.size() - position_; }
-
-  void need(std::size_t n, const char* what) const {
-    if (n > remaining()) fail(path_, std::string("truncated EXR: file ends inside the ") + what);
-  }
-  std::uint8_t u8(const char* what) {
-    need(1, what);
-    return bytes_[position_++];
-  }
-  std::uint32_t u32(const char* what) {
-    need(4, what);
-    std::uint32_t v = 0;
-    for (int i = 0; i < 4; ++i) v |= std::uint32_t{bytes_[position_++]} << (8 * i);
-    return v;
-  }
-  std::int32_t i32(const char* what) { return static_cast<std::int32_t>(u32(what)); }
-  std::uint64_t u64(const char* what) {
-    need(8, what);
-    std::uint64_t v = 0;
-    for (int i = 0; i < 8; ++i) v |= std::uint64_t{bytes_[position_++]} << (8 * i);
-    return v;
-  }
-  /// A null-terminated string of at most max_length characters.
-  std::string text(std::size_t max_length, const char* what) {
-    std::string s;
-    for (;;) {
-      const std::uint8_t c = u8(what);
-      if (c == 0) return s;
-      if (s.size() == max_length) {
-        fail(path_, std::string("corrupt EXR: unterminated or over-long name in the ") + what);
-      }
-      s.push_back(static_cast<char>(c));
+  bool read(char c[], int n) override {
+    if (n < 0 || position_ > bytes_.size() ||
+        static_cast<std::uint64_t>(n) > bytes_.size() - position_) {
+      throw Iex::InputExc("unexpected end of file");
     }
+    std::memcpy(c, bytes_.data() + position_, static_cast<std::size_t>(n));
+    position_ += static_cast<std::uint64_t>(n);
+    return position_ < bytes_.size();
   }
-  std::span<const std::uint8_t> take(std::size_t n, const char* what) {
-    need(n, what);
-    const auto s = bytes_.subspan(position_, n);
-    position_ += n;
-    return s;
-  }
+  std::uint64_t tellg() override { return position_; }
+  void seekg(std::uint64_t position) override { position_ = position; }
 
 private:
   std::span<const std::uint8_t> bytes_;
-  const std::filesystem::path& path_;
-  std::size_t position_;
+  std::uint64_t position_ = 0;
 };
 
-/// IEEE 754 binary16 → binary32, exact (every half is a float), subnormals, ±Inf and NaN kept.
-float half_to_float(std::uint16_t h) {
-  const std::uint32_t sign = (h >> 15) & 0x1u;
-  const std::uint32_t exponent = (h >> 10) & 0x1Fu;
-  const std::uint32_t mantissa = h & 0x3FFu;
-  float magnitude;
-  if (exponent == 0) {
-    magnitude = std::ldexp(static_cast<float>(mantissa), -24); // subnormal: m · 2^-24
-  } else if (exponent == 31) {
-    magnitude = mantissa == 0 ? std::numeric_limits<float>::infinity()
-                              : std::numeric_limits<float>::quiet_NaN();
-  } else {
-    magnitude = std::ldexp(static_cast<float>(mantissa | 0x400u), static_cast<int>(exponent) - 25);
+/// An Imf::OStream that grows a byte vector. The library writes the line offset table from
+/// OutputFile's destructor, where it swallows errors; writing to memory first and then to the
+/// file lets every write error reach the caller.
+class ExrMemoryOutput final : public Imf::OStream {
+public:
+  explicit ExrMemoryOutput(const std::string& name) : Imf::OStream(name.c_str()) {}
+
+  void write(const char c[], int n) override {
+    const std::size_t end = static_cast<std::size_t>(position_) + static_cast<std::size_t>(n);
+    if (end > bytes_.size()) bytes_.resize(end);
+    std::memcpy(bytes_.data() + position_, c, static_cast<std::size_t>(n));
+    position_ = end;
   }
-  return sign != 0 ? -magnitude : magnitude;
-}
+  std::uint64_t tellp() override { return position_; }
+  void seekp(std::uint64_t position) override { position_ = position; }
+  [[nodiscard]] const Bytes& bytes() const { return bytes_; }
 
-const char* compression_name(std::uint8_t c) {
-  constexpr std::array<const char*, 10> kNames = {"NO_COMPRESSION", "RLE", "ZIPS", "ZIP",  "PIZ",
-                                                  "PXR24",          "B44", "B44A", "DWAA", "DWAB"};
-  return c < kNames.size() ? kNames[c] : "unknown";
-}
-
-struct ExrChannel {
-  std::string name;
-  std::int32_t pixel_type = 0;
-  std::size_t offset_in_line = 0; ///< byte offset of this channel's samples in a scan line
+private:
+  Bytes bytes_;
+  std::uint64_t position_ = 0;
 };
 
-struct ExrHeader {
-  std::vector<ExrChannel> channels;
-  std::optional<std::uint8_t> compression;
-  std::optional<std::array<std::int32_t, 4>> data_window; ///< xMin, yMin, xMax, yMax
-};
-
-std::size_t pixel_type_size(std::int32_t type) { return type == kExrPixelHalf ? 2 : 4; }
-
-void expect_type(const std::filesystem::path& path, const std::string& name,
-                 const std::string& type, const char* expected, std::size_t size,
-                 std::size_t expected_size) {
-  if (type != expected) {
-    fail(path, "corrupt EXR: attribute " + name + " has type " + type + ", expected " + expected);
+/// A library message on one line: OpenEXR's messages may span several, and may quote names
+/// from a corrupt file; whitespace runs become one space, other control bytes and non-ASCII
+/// bytes '?'.
+std::string one_line(std::string_view text) {
+  std::string line;
+  bool space = false;
+  for (const char c : text) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (std::isspace(byte) != 0) {
+      space = !line.empty();
+      continue;
+    }
+    if (space) line.push_back(' ');
+    space = false;
+    line.push_back(byte < 0x20 || byte >= 0x7F ? '?' : c);
   }
-  if (expected_size != 0 && size != expected_size) {
-    fail(path, "corrupt EXR: attribute " + name + " has size " + std::to_string(size) +
-                   ", expected " + std::to_string(expected_size));
+  return line.empty() ? "unknown error" : line;
+}
+
+std::uint32_t le32(std::span<const std::uint8_t> bytes, std::size_t at) {
+  return std::uint32_t{bytes[at]} | std::uint32_t{bytes[at + 1]} << 8 |
+         std::uint32_t{bytes[at + 2]} << 16 | std::uint32_t{bytes[at + 3]} << 24;
+}
+
+/// The layout requires the channel list sorted by name. The C++ library sorts the list it reads,
+/// so samples stored in another order would silently land in the wrong channels, and
+/// OpenEXRCore 3.1 crashes (a NULL write in exr_decoding_run) on some such files. `list` is the
+/// value of the chlist attribute: entries of a null-terminated name and 16 bytes, then a 0.
+void check_exr_channel_order(std::span<const std::uint8_t> list,
+                             const std::filesystem::path& path) {
+  std::optional<std::string_view> previous;
+  for (std::size_t at = 0; at < list.size() && list[at] != 0;) {
+    const auto end = std::find(list.begin() + static_cast<std::ptrdiff_t>(at), list.end(), 0);
+    if (end == list.end()) return; // malformed: left to the library
+    const std::string_view name(reinterpret_cast<const char*>(list.data()) + at,
+                                static_cast<std::size_t>(end - list.begin()) - at);
+    if (previous && name <= *previous) { // char_traits order: bytes as unsigned, as strcmp
+      fail(path, "corrupt EXR: channel list not sorted by name ('" + one_line(*previous) +
+                     "' before '" + one_line(name) + "')");
+    }
+    previous = name;
+    at += name.size() + 1 + 16; // pixel type, pLinear, reserved, x and y sampling
   }
 }
 
-std::vector<ExrChannel> parse_channel_list(std::span<const std::uint8_t> value,
-                                           std::size_t max_name,
-                                           const std::filesystem::path& path) {
-  ByteReader in(value, path);
-  std::vector<ExrChannel> channels;
+/// The names of the header's attributes, from their framing alone (name, type, size; the values
+/// are left to the library, and so is reporting a header that ends early), and the channel
+/// order. Header::readFrom allocates an attribute's declared size before reading its value (and
+/// zero-fills it, for strings), so a 200-byte file declaring a 2 GiB string would cost 2 GiB:
+/// every declared size must fit in the rest of the file.
+std::vector<std::string> exr_attribute_names(std::span<const std::uint8_t> bytes,
+                                             const std::filesystem::path& path) {
+  std::vector<std::string> names;
+  std::size_t at = 8; // after the magic number and version field
+  const auto next_text = [&]() -> std::optional<std::string_view> {
+    const auto end = std::find(bytes.begin() + static_cast<std::ptrdiff_t>(at), bytes.end(), 0);
+    if (end == bytes.end()) return std::nullopt;
+    const std::string_view text(reinterpret_cast<const char*>(bytes.data()) + at,
+                                static_cast<std::size_t>(end - bytes.begin()) - at);
+    at += text.size() + 1;
+    return text;
+  };
   for (;;) {
-    std::string name = in.text(max_name, "channel list");
-    if (name.empty()) break;
-    ExrChannel channel;
-    channel.name = std::move(name);
-    channel.pixel_type = in.i32("channel list");
-    in.u8("channel list");      // pLinear: a hint for lossy compressors, irrelevant here
-    in.take(3, "channel list"); // reserved
-    const std::int32_t x_sampling = in.i32("channel list");
-    const std::int32_t y_sampling = in.i32("channel list");
-    if (channel.pixel_type < kExrPixelUint || channel.pixel_type > kExrPixelFloat) {
-      fail(path, "corrupt EXR: channel " + channel.name + " has pixel type " +
-                     std::to_string(channel.pixel_type));
+    const auto name = next_text();
+    if (!name || name->empty() || !next_text() || bytes.size() - at < 4) return names;
+    const std::uint32_t size = le32(bytes, at);
+    at += 4;
+    if (size > bytes.size() - at) {
+      fail(path, "truncated or corrupt EXR: header attribute '" + one_line(name->substr(0, 64)) +
+                     "' declares " + std::to_string(size) + " bytes, more than the " +
+                     std::to_string(bytes.size() - at) + " left in the file");
     }
-    if (x_sampling != 1 || y_sampling != 1) {
-      fail(path, "unsupported EXR: channel " + channel.name + " is subsampled (" +
-                     std::to_string(x_sampling) + "x" + std::to_string(y_sampling) + ")");
-    }
-    channels.push_back(std::move(channel));
+    if (*name == "channels") check_exr_channel_order(bytes.subspan(at, size), path);
+    at += size;
+    names.emplace_back(*name);
   }
-  if (channels.empty()) fail(path, "corrupt EXR: the channel list is empty");
-  return channels;
+}
+
+/// Which channels become R, G and B: the file's R, G, B, or its Y three times for a
+/// luminance-only image.
+struct ExrColourChannels {
+  std::array<std::string, 3> names;
+  bool gray = false;
+};
+
+/// The checks made on the header alone, before Imf::InputFile allocates line or tile tables
+/// sized by it. Returns the channels to read.
+ExrColourChannels check_exr_header(const Imf::Header& header,
+                                   const std::vector<std::string>& attributes, bool tiled,
+                                   const std::filesystem::path& path) {
+  // Imf::Header starts with default values for these (and checks that the file's have the same
+  // types), so whether the file has them is seen in its own list: a missing one must not be
+  // silently replaced (by a default 64x64 data window, say).
+  for (const char* name : {"channels", "compression", "dataWindow", "displayWindow", "lineOrder",
+                           "pixelAspectRatio", "screenWindowCenter", "screenWindowWidth"}) {
+    if (std::find(attributes.begin(), attributes.end(), name) == attributes.end()) {
+      fail(path, std::string("corrupt EXR: header has no ") + name + " attribute");
+    }
+  }
+  if (tiled && !header.hasTileDescription()) {
+    fail(path, "corrupt EXR: tiled file without a tiles attribute");
+  }
+  if (header.hasType() && Imf::isDeepData(header.type())) fail(path, "unsupported EXR: deep data");
+
+  // Sizes in 64 bits: a forged window of ±2^31 must not overflow before it is rejected.
+  const Imath::Box2i& window = header.dataWindow();
+  const std::int64_t width = std::int64_t{window.max.x} - window.min.x + 1;
+  const std::int64_t height = std::int64_t{window.max.y} - window.min.y + 1;
+  if (width < 1 || height < 1) {
+    fail(path, "corrupt EXR: empty data window (" + size_text(width, height) + ")");
+  }
+  if (width > kMaxFramebufferSide || height > kMaxFramebufferSide) {
+    fail(path, "EXR size " + size_text(width, height) + " is outside [1, " +
+                   std::to_string(kMaxFramebufferSide) + "] per side");
+  }
+  header.sanityCheck(tiled); // the library's own checks: windows, modes, compression, ...
+
+  const Imf::ChannelList& channels = header.channels();
+  ExrColourChannels colour;
+  if (channels.findChannel("R") != nullptr && channels.findChannel("G") != nullptr &&
+      channels.findChannel("B") != nullptr) {
+    colour.names = {"R", "G", "B"};
+  } else if (channels.findChannel("Y") != nullptr && channels.findChannel("RY") == nullptr &&
+             channels.findChannel("BY") == nullptr) {
+    colour.names = {"Y", "Y", "Y"};
+    colour.gray = true;
+  } else {
+    std::string found;
+    for (auto it = channels.begin(); it != channels.end(); ++it) found += " " + one_line(it.name());
+    fail(path, "unsupported EXR: no R, G, B channels (nor Y alone); found:" +
+                   (found.empty() ? std::string(" none") : found));
+  }
+  for (const std::string& name : colour.names) {
+    const Imf::Channel& channel = *channels.findChannel(name);
+    if (channel.xSampling != 1 || channel.ySampling != 1) {
+      fail(path, "unsupported EXR: channel " + name + " is subsampled (" +
+                     size_text(channel.xSampling, channel.ySampling) + ")");
+    }
+  }
+  return colour;
+}
+
+// --- Chunk check through OpenEXRCore ---------------------------------------------------------
+// The C++ library (3.1) does not check that a chunk decompresses to the size the header implies:
+// a corrupt file whose data window or tile size no longer matches its chunks (one flipped byte
+// suffices) reads "successfully", its missing samples copied from uninitialised memory. The C
+// library of the same package, OpenEXRCore, written for fuzzed input, checks every chunk's
+// framing and decompressed size; it decodes each chunk here into a scratch buffer, which is
+// discarded. Core 3.1 has no DWAA/DWAB decoder, so chunks of those are checked for framing only.
+
+/// Where OpenEXRCore reads from, and the first error it reported.
+struct ExrCoreInput {
+  std::span<const std::uint8_t> bytes;
+  std::string error;
+};
+
+std::int64_t exr_core_read(exr_const_context_t, void* user, void* buffer, std::uint64_t size,
+                           std::uint64_t offset, exr_stream_error_func_ptr_t) {
+  const auto bytes = static_cast<ExrCoreInput*>(user)->bytes;
+  if (offset >= bytes.size()) return 0;
+  const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(size, bytes.size() - offset));
+  std::memcpy(buffer, bytes.data() + offset, n);
+  return static_cast<std::int64_t>(n);
+}
+
+std::int64_t exr_core_size(exr_const_context_t, void* user) {
+  return static_cast<std::int64_t>(static_cast<ExrCoreInput*>(user)->bytes.size());
+}
+
+/// Keeps the first message (the cause; later ones report the failed step), prints nothing.
+void exr_core_error(exr_const_context_t context, exr_result_t, const char* message) {
+  void* user = nullptr;
+  if (exr_get_user_data(context, &user) != EXR_ERR_SUCCESS || user == nullptr) return;
+  auto& input = *static_cast<ExrCoreInput*>(user);
+  if (input.error.empty() && message != nullptr) input.error = one_line(message);
+}
+
+/// Owns an OpenEXRCore read context.
+struct ExrCoreContext {
+  exr_context_t context = nullptr;
+  ExrCoreContext() = default;
+  ExrCoreContext(const ExrCoreContext&) = delete;
+  ExrCoreContext& operator=(const ExrCoreContext&) = delete;
+  ~ExrCoreContext() {
+    if (context != nullptr) exr_finish(&context);
+  }
+};
+
+/// Owns the buffers of one chunk's decode pipeline.
+struct ExrCoreDecode {
+  exr_const_context_t context;
+  exr_decode_pipeline_t decode = EXR_DECODE_PIPELINE_INITIALIZER;
+  explicit ExrCoreDecode(exr_const_context_t c) : context(c) {}
+  ExrCoreDecode(const ExrCoreDecode&) = delete;
+  ExrCoreDecode& operator=(const ExrCoreDecode&) = delete;
+  ~ExrCoreDecode() { exr_decoding_destroy(context, &decode); }
+};
+
+void check_exr_chunks(std::span<const std::uint8_t> bytes, const ExrColourChannels& colour,
+                      const std::filesystem::path& path) {
+  ExrCoreInput input{bytes, {}};
+  const auto check = [&](exr_result_t result) {
+    if (result == EXR_ERR_SUCCESS) return;
+    fail(path,
+         "corrupt EXR: " + (input.error.empty() ? std::string(exr_get_default_error_message(result))
+                                                : input.error));
+  };
+  exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+  init.user_data = &input;
+  init.read_fn = &exr_core_read;
+  init.size_fn = &exr_core_size;
+  init.error_handler_fn = &exr_core_error;
+  init.max_image_width = static_cast<int>(kMaxFramebufferSide);
+  init.max_image_height = static_cast<int>(kMaxFramebufferSide);
+  init.max_tile_width = static_cast<int>(kMaxFramebufferSide);
+  init.max_tile_height = static_cast<int>(kMaxFramebufferSide);
+  init.flags = EXR_CONTEXT_FLAG_DISABLE_CHUNK_RECONSTRUCTION; // a broken offset table is an error
+  ExrCoreContext owner;
+  check(exr_start_read(&owner.context, path.string().c_str(), &init));
+  const exr_const_context_t context = owner.context;
+
+  exr_attr_box2i_t window{};
+  exr_storage_t storage = EXR_STORAGE_SCANLINE;
+  exr_compression_t compression = EXR_COMPRESSION_NONE;
+  check(exr_get_data_window(context, 0, &window));
+  check(exr_get_storage(context, 0, &storage));
+  check(exr_get_compression(context, 0, &compression));
+  // Core reads the header itself; it must agree with the C++ reader's, already checked.
+  const std::int64_t width = std::int64_t{window.max.x} - window.min.x + 1;
+  const std::int64_t height = std::int64_t{window.max.y} - window.min.y + 1;
+  if (width < 1 || height < 1 || width > kMaxFramebufferSide || height > kMaxFramebufferSide ||
+      (storage != EXR_STORAGE_SCANLINE && storage != EXR_STORAGE_TILED)) {
+    fail(path, "corrupt EXR: inconsistent header");
+  }
+
+  // Every chunk of the image (level 0 for tiles): its table entry and framing first.
+  std::vector<exr_chunk_info_t> chunks;
+  if (storage == EXR_STORAGE_SCANLINE) {
+    std::int32_t lines = 0;
+    check(exr_get_scanlines_per_chunk(context, 0, &lines));
+    if (lines < 1) fail(path, "corrupt EXR: inconsistent header");
+    for (std::int64_t y = window.min.y; y <= window.max.y; y += lines) {
+      check(exr_read_scanline_chunk_info(context, 0, static_cast<int>(y), &chunks.emplace_back()));
+    }
+  } else {
+    std::int32_t tile_width = 0;
+    std::int32_t tile_height = 0;
+    check(exr_get_tile_sizes(context, 0, 0, 0, &tile_width, &tile_height));
+    if (tile_width < 1 || tile_height < 1) fail(path, "corrupt EXR: inconsistent header");
+    for (std::int64_t ty = 0; ty < (height + tile_height - 1) / tile_height; ++ty) {
+      for (std::int64_t tx = 0; tx < (width + tile_width - 1) / tile_width; ++tx) {
+        check(exr_read_tile_chunk_info(context, 0, static_cast<int>(tx), static_cast<int>(ty), 0, 0,
+                                       &chunks.emplace_back()));
+      }
+    }
+  }
+  if (compression == EXR_COMPRESSION_DWAA || compression == EXR_COMPRESSION_DWAB) return;
+
+  // Then each chunk decoded, the colour channels into a scratch buffer of the chunk's size.
+  std::vector<float> scratch;
+  for (const exr_chunk_info_t& chunk : chunks) {
+    ExrCoreDecode pipeline{context};
+    exr_decode_pipeline_t& decode = pipeline.decode;
+    check(exr_decoding_initialize(context, 0, &chunk, &decode));
+    scratch.assign(
+        static_cast<std::size_t>(chunk.width) * static_cast<std::size_t>(chunk.height) * 3, 0.0f);
+    for (int c = 0; c < decode.channel_count; ++c) {
+      exr_coding_channel_info_t& channel = decode.channels[c];
+      const auto found = std::find(colour.names.begin(), colour.names.end(), channel.channel_name);
+      if (found == colour.names.end() || channel.width != chunk.width ||
+          channel.height != chunk.height) {
+        channel.decode_to_ptr = nullptr; // not read (or subsampled): decompressed, not unpacked
+        continue;
+      }
+      const auto k = static_cast<std::size_t>(found - colour.names.begin());
+      channel.decode_to_ptr = reinterpret_cast<std::uint8_t*>(scratch.data() + k);
+      channel.user_pixel_stride = 3 * sizeof(float);
+      channel.user_line_stride = static_cast<std::int32_t>(3 * sizeof(float)) * chunk.width;
+      channel.user_bytes_per_element = sizeof(float);
+      channel.user_data_type = EXR_PIXEL_FLOAT;
+    }
+    check(exr_decoding_choose_default_routines(context, 0, &decode));
+    check(exr_decoding_run(context, 0, &decode));
+  }
+}
+
+Framebuffer decode_exr(std::span<const std::uint8_t> bytes, const std::filesystem::path& path) {
+  // Version field: the low byte is the format version, the rest are feature flags.
+  if (bytes.size() < 8) fail(path, "truncated EXR: file ends inside the version field");
+  const auto version = static_cast<int>(le32(bytes, 4));
+  if (Imf::isMultiPart(version)) {
+    fail(path, "unsupported EXR: multi-part file (only single-part images are read)");
+  }
+  if (Imf::isNonImage(version)) fail(path, "unsupported EXR: deep data");
+  if (Imf::getVersion(version) != Imf::EXR_VERSION) {
+    fail(path, "unsupported EXR: format version " + std::to_string(Imf::getVersion(version)));
+  }
+  if (!Imf::supportsFlags(Imf::getFlags(version))) {
+    fail(path, "unsupported EXR: unknown version flags " +
+                   std::to_string(static_cast<std::uint32_t>(Imf::getFlags(version)) >> 8));
+  }
+  const bool tiled = Imf::isTiled(version);
+  const std::vector<std::string> attributes = exr_attribute_names(bytes, path);
+
+  // The header alone first, into a default Imf::Header: its predefined attributes make readFrom
+  // refuse a file attribute of the same name and another type. (Erasing them instead lets an
+  // attribute "channels" of an unknown type in, on which Header::sanityCheck crashes.)
+  ExrMemoryInput stream(bytes, path.string());
+  Imf::Header header;
+  stream.seekg(8);
+  int header_version = version;
+  header.readFrom(stream, header_version);
+  const ExrColourChannels colour = check_exr_header(header, attributes, tiled, path);
+  check_exr_chunks(bytes, colour, path);
+
+  // The header passed: now the library reads the file from the start, tables and pixels.
+  stream.seekg(0);
+  Imf::InputFile file(stream);
+  const Imath::Box2i window = header.dataWindow();
+  if (file.header().dataWindow() != window) fail(path, "corrupt EXR: header changed on re-read");
+  const auto width = static_cast<std::uint32_t>(std::int64_t{window.max.x} - window.min.x + 1);
+  const auto height = static_cast<std::uint32_t>(std::int64_t{window.max.y} - window.min.y + 1);
+  Framebuffer image(width, height);
+
+  // FLOAT slices straight into the framebuffer: the library converts HALF and UINT samples.
+  // Slice::Make offsets the base by the window origin, so pixel (xMin, yMin) lands at (0, 0).
+  const std::size_t x_stride = sizeof(vec3);
+  const std::size_t y_stride = sizeof(vec3) * width;
+  Imf::FrameBuffer slices;
+  for (int c = 0; c < (colour.gray ? 1 : 3); ++c) {
+    slices.insert(colour.names[static_cast<std::size_t>(c)],
+                  Imf::Slice::Make(Imf::FLOAT, &image.pixels()[0][c], window, x_stride, y_stride));
+  }
+  file.setFrameBuffer(slices);
+  file.readPixels(window.min.y, window.max.y);
+
+  for (std::uint32_t y = 0; y < height; ++y) {
+    for (std::uint32_t x = 0; x < width; ++x) {
+      vec3& p = image.at(x, y);
+      if (colour.gray) p = vec3(p.r);
+      for (int c = 0; c < 3; ++c) {
+        if (!std::isfinite(p[c])) {
+          fail(path, "EXR pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") channel " +
+                         colour.names[static_cast<std::size_t>(c)] + " is NaN or infinite");
+        }
+      }
+    }
+  }
+  return image;
 }
 
 } // namespace
@@ -379,220 +615,48 @@ void write_exr(const Framebuffer& image, const std::filesystem::path& path) {
     }
   }
 
-  // Header attributes, in the name order OpenEXR itself writes them.
-  ByteWriter header;
-  for (std::uint8_t b : kExrMagic) header.u8(b);
-  header.u32(kExrVersion); // single-part scan-line file, short names: no flag bits
-  {
-    ByteWriter channels; // chlist: sorted by name, as the format requires
-    for (const char* name : {"B", "G", "R"}) {
-      channels.text(name);
-      channels.i32(kExrPixelFloat);
-      channels.u8(0);                             // pLinear
-      for (int i = 0; i < 3; ++i) channels.u8(0); // reserved
-      channels.i32(1);                            // xSampling
-      channels.i32(1);                            // ySampling
+  ExrMemoryOutput encoded(path.string());
+  try {
+    Imf::Header header(static_cast<int>(width), static_cast<int>(height));
+    header.compression() = Imf::ZIP_COMPRESSION; // lossless: the floats come back bit-exact
+    Imf::FrameBuffer slices;
+    for (int c = 0; c < 3; ++c) {
+      const char* name = c == 0 ? "R" : c == 1 ? "G" : "B";
+      header.channels().insert(name, Imf::Channel(Imf::FLOAT));
+      slices.insert(name, Imf::Slice::Make(Imf::FLOAT, &image.pixels()[0][c], Imath::V2i(0, 0),
+                                           width, height, sizeof(vec3), sizeof(vec3) * width));
     }
-    channels.u8(0);
-    write_attribute(header, "channels", "chlist", channels);
+    Imf::OutputFile file(encoded, header);
+    file.setFrameBuffer(slices);
+    file.writePixels(static_cast<int>(height));
+  } catch (const std::exception& e) {
+    fail(path, "cannot write EXR: " + one_line(e.what()));
   }
-  {
-    ByteWriter compression;
-    compression.u8(0); // NO_COMPRESSION
-    write_attribute(header, "compression", "compression", compression);
-  }
-  ByteWriter window; // box2i: xMin, yMin, xMax, yMax (inclusive)
-  window.i32(0);
-  window.i32(0);
-  window.i32(static_cast<std::int32_t>(width - 1));
-  window.i32(static_cast<std::int32_t>(height - 1));
-  write_attribute(header, "dataWindow", "box2i", window);
-  write_attribute(header, "displayWindow", "box2i", window);
-  {
-    ByteWriter line_order;
-    line_order.u8(0); // INCREASING_Y
-    write_attribute(header, "lineOrder", "lineOrder", line_order);
-  }
-  {
-    ByteWriter aspect;
-    aspect.f32(1.0f);
-    write_attribute(header, "pixelAspectRatio", "float", aspect);
-  }
-  {
-    ByteWriter center;
-    center.f32(0.0f);
-    center.f32(0.0f);
-    write_attribute(header, "screenWindowCenter", "v2f", center);
-  }
-  {
-    ByteWriter screen_width;
-    screen_width.f32(1.0f);
-    write_attribute(header, "screenWindowWidth", "float", screen_width);
-  }
-  header.u8(0); // end of header
-
-  // Line offset table: block y starts after the table and the y blocks before it.
-  const std::uint64_t line_bytes = std::uint64_t{width} * 3 * sizeof(float);
-  const std::uint64_t block_bytes = 2 * sizeof(std::int32_t) + line_bytes;
-  const std::uint64_t first_block = header.size() + std::uint64_t{height} * sizeof(std::uint64_t);
-  for (std::uint32_t y = 0; y < height; ++y) header.u64(first_block + y * block_bytes);
 
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   if (!out) fail(path, "cannot write EXR: " + errno_message());
-  out.write(reinterpret_cast<const char*>(header.bytes().data()),
-            static_cast<std::streamsize>(header.size()));
-  ByteWriter block;
-  for (std::uint32_t y = 0; y < height; ++y) {
-    block = ByteWriter();
-    block.i32(static_cast<std::int32_t>(y));
-    block.i32(static_cast<std::int32_t>(line_bytes));
-    for (int channel : {2, 1, 0}) { // B, G, R: the channel list order
-      for (std::uint32_t x = 0; x < width; ++x) block.f32(image.at(x, y)[channel]);
-    }
-    out.write(reinterpret_cast<const char*>(block.bytes().data()),
-              static_cast<std::streamsize>(block.size()));
-  }
+  out.write(reinterpret_cast<const char*>(encoded.bytes().data()),
+            static_cast<std::streamsize>(encoded.bytes().size()));
   out.flush();
   if (!out) fail(path, "cannot write EXR: " + errno_message());
 }
 
 Framebuffer read_exr(const std::filesystem::path& path) {
   const Bytes bytes = read_file_bytes(path);
-  if (bytes.size() < kExrMagic.size() ||
-      !std::equal(kExrMagic.begin(), kExrMagic.end(), bytes.begin())) {
+  if (bytes.size() < 4 || !Imf::isImfMagic(reinterpret_cast<const char*>(bytes.data()))) {
     fail(path, "not an OpenEXR file (wrong magic number)");
   }
-  ByteReader in(bytes, path, kExrMagic.size());
-
-  // Version field: the low byte is the format version, the rest are feature flags.
-  const std::uint32_t version = in.u32("version field");
-  if ((version & 0xFFu) != kExrVersion) {
-    fail(path, "unsupported EXR: format version " + std::to_string(version & 0xFFu));
+  // Every failure inside the library (Iex::BaseExc, std::bad_alloc, ...) becomes a
+  // specula::Error naming the file.
+  try {
+    return decode_exr(bytes, path);
+  } catch (const Error&) {
+    throw;
+  } catch (const std::bad_alloc&) {
+    fail(path, "corrupt EXR: out of memory while decoding");
+  } catch (const std::exception& e) {
+    fail(path, "corrupt or unreadable EXR: " + one_line(e.what()));
   }
-  if ((version & kExrFlagMultipart) != 0) fail(path, "unsupported EXR: multi-part file");
-  if ((version & kExrFlagNonImage) != 0) fail(path, "unsupported EXR: deep data");
-  if ((version & kExrFlagTiled) != 0) fail(path, "unsupported EXR: tiled image");
-  if ((version & ~(0xFFu | kExrFlagLongNames)) != 0) {
-    fail(path, "unsupported EXR: unknown version flags " + std::to_string(version >> 8));
-  }
-  const std::size_t max_name = (version & kExrFlagLongNames) != 0 ? 255 : 31;
-
-  // Header: attributes until an empty name; unknown ones are skipped by their size.
-  ExrHeader header;
-  for (;;) {
-    const std::string name = in.text(max_name, "header");
-    if (name.empty()) break;
-    const std::string type = in.text(max_name, "header");
-    const std::int32_t size = in.i32("header");
-    if (size < 0) fail(path, "corrupt EXR: attribute " + name + " has negative size");
-    const auto value = in.take(static_cast<std::size_t>(size), "header");
-    const auto value_size = static_cast<std::size_t>(size);
-    if (name == "channels") {
-      expect_type(path, name, type, "chlist", value_size, 0);
-      header.channels = parse_channel_list(value, max_name, path);
-    } else if (name == "compression") {
-      expect_type(path, name, type, "compression", value_size, 1);
-      header.compression = value[0];
-    } else if (name == "dataWindow") {
-      expect_type(path, name, type, "box2i", value_size, 16);
-      ByteReader box(value, path);
-      std::array<std::int32_t, 4> window{};
-      for (auto& v : window) v = box.i32("dataWindow");
-      header.data_window = window;
-    }
-  }
-  if (header.channels.empty()) fail(path, "corrupt EXR: header has no channels attribute");
-  if (!header.compression) fail(path, "corrupt EXR: header has no compression attribute");
-  if (!header.data_window) fail(path, "corrupt EXR: header has no dataWindow attribute");
-  if (*header.compression != 0) {
-    fail(path, std::string("unsupported EXR: compression ") +
-                   compression_name(*header.compression) + " (only NO_COMPRESSION is read)");
-  }
-
-  // Sizes in 64 bits: a forged window of ±2^31 must not overflow before it is rejected.
-  const auto [x_min, y_min, x_max, y_max] = *header.data_window;
-  const std::int64_t width = std::int64_t{x_max} - x_min + 1;
-  const std::int64_t height = std::int64_t{y_max} - y_min + 1;
-  if (width < 1 || height < 1) {
-    fail(path, "corrupt EXR: empty data window (" + size_text(width, height) + ")");
-  }
-  if (width > kMaxFramebufferSide || height > kMaxFramebufferSide) {
-    fail(path, "EXR size " + size_text(width, height) + " is outside [1, " +
-                   std::to_string(kMaxFramebufferSide) + "] per side");
-  }
-
-  // Where each of R, G, B lies in a scan line: channels are stored one after another, each as
-  // `width` samples, in channel-list order.
-  constexpr std::array<std::string_view, 3> kRgbNames = {"R", "G", "B"};
-  std::size_t line_bytes = 0;
-  std::array<const ExrChannel*, 3> rgb{};
-  for (ExrChannel& channel : header.channels) {
-    channel.offset_in_line = line_bytes;
-    line_bytes += static_cast<std::size_t>(width) * pixel_type_size(channel.pixel_type);
-    for (int c = 0; c < 3; ++c) {
-      if (channel.name == kRgbNames[c]) rgb[c] = &channel;
-    }
-  }
-  for (int c = 0; c < 3; ++c) {
-    if (rgb[c] == nullptr) {
-      std::string found;
-      for (const ExrChannel& channel : header.channels) found += " " + channel.name;
-      fail(path, "unsupported EXR: no R, G and B channels (found:" + found + ")");
-    }
-    if (rgb[c]->pixel_type == kExrPixelUint) {
-      fail(path, "unsupported EXR: channel " + rgb[c]->name + " is UINT, not HALF or FLOAT");
-    }
-  }
-
-  // Line offset table, then one block per scan line, found through the table so any line
-  // order is read the same way.
-  const auto rows = static_cast<std::size_t>(height);
-  std::vector<std::uint64_t> offsets(rows);
-  for (auto& offset : offsets) offset = in.u64("line offset table");
-  const std::size_t blocks_start = in.position();
-
-  Framebuffer image(static_cast<std::uint32_t>(width), static_cast<std::uint32_t>(height));
-  std::vector<bool> seen(rows, false);
-  for (std::size_t i = 0; i < rows; ++i) {
-    if (offsets[i] < blocks_start || offsets[i] >= bytes.size()) {
-      fail(path, "truncated or corrupt EXR: scan line block " + std::to_string(i) + " has offset " +
-                     std::to_string(offsets[i]) + " outside the file");
-    }
-    ByteReader block(bytes, path, static_cast<std::size_t>(offsets[i]));
-    const std::int32_t y = block.i32("scan line block");
-    const std::int32_t size = block.i32("scan line block");
-    if (y < y_min || y > y_max) {
-      fail(path, "corrupt EXR: scan line y = " + std::to_string(y) + " outside the data window");
-    }
-    const auto row = static_cast<std::size_t>(std::int64_t{y} - y_min);
-    if (seen[row]) fail(path, "corrupt EXR: scan line y = " + std::to_string(y) + " appears twice");
-    seen[row] = true;
-    if (size < 0 || static_cast<std::size_t>(size) != line_bytes) {
-      fail(path, "corrupt EXR: scan line y = " + std::to_string(y) + " holds " +
-                     std::to_string(size) + " bytes, expected " + std::to_string(line_bytes));
-    }
-    const auto data = block.take(line_bytes, "scan line data");
-    for (int c = 0; c < 3; ++c) {
-      const ExrChannel& channel = *rgb[c];
-      ByteReader samples(data, path, channel.offset_in_line);
-      for (std::size_t x = 0; x < static_cast<std::size_t>(width); ++x) {
-        float v;
-        if (channel.pixel_type == kExrPixelHalf) {
-          const std::uint32_t lo = samples.u8("scan line data");
-          const std::uint32_t hi = samples.u8("scan line data");
-          v = half_to_float(static_cast<std::uint16_t>(lo | (hi << 8)));
-        } else {
-          v = std::bit_cast<float>(samples.u32("scan line data"));
-        }
-        if (!std::isfinite(v)) {
-          fail(path, "EXR pixel (" + std::to_string(x) + ", " + std::to_string(row) + ") channel " +
-                         channel.name + " is NaN or infinite");
-        }
-        image.at(static_cast<std::uint32_t>(x), static_cast<std::uint32_t>(row))[c] = v;
-      }
-    }
-  }
-  return image;
 }
 
 // --- By extension ------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 #pragma once
 /// \file
-/// Image files: 8-bit sRGB PNG (through stb_image / stb_image_write) and a minimal OpenEXR
-/// (uncompressed scan lines, written from the OpenEXR file layout document, no library).
+/// Image files: 8-bit sRGB PNG (through stb_image / stb_image_write) and OpenEXR (through the
+/// OpenEXR library, every compression it implements).
 /// Framebuffers are linear RGB; PNG stores display-encoded sRGB, EXR stores linear floats.
 /// Every reader validates its input and throws specula::Error whose what() names the file and
 /// the problem (missing, empty, truncated, wrong signature, absurd size, unsupported variant,
@@ -33,21 +33,25 @@ void write_png_srgb8(std::span<const std::uint8_t> rgb, std::uint32_t width, std
 /// truncated data, or a side larger than kMaxFramebufferSide.
 [[nodiscard]] Framebuffer read_png(const std::filesystem::path& path);
 
-/// Writes a single-part scan-line OpenEXR 2.0 file (OpenEXR File Layout, "Scan Line Blocks"):
-/// channels B, G, R as FLOAT, NO_COMPRESSION, one scan line per block, INCREASING_Y, data and
-/// display window (0, 0)–(width−1, height−1). Floats are stored bit-exactly, so read_exr returns
-/// an identical framebuffer. Throws specula::Error naming the path when a pixel is NaN or ±Inf
-/// (Specula never writes non-finite values, and read_exr rejects them) or the file cannot be
-/// written.
+/// Writes a single-part scan-line OpenEXR file through the OpenEXR library: channels R, G, B as
+/// FLOAT, ZIP compression (lossless), INCREASING_Y, data and display window (0, 0)–(width−1,
+/// height−1). Floats are stored bit-exactly, so read_exr returns an identical framebuffer.
+/// Throws specula::Error naming the path when a pixel is NaN or ±Inf (Specula never writes
+/// non-finite values, and read_exr rejects them; nothing is written then) or the file cannot be
+/// written (missing folder, a directory, a full device).
 void write_exr(const Framebuffer& image, const std::filesystem::path& path);
 
-/// Reads a single-part scan-line OpenEXR file without compression whose R, G and B channels are
-/// FLOAT or HALF with sampling 1×1 (other channels, such as A, are skipped), in any line order.
-/// The data window's origin is dropped: pixel (xMin, yMin) becomes (0, 0). Throws specula::Error
-/// naming the file: missing, empty, wrong magic number, truncated header, offset table or scan
-/// line, inconsistent sizes, a data window side larger than kMaxFramebufferSide, a NaN or ±Inf
-/// value, or "unsupported EXR: ..." for tiled, deep, multi-part, compressed, subsampled or UINT
-/// colour data.
+/// Reads a single-part OpenEXR file, scan-line or tiled (level 0 of a mip or rip map), in any
+/// compression the OpenEXR library implements (NONE, RLE, ZIPS, ZIP, PIZ, PXR24, B44, B44A, DWAA,
+/// DWAB) and any line order. Channels R, G and B of type HALF, FLOAT or UINT become floats (HALF
+/// exactly, UINT above 2^24 rounded); a file with a Y channel but not all of R, G, B (and no RY,
+/// BY chroma) is read as gray. Other channels, such as A, are skipped. The data window's origin is
+/// dropped: pixel (xMin, yMin) becomes (0, 0). Throws specula::Error naming the file: missing,
+/// empty, wrong magic number, truncated or corrupt data (the library's message, on one line), a
+/// header attribute larger than the file, a missing required attribute, a data window side larger
+/// than kMaxFramebufferSide (checked before any pixel memory is allocated), a NaN or ±Inf value, or
+/// "unsupported EXR: ..." for multi-part, deep, luminance-chroma or subsampled colour data, or no
+/// R, G, B channels.
 [[nodiscard]] Framebuffer read_exr(const std::filesystem::path& path);
 
 /// read_png or read_exr by extension (.png, .exr, case-insensitive); any other extension is an
