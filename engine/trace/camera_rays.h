@@ -4,6 +4,7 @@
 
 #include "specula/geometry/ray.h"
 #include "specula/scene/components/camera.h"
+#include "specula/trace/packet_tile.h"
 
 #include <cmath>
 #include <cstdint>
@@ -33,6 +34,12 @@ struct CameraRays {
     inv_width = 1.0f / float(width);
     inv_height = 1.0f / float(height);
   }
+
+  /// Unit directions of the rays through every pixel of `tile`, in its trace order, one array per
+  /// component (each holds tile.pixel_count() floats): bit-identical to ray(x, y).direction, a
+  /// tile at a time — the image-plane offsets once per column and row, the normalisation
+  /// vectorised. Every ray starts at `origin`.
+  void tile_directions(const PacketTile& tile, float* dx, float* dy, float* dz) const;
 
   /// The ray through the centre of pixel (x, y), row 0 at the top.
   [[nodiscard]] Ray ray(std::uint32_t x, std::uint32_t y) const {

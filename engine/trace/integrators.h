@@ -44,28 +44,23 @@ struct WhittedNode {
   RayKind kind;
 };
 
-/// Cast mode's wave, one array per component: the gathered triangle data (vertex positions and
-/// normals), then the shading inputs computed from them (world position, geometric and shading
-/// normals facing the ray, albedo / π, radiance so far). Misses are marked.
+/// Cast mode's wave, one array per component: world position; interpolated vertex normal (then
+/// the shading normal); geometric normal facing the ray; albedo / π; radiance of the lights so
+/// far. flags: bit 0 a hit on a baked instance, bit 1 its vertex normals are interpolated.
+/// `general` lists hits on transformed instances, shaded by shading_point one by one.
 struct CastWave {
-  std::vector<float> p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z;
-  std::vector<float> n0x, n0y, n0z, n1x, n1y, n1z, n2x, n2y, n2z;
   std::vector<float> px, py, pz;
-  std::vector<float> gx, gy, gz;
   std::vector<float> sx, sy, sz;
+  std::vector<float> gx, gy, gz;
   std::vector<float> ar, ag, ab;
   std::vector<float> lr, lg, lb;
-  std::vector<std::uint32_t> hit;     ///< 32-bit like the floats, so mixed loops vectorise
-  std::vector<std::uint32_t> smooth;  ///< the n* arrays hold vertex normals to interpolate
-  std::vector<std::uint32_t> general; ///< hits on transformed instances, shaded one by one
+  std::vector<std::uint32_t> flags;
+  std::vector<std::uint32_t> general;
 
   void resize(std::size_t n) {
-    for (auto* a : {&p0x, &p0y, &p0z, &p1x, &p1y, &p1z, &p2x, &p2y, &p2z, &n0x, &n0y,
-                    &n0z, &n1x, &n1y, &n1z, &n2x, &n2y, &n2z, &px,  &py,  &pz,  &gx,
-                    &gy,  &gz,  &sx,  &sy,  &sz,  &ar,  &ag,  &ab,  &lr,  &lg,  &lb})
+    for (auto* a : {&px, &py, &pz, &sx, &sy, &sz, &gx, &gy, &gz, &ar, &ag, &ab, &lr, &lg, &lb})
       a->resize(n);
-    hit.resize(n);
-    smooth.resize(n);
+    flags.resize(n);
   }
 };
 

@@ -283,8 +283,8 @@ void EmbreeTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> o
 }
 
 template <int N, typename RayHitN, typename IntersectN>
-void EmbreeTracer::intersect_camera_packets(const CameraRays& camera, const PacketTile& tile,
-                                            PrimaryHits& hits, IntersectN intersect_n) const {
+void EmbreeTracer::intersect_camera_packets(const PacketTile& tile, PrimaryHits& hits,
+                                            const vec3& origin, IntersectN intersect_n) const {
   SPECULA_ASSERT(tile.packet_w * tile.packet_h <= std::uint32_t(N));
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
@@ -294,31 +294,20 @@ void EmbreeTracer::intersect_camera_packets(const CameraRays& camera, const Pack
       [&](std::uint32_t bx0, std::uint32_t by0, std::uint32_t bx1, std::uint32_t by1) {
         alignas(64) RayHitN rh;
         alignas(64) int valid[N];
-        int lanes = 0;
-        for (std::uint32_t y = by0; y < by1; ++y)
-          for (std::uint32_t x = bx0; x < bx1; ++x, ++lanes) {
-            const Ray r = camera.ray(x, y);
-            rh.ray.org_x[lanes] = r.origin.x;
-            rh.ray.org_y[lanes] = r.origin.y;
-            rh.ray.org_z[lanes] = r.origin.z;
-            rh.ray.dir_x[lanes] = r.direction.x;
-            rh.ray.dir_y[lanes] = r.direction.y;
-            rh.ray.dir_z[lanes] = r.direction.z;
-            rh.ray.tnear[lanes] = r.tnear;
-            rh.ray.tfar[lanes] = r.tfar;
-          }
+        // The block's rays are consecutive in the tile's trace order: its directions are already in
+        // hits.dir_*; inactive lanes repeat the first ray (finite data, masked off).
+        const int lanes = int((bx1 - bx0) * (by1 - by0));
         for (int i = 0; i < N; ++i) {
+          const std::size_t k = next + std::size_t(i < lanes ? i : 0);
           valid[i] = i < lanes ? -1 : 0;
-          if (i >= lanes) { // inactive lanes still hold finite data
-            rh.ray.org_x[i] = rh.ray.org_x[0];
-            rh.ray.org_y[i] = rh.ray.org_y[0];
-            rh.ray.org_z[i] = rh.ray.org_z[0];
-            rh.ray.dir_x[i] = rh.ray.dir_x[0];
-            rh.ray.dir_y[i] = rh.ray.dir_y[0];
-            rh.ray.dir_z[i] = rh.ray.dir_z[0];
-            rh.ray.tnear[i] = rh.ray.tnear[0];
-            rh.ray.tfar[i] = rh.ray.tfar[0];
-          }
+          rh.ray.org_x[i] = origin.x;
+          rh.ray.org_y[i] = origin.y;
+          rh.ray.org_z[i] = origin.z;
+          rh.ray.dir_x[i] = hits.dir_x[k];
+          rh.ray.dir_y[i] = hits.dir_y[k];
+          rh.ray.dir_z[i] = hits.dir_z[k];
+          rh.ray.tnear[i] = 0.0f;
+          rh.ray.tfar[i] = std::numeric_limits<float>::infinity();
           rh.ray.time[i] = 0.0f;
           rh.ray.mask[i] = 0xFFFFFFFFu;
           rh.ray.id[i] = unsigned(i);
@@ -327,25 +316,18 @@ void EmbreeTracer::intersect_camera_packets(const CameraRays& camera, const Pack
           rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
         }
         intersect_n(valid, top_, &context, &rh);
+        const std::size_t bytes = std::size_t(lanes) * sizeof(float);
+        std::memcpy(&hits.t[next], rh.ray.tfar, bytes); // +inf on a miss
+        std::memcpy(&hits.u[next], rh.hit.u, bytes);
+        std::memcpy(&hits.v[next], rh.hit.v, bytes);
+        std::memcpy(&hits.ng_x[next], rh.hit.Ng_x, bytes);
+        std::memcpy(&hits.ng_y[next], rh.hit.Ng_y, bytes);
+        std::memcpy(&hits.ng_z[next], rh.hit.Ng_z, bytes);
         for (int i = 0; i < lanes; ++i) {
-          const std::size_t k = next + std::size_t(i);
-          hits.dir_x[k] = rh.ray.dir_x[i];
-          hits.dir_y[k] = rh.ray.dir_y[i];
-          hits.dir_z[k] = rh.ray.dir_z[i];
-          if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) {
-            hits.instance[k] = kNoInstance;
-            hits.primitive[k] = 0;
-            hits.t[k] = std::numeric_limits<float>::infinity();
-            continue;
-          }
-          hits.instance[k] = slot_of(rh.hit.geomID[i], rh.hit.instID[0][i]);
-          hits.primitive[k] = rh.hit.primID[i];
-          hits.t[k] = rh.ray.tfar[i];
-          hits.u[k] = rh.hit.u[i];
-          hits.v[k] = rh.hit.v[i];
-          hits.ng_x[k] = rh.hit.Ng_x[i];
-          hits.ng_y[k] = rh.hit.Ng_y[i];
-          hits.ng_z[k] = rh.hit.Ng_z[i];
+          const bool miss = rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID;
+          hits.instance[next + std::size_t(i)] =
+              miss ? kNoInstance : slot_of(rh.hit.geomID[i], rh.hit.instID[0][i]);
+          hits.primitive[next + std::size_t(i)] = miss ? 0u : rh.hit.primID[i];
         }
         next += std::size_t(lanes);
       });
@@ -354,21 +336,21 @@ void EmbreeTracer::intersect_camera_packets(const CameraRays& camera, const Pack
 void EmbreeTracer::intersect_camera(const CameraRays& camera, const PacketTile& tile,
                                     PrimaryHits& hits) const {
   hits.resize(tile.pixel_count());
+  camera.tile_directions(tile, hits.dir_x.data(), hits.dir_y.data(), hits.dir_z.data());
   switch (packet_width_) {
   case 16:
-    intersect_camera_packets<16, RTCRayHit16>(camera, tile, hits, rtcIntersect16);
+    intersect_camera_packets<16, RTCRayHit16>(tile, hits, camera.origin, rtcIntersect16);
     return;
   case 8:
-    intersect_camera_packets<8, RTCRayHit8>(camera, tile, hits, rtcIntersect8);
+    intersect_camera_packets<8, RTCRayHit8>(tile, hits, camera.origin, rtcIntersect8);
     return;
   case 4:
-    intersect_camera_packets<4, RTCRayHit4>(camera, tile, hits, rtcIntersect4);
+    intersect_camera_packets<4, RTCRayHit4>(tile, hits, camera.origin, rtcIntersect4);
     return;
   default: {
-    std::size_t i = 0;
     Hit hit;
-    tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
-      const Ray ray = camera.ray(x, y);
+    for (std::size_t i = 0; i < hits.size(); ++i) {
+      const Ray ray{camera.origin, 0.0f, hits.direction(i), std::numeric_limits<float>::infinity()};
       intersect(std::span<const Ray>(&ray, 1), std::span<Hit>(&hit, 1));
       hits.instance[i] = hit.instance;
       hits.primitive[i] = hit.primitive;
@@ -378,11 +360,7 @@ void EmbreeTracer::intersect_camera(const CameraRays& camera, const PacketTile& 
       hits.ng_x[i] = hit.object_normal.x;
       hits.ng_y[i] = hit.object_normal.y;
       hits.ng_z[i] = hit.object_normal.z;
-      hits.dir_x[i] = ray.direction.x;
-      hits.dir_y[i] = ray.direction.y;
-      hits.dir_z[i] = ray.direction.z;
-      ++i;
-    });
+    }
   }
   }
 }

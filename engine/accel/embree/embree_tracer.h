@@ -60,7 +60,7 @@ private:
     return inst_id == 0 ? static_slot_of_geom_[geom_id] : inst_id - 1;
   }
   template <int N, typename RayHitN, typename IntersectN>
-  void intersect_camera_packets(const CameraRays& camera, const PacketTile& tile, PrimaryHits& hits,
+  void intersect_camera_packets(const PacketTile& tile, PrimaryHits& hits, const vec3& origin,
                                 IntersectN intersect_n) const;
   void rebuild_static(const SceneTables& tables);
   RTCScene shared_blas(const SceneTables& tables, std::uint32_t mesh);
