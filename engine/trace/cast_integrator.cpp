@@ -3,9 +3,9 @@
 // from its triangle (indirect loads: scalar, instance data looked up once per run of hits); a
 // branch-free kernel that turns them into the shading frame; one kernel per light over the whole
 // wave. The kernels are vectorised by the compiler (8-wide through target_clones where the CPU has
-// AVX2). The arithmetic is shading_point's and sample_light's, in the same order; the lights' sum
-// is added to the emission at the end (tests/trace/test_render.cpp compares every pixel with the
-// plain formula).
+// AVX2). The arithmetic is shading_point's and sample_light's, in the same order, except that the
+// albedo multiplies the sum of the lights' irradiance once, at the end, and that sum is added to
+// the emission (tests/trace/test_render.cpp compares every pixel with the plain formula).
 
 #include "specula/trace/integrators.h"
 #include "specula/trace/lights.h"
@@ -29,9 +29,8 @@ constexpr std::uint32_t kBaked = 1u; ///< CastWave::flags: a hit on an instance 
 constexpr std::uint32_t kSmooth = 2u; ///< its vertex normals are interpolated
 
 /// Stage 1: per hit, the barycentric position and vertex normal (b0·v0 + u·v1 + v·v2, as
-/// shading_point computes them) and the material's albedo.
+/// shading_point computes them).
 void gather(const SceneTables& tables, const PrimaryHits& hits, CastWave& w) {
-  constexpr float kInvPi = std::numbers::inv_pi_v<float>;
   const std::size_t n = hits.size();
   w.general.clear();
   std::uint32_t current = kNoInstance;
@@ -39,10 +38,9 @@ void gather(const SceneTables& tables, const PrimaryHits& hits, CastWave& w) {
   const vec3* positions = nullptr;
   const vec3* normals = nullptr;
   const uvec3* triangles = nullptr;
-  vec3 albedo(0.0f);
   for (std::size_t i = 0; i < n; ++i) {
     const std::uint32_t instance = hits.instance[i];
-    vec3 p(0.0f), m(0.0f), a(0.0f);
+    vec3 p(0.0f), m(0.0f);
     std::uint32_t flags = 0;
     if (instance != kNoInstance) {
       if (instance != current) {
@@ -54,9 +52,7 @@ void gather(const SceneTables& tables, const PrimaryHits& hits, CastWave& w) {
         positions = tables.positions.data() + mesh.first_vertex;
         normals = smooth ? tables.normals.data() + mesh.first_normal : nullptr;
         triangles = tables.triangles.data() + mesh.first_triangle;
-        albedo = tables.materials[inst.material].base_color * kInvPi;
       }
-      a = albedo;
       if (identity) {
         const uvec3 tri = triangles[hits.primitive[i]];
         const float u = hits.u[i], v = hits.v[i];
@@ -73,7 +69,6 @@ void gather(const SceneTables& tables, const PrimaryHits& hits, CastWave& w) {
     }
     w.px[i] = p.x, w.py[i] = p.y, w.pz[i] = p.z;
     w.sx[i] = m.x, w.sy[i] = m.y, w.sz[i] = m.z;
-    w.ar[i] = a.x, w.ag[i] = a.y, w.ab[i] = a.z;
     w.flags[i] = flags;
   }
 }
@@ -123,7 +118,7 @@ void shading_frames(const SceneTables& tables, const PrimaryHits& h, CastWave& w
 }
 
 /// Stage 3 for one point light without range or cone, the common case: sample_light's point
-/// branch and the integrator's tests, branch-free over the wave.
+/// branch and the integrator's tests, branch-free over the wave; adds irradiance × cos θ.
 SPECULA_SIMD_CLONES
 void point_light_kernel(std::size_t n, float lx, float ly, float lz, float ir, float ig, float ib,
                         const std::uint32_t* __restrict flags, const float* __restrict px,
@@ -131,9 +126,7 @@ void point_light_kernel(std::size_t n, float lx, float ly, float lz, float ir, f
                         const float* __restrict gx, const float* __restrict gy,
                         const float* __restrict gz, const float* __restrict sx,
                         const float* __restrict sy, const float* __restrict sz,
-                        const float* __restrict ar, const float* __restrict ag,
-                        const float* __restrict ab, float* __restrict lr, float* __restrict lg,
-                        float* __restrict lb) {
+                        float* __restrict lr, float* __restrict lg, float* __restrict lb) {
   for (std::size_t i = 0; i < n; ++i) {
     const float dx = lx - px[i], dy = ly - py[i], dz = lz - pz[i];
     const float dist2 = dx * dx + dy * dy + dz * dz;
@@ -143,7 +136,7 @@ void point_light_kernel(std::size_t n, float lx, float ly, float lz, float ir, f
     const float er = ir * attenuation, eg = ig * attenuation, eb = ib * attenuation;
     const float facing = tx * gx[i] + ty * gy[i] + tz * gz[i];
     const float cos_theta = tx * sx[i] + ty * sy[i] + tz * sz[i];
-    const float r = ar[i] * er * cos_theta, g = ag[i] * eg * cos_theta, b = ab[i] * eb * cos_theta;
+    const float r = er * cos_theta, g = eg * cos_theta, b = eb * cos_theta;
     const float brightest = er > eg ? (er > eb ? er : eb) : (eg > eb ? eg : eb);
     // dist2 > 0 excludes a point on the light (sample_light returns nothing there).
     const bool lit = (flags[i] != 0) & (dist2 > 0.0f) & (facing > 0.0f) & (cos_theta > 0.0f) &
@@ -162,7 +155,7 @@ void add_light(CastWave& w, std::size_t n, const gpu::GpuLight& light) {
     if (glm::dot(ls.to_light, vec3(w.gx[i], w.gy[i], w.gz[i])) <= 0.0f) continue; // behind
     const float cos_theta = glm::dot(ls.to_light, vec3(w.sx[i], w.sy[i], w.sz[i]));
     if (cos_theta <= 0.0f || max_component(ls.irradiance) <= 0.0f) continue;
-    const vec3 add = vec3(w.ar[i], w.ag[i], w.ab[i]) * ls.irradiance * cos_theta;
+    const vec3 add = ls.irradiance * cos_theta;
     w.lr[i] += add.x;
     w.lg[i] += add.y;
     w.lb[i] += add.z;
@@ -189,15 +182,15 @@ void cast_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& sc
       point_light_kernel(n, light.position.x, light.position.y, light.position.z, light.intensity.x,
                          light.intensity.y, light.intensity.z, w.flags.data(), w.px.data(),
                          w.py.data(), w.pz.data(), w.gx.data(), w.gy.data(), w.gz.data(),
-                         w.sx.data(), w.sy.data(), w.sz.data(), w.ar.data(), w.ag.data(),
-                         w.ab.data(), w.lr.data(), w.lg.data(), w.lb.data());
+                         w.sx.data(), w.sy.data(), w.sz.data(), w.lr.data(), w.lg.data(),
+                         w.lb.data());
     else
       add_light(w, n, light);
   }
-  // Emission first, then the lights in order: the sum shading has always made.
+  // Emission plus albedo × the lights' sum.
   const vec3 background = frame.settings.background;
   std::uint32_t current = kNoInstance;
-  vec3 emission(0.0f);
+  vec3 emission(0.0f), albedo(0.0f);
   std::size_t i = 0;
   tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
     const std::size_t k = i++;
@@ -205,9 +198,11 @@ void cast_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& sc
     if (const std::uint32_t instance = hits.instance[k]; instance != kNoInstance) {
       if (instance != current) {
         current = instance;
-        emission = tables.materials[tables.instances[instance].material].emission;
+        const gpu::GpuMaterial& m = tables.materials[tables.instances[instance].material];
+        emission = m.emission;
+        albedo = m.base_color * std::numbers::inv_pi_v<float>;
       }
-      radiance = emission + vec3(w.lr[k], w.lg[k], w.lb[k]);
+      radiance = emission + albedo * vec3(w.lr[k], w.lg[k], w.lb[k]);
     }
     frame.pixels[std::size_t(y) * frame.width + x] = radiance;
   });

@@ -45,21 +45,19 @@ struct WhittedNode {
 };
 
 /// Cast mode's wave, one array per component: world position; interpolated vertex normal (then
-/// the shading normal); geometric normal facing the ray; albedo / π; radiance of the lights so
-/// far. flags: bit 0 a hit on a baked instance, bit 1 its vertex normals are interpolated.
+/// the shading normal); geometric normal facing the ray; the lights' irradiance × cos θ so far.
+/// flags: bit 0 a hit on a baked instance, bit 1 its vertex normals are interpolated.
 /// `general` lists hits on transformed instances, shaded by shading_point one by one.
 struct CastWave {
   std::vector<float> px, py, pz;
   std::vector<float> sx, sy, sz;
   std::vector<float> gx, gy, gz;
-  std::vector<float> ar, ag, ab;
   std::vector<float> lr, lg, lb;
   std::vector<std::uint32_t> flags;
   std::vector<std::uint32_t> general;
 
   void resize(std::size_t n) {
-    for (auto* a : {&px, &py, &pz, &sx, &sy, &sz, &gx, &gy, &gz, &ar, &ag, &ab, &lr, &lg, &lb})
-      a->resize(n);
+    for (auto* a : {&px, &py, &pz, &sx, &sy, &sz, &gx, &gy, &gz, &lr, &lg, &lb}) a->resize(n);
     flags.resize(n);
   }
 };
