@@ -223,38 +223,54 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
   return last_;
 }
 
+namespace {
+
+/// Rays go to Embree's stream calls (rtcIntersect1M / rtcOccluded1M) in chunks of this many.
+constexpr std::size_t kStreamChunk = 256;
+
+void to_embree(const Ray& ray, RTCRay& r) {
+  r.org_x = ray.origin.x;
+  r.org_y = ray.origin.y;
+  r.org_z = ray.origin.z;
+  r.tnear = ray.tnear;
+  r.dir_x = ray.direction.x;
+  r.dir_y = ray.direction.y;
+  r.dir_z = ray.direction.z;
+  r.time = 0.0f;
+  r.tfar = ray.tfar;
+  r.mask = 0xFFFFFFFFu;
+  r.id = 0;
+  r.flags = 0;
+}
+
+} // namespace
+
 void EmbreeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
   SPECULA_ASSERT(hits.size() == rays.size());
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    const Ray& ray = rays[i];
-    RTCRayHit rh;
-    rh.ray.org_x = ray.origin.x;
-    rh.ray.org_y = ray.origin.y;
-    rh.ray.org_z = ray.origin.z;
-    rh.ray.tnear = ray.tnear;
-    rh.ray.dir_x = ray.direction.x;
-    rh.ray.dir_y = ray.direction.y;
-    rh.ray.dir_z = ray.direction.z;
-    rh.ray.time = 0.0f;
-    rh.ray.tfar = ray.tfar;
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.id = 0;
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(top_, &context, &rh);
-    Hit& hit = hits[i];
-    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
-      hit = Hit{};
-      continue;
+  alignas(64) RTCRayHit chunk[kStreamChunk];
+  for (std::size_t first = 0; first < rays.size(); first += kStreamChunk) {
+    const std::size_t count = std::min(kStreamChunk, rays.size() - first);
+    for (std::size_t i = 0; i < count; ++i) {
+      to_embree(rays[first + i], chunk[i].ray);
+      chunk[i].hit.geomID = RTC_INVALID_GEOMETRY_ID;
+      chunk[i].hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
     }
-    hit.t = rh.ray.tfar;
-    hit.instance = slot_of(rh.hit.geomID, rh.hit.instID[0]);
-    hit.primitive = rh.hit.primID;
-    hit.uv = vec2(rh.hit.u, rh.hit.v);
-    hit.object_normal = vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
+    rtcIntersect1M(top_, &context, chunk, unsigned(count), sizeof(RTCRayHit));
+    for (std::size_t i = 0; i < count; ++i) {
+      const RTCRayHit& rh = chunk[i];
+      Hit& hit = hits[first + i];
+      if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
+        hit = Hit{};
+        continue;
+      }
+      hit.t = rh.ray.tfar;
+      hit.instance = slot_of(rh.hit.geomID, rh.hit.instID[0]);
+      hit.primitive = rh.hit.primID;
+      hit.uv = vec2(rh.hit.u, rh.hit.v);
+      hit.object_normal = vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
+    }
   }
 }
 
@@ -262,23 +278,13 @@ void EmbreeTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> o
   SPECULA_ASSERT(occluded.size() == rays.size());
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    const Ray& ray = rays[i];
-    RTCRay r;
-    r.org_x = ray.origin.x;
-    r.org_y = ray.origin.y;
-    r.org_z = ray.origin.z;
-    r.tnear = ray.tnear;
-    r.dir_x = ray.direction.x;
-    r.dir_y = ray.direction.y;
-    r.dir_z = ray.direction.z;
-    r.time = 0.0f;
-    r.tfar = ray.tfar;
-    r.mask = 0xFFFFFFFFu;
-    r.id = 0;
-    r.flags = 0;
-    rtcOccluded1(top_, &context, &r);
-    occluded[i] = r.tfar < 0.0f ? 1 : 0; // Embree sets tfar to -inf on occlusion
+  alignas(64) RTCRay chunk[kStreamChunk];
+  for (std::size_t first = 0; first < rays.size(); first += kStreamChunk) {
+    const std::size_t count = std::min(kStreamChunk, rays.size() - first);
+    for (std::size_t i = 0; i < count; ++i) to_embree(rays[first + i], chunk[i]);
+    rtcOccluded1M(top_, &context, chunk, unsigned(count), sizeof(RTCRay));
+    // Embree sets tfar to -inf on occlusion.
+    for (std::size_t i = 0; i < count; ++i) occluded[first + i] = chunk[i].tfar < 0.0f ? 1 : 0;
   }
 }
 
