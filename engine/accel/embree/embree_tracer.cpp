@@ -4,6 +4,7 @@
 #include "specula/core/error.h"
 #include "specula/render/scene_layer.h"
 
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 
@@ -21,7 +22,12 @@ void EmbreeTracer::on_error(void* user, RTCError code, const char* message) {
 
 EmbreeTracer::EmbreeTracer(std::uint32_t packet_width) : packet_width_(packet_width) {
   set_packet_width(packet_width);
-  device_ = rtcNewDevice("verbose=0");
+  // SPECULA_EMBREE_CONFIG adds to Embree's device configuration, e.g. "isa=avx2" to run the
+  // kernels another CPU would pick (the golden tests' tolerance is about that).
+  std::string config = "verbose=0";
+  if (const char* extra = std::getenv("SPECULA_EMBREE_CONFIG"); extra != nullptr && *extra != '\0')
+    config += std::string(",") + extra;
+  device_ = rtcNewDevice(config.c_str());
   if (device_ == nullptr) throw Error("embree", "cannot create an Embree device");
   rtcSetDeviceErrorFunction(device_, &EmbreeTracer::on_error, this);
   top_ = rtcNewScene(device_);
