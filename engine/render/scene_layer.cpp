@@ -87,6 +87,7 @@ std::optional<std::uint32_t> SceneLayer::instance_of(ecs::Entity entity) const {
 const SceneDelta& SceneLayer::sync(ecs::Registry& registry) {
   delta_ = SceneDelta{};
   stats_ = SceneLayerStats{};
+  static_moved_ = false;
   const TransformChanges* changes = registry.try_resource<TransformChanges>();
   const bool membership_changed = syncs_ == 0 || registry.version<Mesh>() != version_mesh_ ||
                                   registry.version<WorldTransform>() != version_transform_ ||
@@ -110,9 +111,9 @@ const SceneDelta& SceneLayer::sync(ecs::Registry& registry) {
   refresh_lights(registry);
 
   if (delta_.static_rebuilt) {
-    if (syncs_ > 0 && !tables_.static_instances.empty()) // the previous static set
-      log_warning("static geometry changed after load: rebuilding the static structure (mark "
-                  "moving entities 'hierarchical' or 'free')");
+    if (static_moved_)
+      log_warning("a static entity moved: rebuilding the static structure (mark moving entities "
+                  "'hierarchical' or 'free')");
     relayout(registry, true);
   } else if (const std::size_t garbage = tables_.positions.size() - live_vertices_;
              garbage > std::max<std::size_t>(live_vertices_, 1u << 16)) {
@@ -165,6 +166,7 @@ void SceneLayer::full_scan(ecs::Registry& registry, const std::vector<ecs::Entit
         if (moved != nullptr ? moved_now.contains(e.index) : wt.moved_tick != s.moved_tick) {
           if (is_static) {
             delta_.static_rebuilt = true;
+            static_moved_ = true;
           } else {
             write_transform(slot, wt.world_from_object);
             delta_.instances_moved.push_back(slot);
@@ -194,6 +196,7 @@ void SceneLayer::apply_moved(ecs::Registry& registry, const std::vector<ecs::Ent
     s.moved_tick = wt.moved_tick;
     if ((tables_.instances[*slot].flags & gpu::kInstanceStatic) != 0) {
       delta_.static_rebuilt = true;
+      static_moved_ = true;
       continue;
     }
     write_transform(*slot, wt.world_from_object);

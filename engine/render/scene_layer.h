@@ -159,6 +159,7 @@ private:
   std::uint64_t version_mesh_ = 0, version_transform_ = 0, version_kinematics_ = 0,
                 version_animation_ = 0, version_parent_ = 0, version_material_ = 0;
   std::size_t live_vertices_ = 0; ///< pool vertices in use (the rest is garbage until relayout)
+  bool static_moved_ = false;     ///< in the current sync: a static entity moved (warned)
 };
 
 } // namespace specula

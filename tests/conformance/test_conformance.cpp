@@ -465,6 +465,29 @@ TEST_P(Conformance, DestroyedEntitiesLeaveTheStructure) {
   EXPECT_EQ(w.tables().entity(hit.instance), w.ground);
 }
 
+TEST_P(Conformance, AnEntityReplacedWithinOneFrameTakesOverItsSlot) {
+  // The destroyed twin's instance slot goes to the new entity in the same delta (removed, then
+  // added): the structure must drop the old one before placing the new one there.
+  UpdateWorld w(backend());
+  Schedule schedule;
+  schedule.tick(w.reg, 0.0);
+  const std::uint32_t twin_slot = *w.reg.resource<SceneLayer>().instance_of(w.twin);
+  w.reg.destroy(w.twin);
+  const ecs::Entity cone =
+      test::add_mesh(w.reg, test::primitive("cone", 0.8f, vec3(1), 24), test::at(vec3(5, 1, 3)),
+                     Material{}, Kinematics::Type::Free);
+  schedule.tick(w.reg, 0.0);
+  EXPECT_EQ(*w.reg.resource<SceneLayer>().instance_of(cone), twin_slot);
+  EXPECT_EQ(w.tracer().last_update().instances_removed, 1u);
+  EXPECT_EQ(w.tracer().last_update().instances_added, 1u);
+  const Hit where_the_twin_was = w.below(5, 0);
+  ASSERT_TRUE(where_the_twin_was.hit());
+  EXPECT_EQ(w.tables().entity(where_the_twin_was.instance), w.ground);
+  const Hit cone_hit = w.below(5, 3);
+  ASSERT_TRUE(cone_hit.hit());
+  EXPECT_EQ(w.tables().entity(cone_hit.instance), cone);
+}
+
 TEST_P(Conformance, MovingAStaticEntityRebuildsTheStaticSet) {
   UpdateWorld w(backend());
   Schedule schedule;
