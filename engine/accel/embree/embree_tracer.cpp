@@ -360,18 +360,27 @@ void EmbreeTracer::intersect_camera(const CameraRays& camera, const PacketTile& 
     intersect_camera_packets<4, RTCRayHit4>(tile, hits, camera.origin, rtcIntersect4);
     return;
   default: {
-    Hit hit;
-    for (std::size_t i = 0; i < hits.size(); ++i) {
-      const Ray ray{camera.origin, 0.0f, hits.direction(i), std::numeric_limits<float>::infinity()};
-      intersect(std::span<const Ray>(&ray, 1), std::span<Hit>(&hit, 1));
-      hits.instance[i] = hit.instance;
-      hits.primitive[i] = hit.primitive;
-      hits.t[i] = hit.t;
-      hits.u[i] = hit.uv.x;
-      hits.v[i] = hit.uv.y;
-      hits.ng_x[i] = hit.object_normal.x;
-      hits.ng_y[i] = hit.object_normal.y;
-      hits.ng_z[i] = hit.object_normal.z;
+    // Single rays: the tile's camera rays through the batch path, 64 at a time.
+    constexpr std::size_t kChunk = 64;
+    Ray rays[kChunk];
+    Hit out[kChunk];
+    for (std::size_t first = 0; first < hits.size(); first += kChunk) {
+      const std::size_t count = std::min(kChunk, hits.size() - first);
+      for (std::size_t i = 0; i < count; ++i)
+        rays[i] = Ray{camera.origin, 0.0f, hits.direction(first + i), std::numeric_limits<float>::infinity()};
+      intersect(std::span<const Ray>(rays, count), std::span<Hit>(out, count));
+      for (std::size_t i = 0; i < count; ++i) {
+        const Hit& hit = out[i];
+        const std::size_t k = first + i;
+        hits.instance[k] = hit.instance;
+        hits.primitive[k] = hit.primitive;
+        hits.t[k] = hit.t;
+        hits.u[k] = hit.uv.x;
+        hits.v[k] = hit.uv.y;
+        hits.ng_x[k] = hit.object_normal.x;
+        hits.ng_y[k] = hit.object_normal.y;
+        hits.ng_z[k] = hit.object_normal.z;
+      }
     }
   }
   }
