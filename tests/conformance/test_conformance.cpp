@@ -34,13 +34,6 @@ namespace {
 
 constexpr const char* kReferenceBackend = "embree";
 
-std::vector<std::string> available_backends() {
-  std::vector<std::string> names;
-  for (const BackendInfo& b : backends())
-    if (b.available) names.emplace_back(b.name);
-  return names;
-}
-
 class Conformance : public ::testing::TestWithParam<std::string> {
 protected:
   [[nodiscard]] const std::string& backend() const { return GetParam(); }
@@ -504,28 +497,11 @@ TEST_P(Conformance, MovingAStaticEntityRebuildsTheStaticSet) {
 
 // --- Images against the reference backend and the golden images ------------------------------
 
-Framebuffer render_sample(const std::string& scene_name, TraceMode mode,
-                          const std::string& backend) {
-  Scene scene = load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) / "samples/scenes" /
-                           (scene_name + ".json"));
-  RenderJob job;
-  job.backend = backend;
-  job.settings.mode = mode;
-  job.settings.max_depth = scene.settings.max_depth;
-  job.settings.background = scene.settings.background;
-  job.settings.threads = 2;
-  job.image = Framebuffer(96, 96);
-  prepare_rendering(scene.registry, std::move(job));
-  Schedule schedule;
-  schedule.tick(scene.registry, 0.0);
-  return scene.registry.resource<RenderJob>().image;
-}
-
 TEST_P(Conformance, SampleImagesMatchTheReferenceBackend) {
   for (const std::string scene : {"cornell_box", "mirror_spheres_8"}) {
     for (const TraceMode mode : {TraceMode::Cast, TraceMode::Whitted}) {
-      const Framebuffer image = render_sample(scene, mode, backend());
-      const Framebuffer reference = render_sample(scene, mode, kReferenceBackend);
+      const Framebuffer image = test::render_sample(scene, mode, backend(), 96);
+      const Framebuffer reference = test::render_sample(scene, mode, kReferenceBackend, 96);
       const double p = psnr(reference, image);
       EXPECT_GE(p, 40.0) << scene << " " << trace_mode_name(mode);
       EXPECT_LE(flip(reference, image).mean, 0.01) << scene << " " << trace_mode_name(mode);
@@ -535,7 +511,7 @@ TEST_P(Conformance, SampleImagesMatchTheReferenceBackend) {
 
 std::string backend_name(const ::testing::TestParamInfo<std::string>& param) { return param.param; }
 
-INSTANTIATE_TEST_SUITE_P(Backends, Conformance, ::testing::ValuesIn(available_backends()),
+INSTANTIATE_TEST_SUITE_P(Backends, Conformance, ::testing::ValuesIn(test::available_backends()),
                          backend_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(Conformance);
 

@@ -2,16 +2,19 @@
 // Small helpers to build test worlds in code.
 
 #include "specula/geometry/primitives.h"
+#include "specula/render/render_job.h"
 #include "specula/render/scene_layer.h"
 #include "specula/render/tracer_factory.h"
 #include "specula/scene/components.h"
 #include "specula/scene/hierarchy.h"
 #include "specula/scene/scene.h"
+#include "specula/systems/schedule.h"
 
 #include <memory>
 #include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace specula::test {
 
@@ -98,5 +101,32 @@ struct TracedWorld {
     return blocked != 0;
   }
 };
+
+/// The names of every backend this build and machine have (tests are parameterised over them).
+inline std::vector<std::string> available_backends() {
+  std::vector<std::string> names;
+  for (const BackendInfo& b : backends())
+    if (b.available) names.emplace_back(b.name);
+  return names;
+}
+
+/// One frame of a sample scene (samples/scenes/NAME.json) at size × size through the schedule,
+/// on the named backend, with the scene's depth and background, on 2 threads.
+inline Framebuffer render_sample(const std::string& scene_name, TraceMode mode,
+                                 const std::string& backend, std::uint32_t size) {
+  Scene scene = load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) / "samples/scenes" /
+                           (scene_name + ".json"));
+  RenderJob job;
+  job.backend = backend;
+  job.settings.mode = mode;
+  job.settings.max_depth = scene.settings.max_depth;
+  job.settings.background = scene.settings.background;
+  job.settings.threads = 2;
+  job.image = Framebuffer(size, size);
+  prepare_rendering(scene.registry, std::move(job));
+  Schedule schedule;
+  schedule.tick(scene.registry, 0.0);
+  return scene.registry.resource<RenderJob>().image;
+}
 
 } // namespace specula::test

@@ -9,6 +9,7 @@
 //
 // SPECULA_UPDATE_GOLDEN=1 rewrites the references (review the PNGs written beside them first).
 
+#include "scene_builder.h"
 #include "specula/image/flip.h"
 #include "specula/image/image_io.h"
 #include "specula/image/metrics.h"
@@ -33,23 +34,6 @@ namespace fs = std::filesystem;
 constexpr double kMinPsnr = 60.0;
 constexpr double kMaxFlip = 0.001;
 
-Framebuffer render_sample(const std::string& scene_name, TraceMode mode,
-                          const std::string& backend) {
-  Scene scene =
-      load_scene(fs::path(SPECULA_SOURCE_DIR) / "samples/scenes" / (scene_name + ".json"));
-  RenderJob job;
-  job.backend = backend;
-  job.settings.mode = mode;
-  job.settings.max_depth = scene.settings.max_depth;
-  job.settings.background = scene.settings.background;
-  job.settings.threads = 2;
-  job.image = Framebuffer(128, 128);
-  prepare_rendering(scene.registry, std::move(job));
-  Schedule schedule;
-  schedule.tick(scene.registry, 0.0);
-  return scene.registry.resource<RenderJob>().image;
-}
-
 struct Case {
   std::string scene;
   TraceMode mode;
@@ -63,7 +47,7 @@ TEST_P(Golden, MatchesTheReference) {
   const std::string& backend = std::get<1>(GetParam());
   const std::string name = c.scene + "_" + trace_mode_name(c.mode);
   const fs::path reference = fs::path(SPECULA_TEST_DATA_DIR) / "golden" / (name + ".exr");
-  const Framebuffer image = render_sample(c.scene, c.mode, backend);
+  const Framebuffer image = test::render_sample(c.scene, c.mode, backend, 128);
   if (std::getenv("SPECULA_UPDATE_GOLDEN") != nullptr) {
     fs::create_directories(reference.parent_path());
     write_exr(image, reference);
@@ -94,13 +78,6 @@ std::string case_name(const ::testing::TestParamInfo<std::tuple<Case, std::strin
   return c.scene + "_" + trace_mode_name(c.mode) + "_" + std::get<1>(info.param);
 }
 
-std::vector<std::string> available_backends() {
-  std::vector<std::string> names;
-  for (const BackendInfo& b : backends())
-    if (b.available) names.emplace_back(b.name);
-  return names;
-}
-
 INSTANTIATE_TEST_SUITE_P(
     Samples, Golden,
     ::testing::Combine(::testing::Values(Case{"cornell_box", TraceMode::Cast},
@@ -110,7 +87,7 @@ INSTANTIATE_TEST_SUITE_P(
                                          Case{"mirror_spheres_8", TraceMode::Cast},
                                          Case{"mirror_spheres_8", TraceMode::Whitted},
                                          Case{"mirror_spheres_32", TraceMode::Whitted}),
-                       ::testing::ValuesIn(available_backends())),
+                       ::testing::ValuesIn(test::available_backends())),
     case_name);
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(Golden);
 
