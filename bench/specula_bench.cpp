@@ -62,11 +62,6 @@ struct Options {
   std::string source_dir = SPECULA_SOURCE_DIR;
 };
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
-
 double time_ms(const std::function<void()>& f) {
   const auto start = Clock::now();
   f();

@@ -86,11 +86,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   const std::uint32_t cache_resolution = parse_cache(options.cache);
   const std::optional<TraceMode> mode = parse_trace_mode(options.mode);
   if (!mode) throw Error("--mode", "unknown mode '" + options.mode + "'");
-  if (options.backend != "auto") {
-    bool known = false;
-    for (const BackendInfo& b : backends()) known = known || b.name == options.backend;
-    if (!known) (void)resolve_backend(options.backend); // throws the "unknown backend" error
-  }
+  if (!is_backend_name(options.backend))
+    (void)resolve_backend(options.backend); // throws the "unknown backend" error (exit 1)
   Scene scene = load_scene(options.scene);
 
   RenderJob job;
@@ -139,10 +136,6 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
     ms.push_back(f.ms);
     trace_ms.push_back(f.trace_ms);
   }
-  const auto median = [](std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    return v[v.size() / 2];
-  };
   const double frame_ms = median(ms);
   const double trace = median(trace_ms);
   const FrameStats& last = stats.frames.back();

@@ -161,7 +161,6 @@ void SceneLayer::full_scan(ecs::Registry& registry, const std::vector<ecs::Entit
       if (s.entity == e && s.source == mesh.geometry.get() && is_static == desired_static &&
           s.deforming == desired.deforming) {
         seen[slot] = true;
-        s.kinematics = desired.kinematics;
         tables_.instances[slot].kinematics = desired.kinematics;
         if (moved != nullptr ? moved_now.contains(e.index) : wt.moved_tick != s.moved_tick) {
           if (is_static) {
@@ -333,7 +332,6 @@ void SceneLayer::add_instance(ecs::Registry& registry, ecs::Entity e, const Desi
   s = Slot{};
   s.entity = e;
   s.source = mesh.geometry.get();
-  s.kinematics = d.kinematics;
   s.deforming = d.deforming;
   s.moved_tick = wt.moved_tick;
   s.deformed_tick = mesh.deformed_tick;

@@ -111,7 +111,6 @@ private:
   struct Slot {
     ecs::Entity entity = ecs::null_entity;
     const TriangleMesh* source = nullptr; ///< Mesh::geometry as last seen
-    std::uint32_t kinematics = gpu::kKinematicsStatic;
     bool deforming = false;
     std::uint64_t moved_tick = 0;              ///< WorldTransform::moved_tick as last applied
     std::uint64_t deformed_tick = 0;           ///< Mesh::deformed_tick as last applied

@@ -25,6 +25,13 @@ std::vector<BackendInfo> backends() {
   return list;
 }
 
+bool is_backend_name(std::string_view name) {
+  if (name == "auto") return true;
+  for (const BackendInfo& b : backends())
+    if (b.name == name) return true;
+  return false;
+}
+
 std::string resolve_backend(std::string_view requested) {
   const std::vector<BackendInfo> all = backends();
   if (requested == "auto") {

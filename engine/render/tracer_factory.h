@@ -28,6 +28,9 @@ struct BackendInfo {
 /// (a real GPU first, then the CPU backends), with their availability.
 [[nodiscard]] std::vector<BackendInfo> backends();
 
+/// Whether `name` is `auto` or a backend name any build knows (available here or not).
+[[nodiscard]] bool is_backend_name(std::string_view name);
+
 /// The backend a request names: `auto` → the first available one of backends(); any other name
 /// → itself if available. Throws specula::Error for a name no build knows, UnavailableError for
 /// a backend missing from this build or machine (or none at all for `auto`), saying why.

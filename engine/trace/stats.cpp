@@ -54,6 +54,13 @@ RayCounts& RayCounts::operator+=(const RayCounts& o) {
   return *this;
 }
 
+double median(std::vector<double> values) {
+  if (values.empty()) return 0.0;
+  std::sort(values.begin(), values.end());
+  const std::size_t h = values.size() / 2;
+  return values.size() % 2 ? values[h] : 0.5 * (values[h - 1] + values[h]);
+}
+
 std::string stats_to_json(const RunStats& stats) {
   const RunSettings& s = stats.settings;
   json settings = {{"scene", s.scene},
@@ -92,15 +99,10 @@ std::string stats_to_json(const RunStats& stats) {
   }
   std::vector<double> ms;
   for (const FrameStats& f : stats.frames) ms.push_back(f.ms);
-  std::sort(ms.begin(), ms.end());
-  const double median =
-      ms.empty()
-          ? 0.0
-          : (ms.size() % 2 ? ms[ms.size() / 2] : 0.5 * (ms[ms.size() / 2 - 1] + ms[ms.size() / 2]));
   json summary = {
       {"frames", stats.frames.size()},
       {"total_ms", total_ms},
-      {"median_ms", median},
+      {"median_ms", median(ms)},
       {"rays", total_rays.total()},
       {"mrays_per_s",
        total_trace_ms > 0.0 ? double(total_rays.total()) / (total_trace_ms * 1e3) : 0.0},

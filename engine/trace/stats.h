@@ -61,6 +61,10 @@ struct RunStats {
   friend bool operator==(const RunStats&, const RunStats&) = default;
 };
 
+/// The median of the values (the mean of the middle two for an even count; 0 for none): what the
+/// stats file's summary and `specula render` report.
+[[nodiscard]] double median(std::vector<double> values);
+
 /// JSON text of the stats (docs/stats-format.md): {"settings": {...}, "frames": [{"ms", "rays":
 /// {"primary", "shadow", "reflection", "refraction"}, "mrays_per_s": {...}, "cache": {"lookups",
 /// "hits"}}, ...], "summary": {...}}.

@@ -62,5 +62,12 @@ TEST(Stats, MalformedStatsFileNamesTheField) {
   EXPECT_THROW((void)stats_from_json("{", "bad.json"), Error);
 }
 
+TEST(Stats, MedianIsTheMiddleValueOrTheMeanOfTheMiddleTwo) {
+  EXPECT_EQ(median({}), 0.0);
+  EXPECT_EQ(median({5.0}), 5.0);
+  EXPECT_EQ(median({3.0, 1.0, 2.0}), 2.0);
+  EXPECT_EQ(median({4.0, 1.0, 3.0, 2.0}), 2.5); // what the stats file and `specula render` show
+}
+
 } // namespace
 } // namespace specula
