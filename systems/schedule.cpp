@@ -42,7 +42,7 @@ FrameContext Schedule::tick(ecs::Registry& registry, double dt) {
   }
   timings.ms = std::chrono::duration<double, std::milli>(stage_start - start).count();
   if (RenderJob* job = registry.try_resource<RenderJob>()) job->last.ms = timings.ms;
-  registry.set_resource<FrameTimings>(std::move(timings));
+  registry.resource_or_default<FrameTimings>() = std::move(timings); // no new resource per tick
   return ctx_;
 }
 
