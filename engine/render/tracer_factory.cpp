@@ -2,6 +2,8 @@
 
 #include "specula/core/error.h"
 
+#include "specula/accel/native/native_tracer.h"
+
 #if SPECULA_HAS_EMBREE
 #include "specula/accel/embree/embree_tracer.h"
 #endif
@@ -20,8 +22,10 @@ std::vector<BackendInfo> backends() {
   list.push_back(
       {"embree", false, "not in this build (configured with SPECULA_WITH_EMBREE=OFF)", false});
 #endif
-  list.push_back(
-      {"native", false, "not in this build yet (it lands with Specula's own structures)", true});
+  // Specula's own structures: the static set in a kd-tree (the default), a BVH or a grid.
+  list.push_back({"native", true, "", true});
+  list.push_back({"native-bvh", true, "", true});
+  list.push_back({"native-grid", true, "", true});
   return list;
 }
 
@@ -59,6 +63,11 @@ std::unique_ptr<Tracer> make_tracer(std::string_view name, std::uint32_t packet_
 #if SPECULA_HAS_EMBREE
   if (backend == "embree") return std::make_unique<EmbreeTracer>(packet_width);
 #endif
+  NativeOptions options;
+  if (backend == "native-bvh") options.static_structure = StaticStructure::bvh;
+  if (backend == "native-grid") options.static_structure = StaticStructure::grid;
+  if (backend == "native" || backend == "native-bvh" || backend == "native-grid")
+    return std::make_unique<NativeTracer>(packet_width, options);
   throw UnavailableError("backend '" + backend + "' has no tracer in this build");
 }
 

@@ -55,11 +55,18 @@ struct TracerUpdateStats {
   std::uint32_t instances_removed = 0;
   std::uint32_t instances_moved = 0;   ///< instance transforms rewritten
   bool top_committed = false;          ///< the top level was rebuilt or refitted
+  std::uint32_t blas_restructures = 0; ///< degraded subtrees rebuilt after refits (native BVH)
   std::uint32_t static_triangles = 0;  ///< triangles in the static structure
   std::uint32_t dynamic_instances = 0; ///< instances in the top level (the static set excluded)
+  /// Milliseconds of each step of this update (the stats file's "accel" object).
+  double static_build_ms = 0.0; ///< building the static structure
+  double blas_build_ms = 0.0;   ///< building per-mesh structures
+  double refit_ms = 0.0;        ///< refitting deformed meshes
+  double restructure_ms = 0.0;  ///< rebuilding degraded subtrees
+  double top_build_ms = 0.0;    ///< the top level over the instances
   [[nodiscard]] bool no_work() const {
-    return static_builds + blas_builds + blas_refits + instances_added + instances_removed +
-                   instances_moved ==
+    return static_builds + blas_builds + blas_refits + blas_restructures + instances_added +
+                   instances_removed + instances_moved ==
                0 &&
            !top_committed;
   }

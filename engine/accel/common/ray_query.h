@@ -19,6 +19,7 @@
 
 #include "specula/core/math.h"
 #include "specula/geometry/ray.h"
+#include "specula/geometry/ray_offset.h"
 
 #include <algorithm>
 #include <cmath>
@@ -45,11 +46,6 @@ struct TriangleView {
 
 enum class TriangleTest : std::uint8_t { watertight, moller_trumbore };
 
-/// γ(n) of Higham / pbrt: a bound on the relative error of n floating-point operations.
-[[nodiscard]] constexpr float gamma_bound(int n) {
-  constexpr float eps = std::numeric_limits<float>::epsilon() * 0.5f;
-  return float(n) * eps / (1.0f - float(n) * eps);
-}
 /// Factor that makes a box's far distance conservative (Woop et al. 2013, §3.3).
 inline constexpr float kBoxFarScale = 1.0f + 2.0f * gamma_bound(3);
 

@@ -1,0 +1,128 @@
+#pragma once
+/// \file
+/// The native backend: Specula's own structures behind the Tracer interface, after the real-time
+/// CPU ray tracer of Bui Phu & Le — two levels, split by kinematics:
+///   - the static set (baked in world space by the scene layer) in one structure built once: the
+///     SAH kd-tree by default (engine/accel/kdtree), or a BVH or a uniform grid (options);
+///   - each object-space mesh that rigid dynamic instances share gets one BVH, built when the
+///     first instance needs it (lazily expanded subtrees as an option); moving an instance only
+///     rewrites its transform;
+///   - a deforming instance owns its BVH: refitted when the layer reports its vertices rewritten,
+///     and its degraded subtrees rebuilt (selective restructuring) when their SAH cost has grown
+///     past a threshold;
+///   - a top-level BVH over the dynamic instances' world bounds, rebuilt in any frame in which one
+///     of them changed (hierarchical objects move every frame: a few hundred boxes at most).
+/// Rays enter an instance through its object_from_world transform (directions not renormalised,
+/// so distances stay comparable across levels). Only the layer's delta causes work;
+/// last_update() counts and times what was done.
+
+#include "specula/accel/bvh/bvh.h"
+#include "specula/accel/common/ray_query.h"
+#include "specula/accel/grid/grid.h"
+#include "specula/accel/kdtree/kdtree.h"
+#include "specula/trace/tracer.h"
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+namespace specula {
+
+struct SceneTables;
+
+/// The structure that holds the static set.
+enum class StaticStructure : std::uint8_t { kdtree, bvh, grid };
+
+struct NativeOptions {
+  StaticStructure static_structure = StaticStructure::kdtree;
+  accel::TriangleTest triangle_test = accel::TriangleTest::watertight;
+  /// Per-mesh BVHs expand their deeper subtrees on first visit.
+  bool lazy_blas = false;
+  /// A deforming mesh's subtree is rebuilt once its SAH cost exceeds this multiple of its cost
+  /// when last built.
+  float restructure_threshold = 1.3f;
+};
+
+class NativeTracer final : public Tracer {
+public:
+  explicit NativeTracer(std::uint32_t packet_width = 8, NativeOptions options = {});
+  ~NativeTracer() override;
+  NativeTracer(const NativeTracer&) = delete;
+  NativeTracer& operator=(const NativeTracer&) = delete;
+
+  /// "native" (kd-tree), "native-bvh" or "native-grid": the backend name that selects these
+  /// options.
+  [[nodiscard]] std::string_view name() const override { return name_; }
+  const TracerUpdateStats& update(const SceneLayer& layer) override;
+  [[nodiscard]] const TracerUpdateStats& last_update() const override { return last_; }
+  void intersect(std::span<const Ray> rays, std::span<Hit> hits) const override;
+  void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded) const override;
+  void intersect_camera(const CameraRays& camera, const PacketTile& tile,
+                        PrimaryHits& hits) const override;
+  [[nodiscard]] std::uint32_t packet_width() const override { return packet_width_; }
+  void set_packet_width(std::uint32_t width) override;
+
+  [[nodiscard]] const NativeOptions& options() const { return options_; }
+  [[nodiscard]] const accel::KdTree& kdtree() const { return kd_; }
+  [[nodiscard]] const accel::Bvh& static_bvh() const { return static_bvh_; }
+  [[nodiscard]] const accel::UniformGrid& grid() const { return grid_; }
+
+private:
+  /// A mesh's own copy of its geometry (object space) and its BVH; addresses stay put.
+  struct Blas {
+    std::vector<vec3> positions;
+    std::vector<uvec3> triangles;
+    accel::Bvh bvh;
+    [[nodiscard]] accel::TriangleView view() const {
+      return {positions.data(), triangles.data(), std::uint32_t(triangles.size())};
+    }
+  };
+  struct Dynamic {
+    const Blas* blas = nullptr;
+    std::unique_ptr<Blas> own; ///< deforming instances only
+    mat4 world_from_object{1.0f};
+    mat4 object_from_world{1.0f};
+    bool identity = false;
+  };
+
+  template <accel::TriangleTest Test>
+  void intersect_one(accel::PreparedRay& r, Hit& hit) const;
+  template <accel::TriangleTest Test>
+  [[nodiscard]] bool occluded_one(const accel::PreparedRay& r) const;
+  /// Closest hit among the dynamic instances, closer than r.tfar (which it shrinks).
+  template <accel::TriangleTest Test>
+  void intersect_dynamic(accel::PreparedRay& r, Hit& hit) const;
+  template <int N>
+  void intersect_camera_packets(const PacketTile& tile, PrimaryHits& hits, const vec3& origin) const;
+  void resolve_static(const accel::TriangleHit& th, Hit& hit) const;
+
+  void rebuild_static(const SceneTables& tables);
+  static void copy_mesh(const SceneTables& tables, std::uint32_t mesh, Blas& out);
+  const Blas* shared_blas(const SceneTables& tables, std::uint32_t mesh);
+  void set_transform(Dynamic& d, const mat4& world_from_object);
+  void rebuild_top();
+
+  std::uint32_t packet_width_;
+  NativeOptions options_;
+  std::string name_;
+  // Static set: world-space copy with absolute vertex indices.
+  std::vector<vec3> static_positions_;
+  std::vector<uvec3> static_triangles_;
+  std::vector<std::uint32_t> static_first_triangle_; ///< per static instance, ascending
+  std::vector<std::uint32_t> static_slot_;           ///< the instance slot of each
+  accel::KdTree kd_;
+  accel::Bvh static_bvh_;
+  accel::UniformGrid grid_;
+  bool has_static_ = false;
+  // Dynamic instances.
+  std::unordered_map<std::uint32_t, std::unique_ptr<Blas>> blas_; ///< by shared mesh record
+  std::unordered_map<std::uint32_t, Dynamic> dynamic_;            ///< by instance slot
+  accel::Bvh top_;
+  std::vector<std::uint32_t> top_slot_;    ///< instance slot of each top-level box
+  std::vector<const Dynamic*> top_entry_;  ///< and its record
+  TracerUpdateStats last_;
+};
+
+} // namespace specula
