@@ -5,6 +5,7 @@
 #include "commands.h"
 #include "compare_command.h"
 #include "specula/core/error.h"
+#include "specula/render/tracer_factory.h"
 #include "specula/scene/scene.h"
 
 #include <CLI/CLI.hpp>
@@ -13,6 +14,19 @@
 
 #include <exception>
 #include <iostream>
+#include <string>
+#include <vector>
+
+namespace {
+
+/// `auto` and every backend name any build knows (a missing one exits 2 with the reason).
+std::vector<std::string> backend_names() {
+  std::vector<std::string> names = {"auto"};
+  for (const specula::BackendInfo& b : specula::backends()) names.emplace_back(b.name);
+  return names;
+}
+
+} // namespace
 
 int main(int argc, char** argv) {
   using namespace specula;
@@ -37,7 +51,7 @@ int main(int argc, char** argv) {
       ->required();
   render_cmd
       ->add_option("--backend", render.backend, "Tracing backend (auto: the best one available)")
-      ->check(CLI::IsMember({"auto", "embree", "native", "vulkan"}))
+      ->check(CLI::IsMember(backend_names()))
       ->capture_default_str();
   render_cmd->add_option("--mode", render.mode, "Integrator")
       ->check(CLI::IsMember({"cast", "whitted", "path", "shadow"}))

@@ -1,14 +1,16 @@
 #!/usr/bin/env bash
-# Installs what is missing, builds Specula twice and runs every test through ctest on each build:
+# Installs what is missing, builds Specula three times and runs every test through ctest on each:
 #   1. the `ci` preset: optimised, warnings as errors, benchmarks built and smoke-run;
-#   2. the `asan` preset: debug with AddressSanitizer and UBSan, so assertions and the death
+#   2. the `ci-native` preset: the same without Embree (SPECULA_WITH_EMBREE=OFF), so the engine
+#      builds, renders and passes its tests on the native backend alone;
+#   3. the `asan` preset: debug with AddressSanitizer and UBSan, so assertions and the death
 #      tests compiled out of optimised builds run, and memory errors and leaks fail the run.
-# SPECULA_TEST_PRESETS="ci" (or "asan") runs one of them only.
+# SPECULA_TEST_PRESETS="ci" (or any list of them) runs those only.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/deps.sh
 jobs=$(nproc 2>/dev/null || echo 2)
-for preset in ${SPECULA_TEST_PRESETS:-ci asan}; do
+for preset in ${SPECULA_TEST_PRESETS:-ci ci-native asan}; do
   echo "== $preset: configure, build, test"
   cmake --preset "$preset"
   cmake --build --preset "$preset" -j "$jobs"

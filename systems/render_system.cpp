@@ -20,6 +20,7 @@ void render_system(ecs::Registry& registry, const FrameContext& /*ctx*/) {
       render_frame(tracer, layer, *camera, job->settings, job->image, job->hook.get());
   stats.trace_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  stats.accel = job->last.accel; // written by the acceleration system this tick
   job->last = stats;
   ++job->frames;
 }

@@ -16,7 +16,8 @@ void prepare_rendering(ecs::Registry& registry, RenderJob job) {
   if (job.settings.mode == TraceMode::Path || job.settings.mode == TraceMode::Shadow)
     throw UnavailableError(std::string("mode '") + trace_mode_name(job.settings.mode) +
                            "' is not available yet (it lands with the streaming ray tracer)");
-  std::unique_ptr<Tracer> tracer = make_tracer(job.backend, job.packet_width);
+  std::unique_ptr<Tracer> tracer =
+      make_tracer(job.backend, job.packet_width, scene_kind(registry));
   job.backend = std::string(tracer->name());
   registry.set_resource<ActiveTracer>(ActiveTracer{std::move(tracer)});
   // A new layer: its first sync hands the new tracer the whole scene.

@@ -1,6 +1,8 @@
 #include "specula/render/tracer_factory.h"
 
 #include "specula/core/error.h"
+#include "specula/scene/components.h"
+#include "specula/scene/kinematics_rules.h"
 
 #include "specula/accel/native/native_tracer.h"
 
@@ -29,6 +31,12 @@ std::vector<BackendInfo> backends() {
   return list;
 }
 
+BackendInfo backend_info(std::string_view name) {
+  for (BackendInfo& b : backends())
+    if (b.name == name) return std::move(b);
+  throw Error("--backend", "unknown backend '" + std::string(name) + "'");
+}
+
 bool is_backend_name(std::string_view name) {
   if (name == "auto") return true;
   for (const BackendInfo& b : backends())
@@ -36,11 +44,53 @@ bool is_backend_name(std::string_view name) {
   return false;
 }
 
-std::string resolve_backend(std::string_view requested) {
+const char* scene_kind_name(SceneKind kind) {
+  switch (kind) {
+  case SceneKind::rigid_dynamic:
+    return "rigid dynamic";
+  case SceneKind::deforming:
+    return "deforming";
+  default:
+    return "static";
+  }
+}
+
+SceneKind scene_kind(ecs::Registry& registry) {
+  SceneKind kind = SceneKind::static_only;
+  registry.view<Mesh>().each([&](ecs::Entity e, const Mesh& mesh) {
+    const Animation* anim = registry.try_get<Animation>(e);
+    if (!mesh.deformed_positions.empty() || (anim != nullptr && !anim->vertices.empty())) {
+      kind = SceneKind::deforming;
+      return;
+    }
+    const Kinematics* k = registry.try_get<Kinematics>(e);
+    const Kinematics::Type type = k != nullptr ? k->type : inferred_kinematics(registry, e);
+    if (type != Kinematics::Type::Static && kind == SceneKind::static_only)
+      kind = SceneKind::rigid_dynamic;
+  });
+  return kind;
+}
+
+std::vector<std::string_view> cpu_preference(SceneKind kind) {
+  // Measured with specula_bench (docs/PERFORMANCE.md, "Choosing between CPU backends").
+  switch (kind) {
+  default:
+    return {"embree", "native"};
+  }
+}
+
+std::string resolve_backend(std::string_view requested, SceneKind kind) {
   const std::vector<BackendInfo> all = backends();
-  if (requested == "auto") {
+  const auto available = [&](std::string_view name) {
     for (const BackendInfo& b : all)
-      if (b.available) return std::string(b.name);
+      if (b.name == name) return b.available;
+    return false;
+  };
+  if (requested == "auto") {
+    // A real GPU first (lavapipe, the software Vulkan device, is slower than the CPU backends).
+    if (available("vulkan")) return "vulkan";
+    for (const std::string_view name : cpu_preference(kind))
+      if (available(name)) return std::string(name);
     throw UnavailableError("no tracing backend is available in this build");
   }
   for (const BackendInfo& b : all) {
@@ -55,11 +105,12 @@ std::string resolve_backend(std::string_view requested) {
               "unknown backend '" + std::string(requested) + "' (expected one of " + names + ")");
 }
 
-std::unique_ptr<Tracer> make_tracer(std::string_view name, std::uint32_t packet_width) {
+std::unique_ptr<Tracer> make_tracer(std::string_view name, std::uint32_t packet_width,
+                                    SceneKind kind) {
   if (packet_width != 1 && packet_width != 4 && packet_width != 8 && packet_width != 16)
     throw Error("render settings",
                 "packet width must be 1, 4, 8 or 16, got " + std::to_string(packet_width));
-  const std::string backend = resolve_backend(name);
+  const std::string backend = resolve_backend(name, kind);
 #if SPECULA_HAS_EMBREE
   if (backend == "embree") return std::make_unique<EmbreeTracer>(packet_width);
 #endif

@@ -34,6 +34,9 @@ struct TraceSettings {
   /// traced: its contribution cannot show in an 8-bit image (1/256).
   float min_weight = 1.0f / 256.0f;
   vec3 background{0.0f};
+  /// Whitted: trace shadow rays (off: every light counts as visible — the "diffuse" and
+  /// "reflection & refraction" configurations of the real-time ray tracer paper's tables).
+  bool shadows = true;
   std::uint32_t tile_size = 16;
   std::uint32_t threads = 0; ///< 0: every hardware thread
 };

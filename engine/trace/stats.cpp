@@ -90,7 +90,18 @@ std::string stats_to_json(const RunStats& stats) {
                       {"rays", rays},
                       {"dropped_rays", f.rays.dropped},
                       {"mrays_per_s", rates},
-                      {"cache", {{"lookups", f.cache.lookups}, {"hits", f.cache.hits}}}});
+                      {"cache", {{"lookups", f.cache.lookups}, {"hits", f.cache.hits}}},
+                      {"accel",
+                       {{"ms", f.accel.ms},
+                        {"static_build_ms", f.accel.static_build_ms},
+                        {"blas_build_ms", f.accel.blas_build_ms},
+                        {"refit_ms", f.accel.refit_ms},
+                        {"restructure_ms", f.accel.restructure_ms},
+                        {"top_build_ms", f.accel.top_build_ms},
+                        {"static_builds", f.accel.static_builds},
+                        {"blas_builds", f.accel.blas_builds},
+                        {"refits", f.accel.refits},
+                        {"restructures", f.accel.restructures}}}});
     total_ms += f.ms;
     total_trace_ms += f.trace_ms;
     total_rays += f.rays;
@@ -147,6 +158,21 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
     const json c = read<json>(frames[i], "cache", name, at);
     f.cache.lookups = read<std::uint64_t>(c, "lookups", name, at + ".cache");
     f.cache.hits = read<std::uint64_t>(c, "hits", name, at + ".cache");
+    // "accel" arrived with the native backend: files written before it have none.
+    if (frames[i].contains("accel")) {
+      const json a = read<json>(frames[i], "accel", name, at);
+      const std::string where = at + ".accel";
+      f.accel.ms = read<double>(a, "ms", name, where);
+      f.accel.static_build_ms = read<double>(a, "static_build_ms", name, where);
+      f.accel.blas_build_ms = read<double>(a, "blas_build_ms", name, where);
+      f.accel.refit_ms = read<double>(a, "refit_ms", name, where);
+      f.accel.restructure_ms = read<double>(a, "restructure_ms", name, where);
+      f.accel.top_build_ms = read<double>(a, "top_build_ms", name, where);
+      f.accel.static_builds = read<std::uint32_t>(a, "static_builds", name, where);
+      f.accel.blas_builds = read<std::uint32_t>(a, "blas_builds", name, where);
+      f.accel.refits = read<std::uint32_t>(a, "refits", name, where);
+      f.accel.restructures = read<std::uint32_t>(a, "restructures", name, where);
+    }
     stats.frames.push_back(f);
   }
   return stats;

@@ -33,11 +33,28 @@ struct CacheCounts {
   friend bool operator==(const CacheCounts&, const CacheCounts&) = default;
 };
 
+/// The acceleration system's part of a frame: the tracer's structure update, whole and per step
+/// (Tracer::update's TracerUpdateStats), and what it did.
+struct AccelStats {
+  double ms = 0.0;              ///< the whole update (acceleration_system)
+  double static_build_ms = 0.0; ///< building the static structure
+  double blas_build_ms = 0.0;   ///< building per-mesh structures
+  double refit_ms = 0.0;        ///< refitting deformed meshes
+  double restructure_ms = 0.0;  ///< rebuilding degraded subtrees
+  double top_build_ms = 0.0;    ///< the top level over the instances
+  std::uint32_t static_builds = 0;
+  std::uint32_t blas_builds = 0;
+  std::uint32_t refits = 0;
+  std::uint32_t restructures = 0;
+  friend bool operator==(const AccelStats&, const AccelStats&) = default;
+};
+
 struct FrameStats {
   double ms = 0.0;       ///< wall-clock time of the whole frame: every system of the tick
   double trace_ms = 0.0; ///< of which tracing the image (render_system)
   RayCounts rays;
   CacheCounts cache;
+  AccelStats accel;
   friend bool operator==(const FrameStats&, const FrameStats&) = default;
 };
 
@@ -67,7 +84,7 @@ struct RunStats {
 
 /// JSON text of the stats (docs/stats-format.md): {"settings": {...}, "frames": [{"ms", "rays":
 /// {"primary", "shadow", "reflection", "refraction"}, "mrays_per_s": {...}, "cache": {"lookups",
-/// "hits"}}, ...], "summary": {...}}.
+/// "hits"}, "accel": {...}}, ...], "summary": {...}}.
 [[nodiscard]] std::string stats_to_json(const RunStats& stats);
 /// Parses what stats_to_json writes (derived fields are recomputed, not read). Throws
 /// specula::Error(name, field, ...) on malformed input.

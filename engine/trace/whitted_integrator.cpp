@@ -7,6 +7,7 @@
 #include "specula/trace/lights.h"
 #include "specula/trace/shading.h"
 
+#include <algorithm>
 #include <limits>
 #include <numbers>
 
@@ -148,9 +149,13 @@ private:
 
   void trace_shadows() {
     if (s_.shadow_rays.empty()) return;
-    counts_[RayKind::Shadow] += s_.shadow_rays.size();
     s_.blocked.resize(s_.shadow_rays.size());
-    frame_.tracer.occluded(s_.shadow_rays, s_.blocked);
+    if (settings_.shadows) {
+      counts_[RayKind::Shadow] += s_.shadow_rays.size();
+      frame_.tracer.occluded(s_.shadow_rays, s_.blocked);
+    } else {
+      std::fill(s_.blocked.begin(), s_.blocked.end(), std::uint8_t{0});
+    }
     // In emission order: a ray's lights are added in light order.
     for (std::size_t k = 0; k < s_.shadow_rays.size(); ++k)
       if (s_.blocked[k] == 0) s_.nodes[s_.shadow_node[k]].radiance += s_.shadow_value[k];

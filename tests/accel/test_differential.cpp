@@ -30,11 +30,7 @@ constexpr std::size_t kRaysPerStage = std::size_t(1) << 20;
 constexpr std::size_t kRaysPerStage = std::size_t(1) << 16;
 #endif
 
-bool has_embree() {
-  for (const BackendInfo& b : backends())
-    if (b.name == "embree") return b.available;
-  return false;
-}
+bool has_embree() { return backend_info("embree").available; }
 
 /// Half coherent (from `eye` through a cone around the scene centre), half incoherent.
 std::vector<Ray> make_rays(const Aabb& bounds, const vec3& eye, std::uint32_t seed) {

@@ -1,6 +1,8 @@
 // Runs the `specula` program as a user would: exit codes (0 ok, 1 bad input, 2 unavailable),
 // messages naming the file, and no crash on any input.
 
+#include "specula/render/tracer_factory.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -147,16 +149,26 @@ TEST(Cli, BadOptionsExitOne) {
   }
 }
 
-TEST(Cli, RenderWritesTheImageAndStatsWithEmbree) {
+/// The CPU backends this build has.
+std::vector<std::string> cpu_backends() {
+  std::vector<std::string> names;
+  for (const specula::BackendInfo& b : specula::backends())
+    if (b.available && (b.name == "embree" || b.name == "native")) names.emplace_back(b.name);
+  return names;
+}
+
+TEST(Cli, RenderWritesTheImageAndStatsOnEveryCpuBackend) {
   const std::string scene =
       (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
   const fs::path dir =
       fs::temp_directory_path() / ("specula_cli_render_" + std::to_string(::getpid()));
   fs::create_directories(dir);
+  for (const std::string& backend : cpu_backends())
   for (const char* mode : {"cast", "whitted"}) {
+    SCOPED_TRACE(backend);
     const fs::path png = dir / (std::string(mode) + ".png");
     const fs::path stats = dir / (std::string(mode) + ".json");
-    const Result r = run({"render", scene, "--backend", "embree", "--mode", mode, "--width", "48",
+    const Result r = run({"render", scene, "--backend", backend, "--mode", mode, "--width", "48",
                           "--height", "32", "--frames", "2", "--threads", "1", "--out",
                           png.string(), "--stats", stats.string()});
     ASSERT_TRUE(r.exited);
@@ -188,11 +200,11 @@ TEST(Cli, RenderWritesTheImageAndStatsWithEmbree) {
 TEST(Cli, BackendsModesAndCachesNotBuiltYetExitTwo) {
   const std::string scene =
       (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
-  const std::vector<std::vector<std::string>> unavailable = {{"--backend", "native"},
-                                                             {"--backend", "vulkan"},
+  std::vector<std::vector<std::string>> unavailable = {{"--backend", "vulkan"},
                                                              {"--mode", "path"},
                                                              {"--mode", "shadow"},
                                                              {"--cache", "64"}};
+  if (!specula::backend_info("embree").available) unavailable.push_back({"--backend", "embree"});
   for (const auto& extra : unavailable) {
     std::vector<std::string> args = {"render", scene, "--width", "16", "--height", "16"};
     args.insert(args.end(), extra.begin(), extra.end());
@@ -210,11 +222,14 @@ TEST(Cli, AutoIsTheDefaultBackendAndSaysWhichItPicked) {
       (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
   const Result r = run({"render", scene, "--width", "16", "--height", "16", "--mode", "cast"});
   ASSERT_EQ(r.code, 0) << r.err;
-  EXPECT_NE(r.out.find("on embree (auto)"), std::string::npos) << r.out;
-  const Result named =
-      run({"render", scene, "--width", "16", "--height", "16", "--backend", "embree"});
-  ASSERT_EQ(named.code, 0) << named.err;
-  EXPECT_NE(named.out.find("on embree,"), std::string::npos) << named.out;
+  const std::string picked = specula::resolve_backend("auto");
+  EXPECT_NE(r.out.find("on " + picked + " (auto)"), std::string::npos) << r.out;
+  for (const std::string& backend : cpu_backends()) {
+    const Result named =
+        run({"render", scene, "--width", "16", "--height", "16", "--backend", backend});
+    ASSERT_EQ(named.code, 0) << named.err;
+    EXPECT_NE(named.out.find("on " + backend + ","), std::string::npos) << named.out;
+  }
 }
 
 TEST(Cli, RenderReportsTheFramesRaysPerSecondOfTracingTime) {

@@ -78,7 +78,7 @@ struct TracedWorld {
   std::unique_ptr<Tracer> tracer;
   std::uint64_t tick = 0;
 
-  explicit TracedWorld(ecs::Registry& reg, std::string_view backend = "embree",
+  explicit TracedWorld(ecs::Registry& reg, std::string_view backend = "auto",
                        std::uint32_t packet_width = 1)
       : tracer(make_tracer(backend, packet_width)) {
     update(reg);
@@ -108,6 +108,13 @@ inline std::vector<std::string> available_backends() {
   for (const BackendInfo& b : backends())
     if (b.available) names.emplace_back(b.name);
   return names;
+}
+
+/// A backend name as a test name part (GoogleTest allows letters, digits and underscores).
+inline std::string test_name(std::string backend) {
+  for (char& c : backend)
+    if (c == '-') c = '_';
+  return backend;
 }
 
 /// One frame of a sample scene (samples/scenes/NAME.json) at size × size through the schedule,

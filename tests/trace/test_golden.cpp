@@ -75,7 +75,7 @@ TEST_P(Golden, MatchesTheReference) {
 
 std::string case_name(const ::testing::TestParamInfo<std::tuple<Case, std::string>>& info) {
   const Case& c = std::get<0>(info.param);
-  return c.scene + "_" + trace_mode_name(c.mode) + "_" + std::get<1>(info.param);
+  return c.scene + "_" + trace_mode_name(c.mode) + "_" + test::test_name(std::get<1>(info.param));
 }
 
 INSTANTIATE_TEST_SUITE_P(

@@ -4,11 +4,19 @@
 #include "specula/core/error.h"
 #include "specula/render/scene_layer.h"
 
+#include <chrono>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
 
 namespace specula {
+
+namespace {
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+} // namespace
 
 static_assert(sizeof(vec3) == 3 * sizeof(float) && sizeof(uvec3) == 3 * sizeof(std::uint32_t),
               "Embree buffers are filled with memcpy from GLM vectors");
@@ -156,7 +164,9 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
   bool top_dirty = false;
 
   if (delta.static_rebuilt) {
+    const auto start = Clock::now();
     rebuild_static(tables);
+    last_.static_build_ms += ms_since(start);
     top_dirty = true;
   }
   for (const std::uint32_t slot : delta.instances_removed) {
@@ -165,6 +175,7 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     top_dirty = true;
   }
   for (const std::uint32_t slot : delta.instances_added) {
+    const auto start = Clock::now();
     const gpu::GpuInstance& inst = tables.instances[slot];
     Dynamic d;
     RTCScene blas = nullptr;
@@ -189,6 +200,7 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     rtcAttachGeometryByID(top_, d.instance, slot + 1);
     check("adding an instance");
     dynamic_[slot] = d;
+    last_.blas_build_ms += ms_since(start);
     ++last_.instances_added;
     top_dirty = true;
   }
@@ -201,6 +213,7 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     top_dirty = true;
   }
   for (const std::uint32_t slot : delta.instances_deformed) {
+    const auto start = Clock::now();
     const Dynamic& d = dynamic_.at(slot);
     const gpu::GpuMesh& m = tables.meshes[tables.instances[slot].mesh];
     auto* vertices =
@@ -211,6 +224,7 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     rtcCommitScene(d.own_blas); // refit: the topology is unchanged
     check("refitting a deforming mesh");
     ++last_.blas_refits;
+    last_.refit_ms += ms_since(start);
     top_dirty = true; // the instance's bounds changed
   }
   for (const std::uint32_t mesh : delta.meshes_removed) {
@@ -220,9 +234,11 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     }
   }
   if (top_dirty) {
+    const auto start = Clock::now();
     rtcCommitScene(top_);
     check("committing the top-level scene");
     last_.top_committed = true;
+    last_.top_build_ms += ms_since(start);
   }
   last_.static_triangles = static_triangles_;
   last_.dynamic_instances = std::uint32_t(dynamic_.size());

@@ -1,0 +1,42 @@
+#pragma once
+// What every section of specula_bench shares: options, timing, test meshes and scenes.
+
+#include "specula/geometry/triangle_mesh.h"
+#include "specula/scene/scene.h"
+
+#include <cstdint>
+#include <functional>
+#include <string>
+
+namespace specula::bench {
+
+struct Options {
+  std::uint32_t size = 1024;
+  std::uint32_t threads = 2;
+  int repetitions = 7;
+  int frames = 10;
+  int subdivisions = 4;
+  /// Largest mesh of the build-scaling section, in triangles.
+  std::uint32_t max_build_triangles = 1u << 20;
+  std::string sections = "primary,tiles,whitted,depth,build,refit,native,paper";
+  std::string source_dir = SPECULA_SOURCE_DIR;
+};
+
+/// Wall-clock milliseconds of f().
+double time_ms(const std::function<void()>& f);
+/// Millions of rays per second.
+inline double mrays(std::uint64_t rays, double ms) { return double(rays) / (ms * 1e3); }
+/// `base`, Loop-subdivided `levels` times with OpenMesh (×4 triangles per level).
+TriangleMesh subdivided(const TriangleMesh& base, int levels);
+/// A scene holding one static mesh, with the default camera and light framing it.
+Scene mesh_scene(const TriangleMesh& mesh, std::uint32_t size);
+/// The Stanford bunny of samples/models.
+TriangleMesh load_bunny(const Options& o);
+
+// Sections measuring Specula's own structures (native_sections.cpp).
+void section_build(const Options& o);
+void section_refit(const Options& o);
+void section_native(const Options& o);
+void section_paper(const Options& o);
+
+} // namespace specula::bench

@@ -1,0 +1,393 @@
+// Numerical stability on hard cases, for every backend of the build (Embree too, for comparison):
+//   - leaks: rays aimed exactly at the shared vertices and edge midpoints of closed meshes (an
+//     icosphere, a box whose faces share positions but not indices) and at the interior edges of
+//     the Stanford bunny, with the geometry at the origin, translated to 1e4, 1e5 and 1e6, and
+//     scaled by 1e-4 and 1e4, static (baked in world space) and as a moving instance;
+//   - acne: rays reflected off hit points of convex meshes, from origins offset by
+//     offset_ray_origin, must never hit their own object again;
+//   - grazing: rays skimming a box's faces at shallow angles must hit it;
+//   - degenerate triangles: zero-area and needle triangles among ordinary ones never produce a hit
+//     on a zero-area triangle, a non-finite distance, or a miss of a neighbour;
+//   - invalid rays (NaN or infinite components, zero direction, empty intervals): a clean miss.
+// Watertight backends (BackendInfo::watertight) must show 0 leaks everywhere; the others are
+// measured and reported. With SPECULA_ROBUSTNESS_TABLE=FILE the counts are also written there as
+// the Markdown table docs/design/robustness.md reproduces.
+
+#include "scene_builder.h"
+#include "specula/geometry/ray_offset.h"
+#include "specula/scene/mesh_io.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <random>
+#include <set>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace specula {
+namespace {
+
+bool watertight(const std::string& backend) { return backend_info(backend).watertight; }
+
+/// An icosahedron subdivided `levels` times; every vertex shared by the triangles around it.
+TriangleMesh icosphere(int levels) {
+  const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
+  TriangleMesh m;
+  m.positions = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
+                 {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
+  for (vec3& p : m.positions) p = glm::normalize(p);
+  m.triangles = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+                 {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
+                 {3, 8, 9},  {4, 9, 5},  {2, 4, 11},  {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
+  for (int l = 0; l < levels; ++l) {
+    std::map<std::pair<std::uint32_t, std::uint32_t>, std::uint32_t> mid;
+    const auto midpoint = [&](std::uint32_t a, std::uint32_t b) {
+      const auto key = std::minmax(a, b);
+      const auto it = mid.find(key);
+      if (it != mid.end()) return it->second;
+      m.positions.push_back(glm::normalize(m.positions[a] + m.positions[b]));
+      return mid[key] = std::uint32_t(m.positions.size() - 1);
+    };
+    std::vector<uvec3> next;
+    for (const uvec3& tri : m.triangles) {
+      const std::uint32_t a = midpoint(tri.x, tri.y), b = midpoint(tri.y, tri.z),
+                          c = midpoint(tri.z, tri.x);
+      next.insert(next.end(), {{tri.x, a, c}, {tri.y, b, a}, {tri.z, c, b}, {a, b, c}});
+    }
+    m.triangles = std::move(next);
+  }
+  m.compute_vertex_normals();
+  return m;
+}
+
+struct Shape {
+  std::string name;
+  std::shared_ptr<const TriangleMesh> mesh;
+  bool closed;   ///< aim from inside at every vertex and edge (else: interior edges from outside)
+  float radius;  ///< of the unscaled mesh around its centre
+  vec3 centre;   ///< of the unscaled mesh
+};
+
+std::vector<Shape> shapes() {
+  std::vector<Shape> list;
+  list.push_back({"icosphere", std::make_shared<const TriangleMesh>(icosphere(4)), true, 1.0f, vec3(0)});
+  list.push_back({"box", std::make_shared<const TriangleMesh>(make_primitive(test::primitive("box", 1.0f, vec3(2.0f, 1.0f, 1.5f)), "test")),
+                  true, 1.0f, vec3(0)});
+  TriangleMesh bunny = load_mesh_file(std::filesystem::path(SPECULA_SOURCE_DIR) / "samples/models/bunny.obj");
+  Aabb b;
+  for (const vec3& p : bunny.positions) b.grow(p);
+  list.push_back({"bunny", std::make_shared<const TriangleMesh>(std::move(bunny)), false,
+                  0.5f * glm::length(b.extent()), b.center()});
+  return list;
+}
+
+struct Placement {
+  std::string name;
+  vec3 translation;
+  float scale;
+  Kinematics::Type kinematics;
+};
+
+std::vector<Placement> placements() {
+  return {{"origin", vec3(0), 1.0f, Kinematics::Type::Static},
+          {"at 1e4", vec3(1e4f, -1e4f, 1e4f), 1.0f, Kinematics::Type::Static},
+          {"at 1e5", vec3(1e5f, 1e5f, -1e5f), 1.0f, Kinematics::Type::Static},
+          {"at 1e6", vec3(-1e6f, 1e6f, 1e6f), 1.0f, Kinematics::Type::Static},
+          {"scaled 1e-4", vec3(0.3f, -0.2f, 0.1f), 1e-4f, Kinematics::Type::Static},
+          {"scaled 1e4", vec3(0), 1e4f, Kinematics::Type::Static},
+          {"instance at 1e5", vec3(1e5f, 0, -1e5f), 1.0f, Kinematics::Type::Free},
+          {"instance scaled 1e-4", vec3(0.3f, -0.2f, 0.1f), 1e-4f, Kinematics::Type::Free}};
+}
+
+struct Count {
+  long long bad = 0, shot = 0;
+};
+
+/// The table: rows "case", columns backends.
+std::map<std::string, std::map<std::string, Count>>& table() {
+  static std::map<std::string, std::map<std::string, Count>> t;
+  return t;
+}
+
+class Robustness : public ::testing::TestWithParam<std::string> {
+protected:
+  [[nodiscard]] const std::string& backend() const { return GetParam(); }
+  static void TearDownTestSuite() {
+    const char* path = std::getenv("SPECULA_ROBUSTNESS_TABLE");
+    if (path == nullptr || *path == '\0') return;
+    std::set<std::string> columns;
+    for (const auto& [row, cells] : table())
+      for (const auto& [b, c] : cells) columns.insert(b);
+    std::ofstream out(path);
+    out << "| case |";
+    for (const std::string& c : columns) out << " " << c << " |";
+    out << "\n|---|";
+    for (std::size_t i = 0; i < columns.size(); ++i) out << "---:|";
+    out << "\n";
+    for (const auto& [row, cells] : table()) {
+      out << "| " << row << " |";
+      for (const std::string& c : columns) {
+        const auto it = cells.find(c);
+        if (it == cells.end())
+          out << " – |";
+        else
+          out << " " << it->second.bad << " / " << it->second.shot << " |";
+      }
+      out << "\n";
+    }
+  }
+  void record(const std::string& row, const Count& c) { table()[row][backend()] = c; }
+};
+
+TEST_P(Robustness, RaysAtSharedEdgesAndVerticesNeverLeak) {
+  for (const Shape& shape : shapes()) {
+    for (const Placement& place : placements()) {
+      ecs::Registry reg;
+      const ecs::Entity e = reg.create();
+      // Centre the shape on the placement's translation.
+      const Transform tr = test::at(place.translation - place.scale * shape.centre, vec3(place.scale));
+      reg.emplace<Transform>(e, tr);
+      reg.emplace<Mesh>(e, Mesh{shape.mesh, {}, {}, 0});
+      reg.emplace<Kinematics>(e, Kinematics{place.kinematics});
+      const test::TracedWorld world(reg, backend());
+      const mat4 m = tr.parent_from_local();
+      const vec3 centre = place.translation;
+      const float radius = shape.radius * place.scale;
+      const TriangleMesh& mesh = *shape.mesh;
+      // Interior edges (two triangles) and the vertices all of whose edges are interior.
+      std::map<std::pair<std::uint32_t, std::uint32_t>, int> edge_use;
+      for (const uvec3& t : mesh.triangles)
+        for (int k = 0; k < 3; ++k) ++edge_use[std::minmax(t[k], t[(k + 1) % 3])];
+      std::vector<bool> boundary_vertex(mesh.positions.size(), false);
+      for (const auto& [edge, uses] : edge_use)
+        if (uses != 2) boundary_vertex[edge.first] = boundary_vertex[edge.second] = true;
+      std::vector<vec3> targets; // object space
+      for (std::size_t v = 0; v < mesh.positions.size(); ++v)
+        if (!boundary_vertex[v]) targets.push_back(mesh.positions[v]);
+      for (const auto& [edge, uses] : edge_use)
+        if (uses == 2) targets.push_back(0.5f * (mesh.positions[edge.first] + mesh.positions[edge.second]));
+      const std::vector<vec3> origins =
+          shape.closed ? std::vector<vec3>{centre, centre + radius * vec3(0.13f, -0.21f, 0.07f)}
+                       : std::vector<vec3>{centre + radius * vec3(2.1f, 1.3f, 2.7f),
+                                           centre + radius * vec3(-2.5f, 0.4f, -1.9f)};
+      Count count;
+      for (const vec3& origin : origins) {
+        for (const vec3& target_object : targets) {
+          const vec3 target = vec3(m * vec4(target_object, 1.0f));
+          Ray ray;
+          ray.origin = origin;
+          ray.direction = glm::normalize(target - origin);
+          if (!shape.closed) {
+            // From outside only targets whose surface faces the origin (a ray at a silhouette
+            // may rightly graze past); nothing blocks the way out there but the mesh itself.
+            if (glm::dot(glm::normalize(target - centre), -ray.direction) < 0.3f) continue;
+          }
+          ++count.shot;
+          if (!world.intersect(ray).hit()) ++count.bad;
+        }
+      }
+      const std::string row = "leaks: " + shape.name + " " + place.name;
+      record(row, count);
+      ASSERT_GT(count.shot, 100) << row;
+      if (watertight(backend())) EXPECT_EQ(count.bad, 0) << row << ": " << count.bad << " of " << count.shot;
+    }
+  }
+}
+
+TEST_P(Robustness, ReflectedRaysNeverHitTheirOwnConvexSurface) {
+  // Static placements: the layer bakes the mesh, so the hit triangle is read in world space.
+  for (const Placement& place : placements()) {
+    if (place.kinematics != Kinematics::Type::Static) continue;
+    for (const char* shape_name : {"icosphere", "box"}) {
+      ecs::Registry reg;
+      const Shape shape = shapes()[std::string(shape_name) == "box" ? 1 : 0];
+      const ecs::Entity e = reg.create();
+      reg.emplace<Transform>(e, test::at(place.translation, vec3(place.scale)));
+      reg.emplace<Mesh>(e, Mesh{shape.mesh, {}, {}, 0});
+      reg.emplace<Kinematics>(e, Kinematics{place.kinematics});
+      const test::TracedWorld world(reg, backend());
+      const SceneTables& tables = world.tables();
+      std::mt19937 rng(11);
+      std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+      Count count;
+      for (int i = 0; i < 4000; ++i) {
+        vec3 d(0.0f);
+        while (glm::length(d) < 0.1f) d = vec3(unit(rng), unit(rng), unit(rng));
+        Ray in;
+        in.origin = place.translation + glm::normalize(d) * (4.0f * place.scale);
+        in.direction = glm::normalize(place.translation + 0.3f * place.scale * vec3(unit(rng), unit(rng), unit(rng)) - in.origin);
+        const Hit hit = world.intersect(in);
+        if (!hit.hit()) continue;
+        const gpu::GpuMesh& gm = tables.meshes[tables.instances[hit.instance].mesh];
+        const uvec3 tri = tables.triangles[gm.first_triangle + hit.primitive];
+        const vec3& a = tables.positions[gm.first_vertex + tri.x];
+        const vec3& b = tables.positions[gm.first_vertex + tri.y];
+        const vec3& c = tables.positions[gm.first_vertex + tri.z];
+        const float w = 1.0f - hit.uv.x - hit.uv.y;
+        const vec3 p = w * a + hit.uv.x * b + hit.uv.y * c;
+        vec3 n = glm::normalize(glm::cross(b - a, c - a));
+        if (glm::dot(n, in.direction) > 0.0f) n = -n;
+        Ray out;
+        out.origin = offset_ray_origin(p, barycentric_error(a, b, c, w, hit.uv.x, hit.uv.y), n);
+        out.direction = glm::normalize(in.direction - 2.0f * glm::dot(in.direction, n) * n);
+        ++count.shot;
+        if (world.intersect(out).hit() || world.occluded(out)) ++count.bad;
+      }
+      const std::string row = std::string("acne: ") + shape_name + " " + place.name;
+      record(row, count);
+      ASSERT_GT(count.shot, 1000) << row;
+      EXPECT_EQ(count.bad, 0) << row;
+    }
+  }
+}
+
+TEST_P(Robustness, GrazingRaysAlongABoxsFacesHitIt) {
+  for (const Placement& place : placements()) {
+    if (place.kinematics != Kinematics::Type::Static) continue;
+    ecs::Registry reg;
+    test::add_mesh(reg, test::primitive("box", 1.0f, vec3(2.0f)), test::at(place.translation, vec3(place.scale)));
+    const test::TracedWorld world(reg, backend());
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+    Count count;
+    const float h = place.scale; // half size
+    for (int i = 0; i < 4000; ++i) {
+      // A point on the top face (y = +h), well inside it, approached from far away at an angle of
+      // 1e-3 to 1e-2 radians above the face's plane.
+      const vec3 target = place.translation + vec3(unit(rng) * 0.9f * h, h, unit(rng) * 0.9f * h);
+      const float angle = 1e-3f + 9e-3f * (0.5f + 0.5f * unit(rng));
+      const float phi = 3.14159265f * unit(rng);
+      const vec3 dir = glm::normalize(vec3(std::cos(phi) * std::cos(angle), -std::sin(angle), std::sin(phi) * std::cos(angle)));
+      Ray ray;
+      ray.origin = target - dir * (3.0f * h);
+      ray.direction = dir;
+      ++count.shot;
+      if (!world.intersect(ray).hit()) ++count.bad;
+    }
+    const std::string row = "grazing: box " + place.name;
+    record(row, count);
+    if (watertight(backend())) EXPECT_EQ(count.bad, 0) << row;
+  }
+}
+
+TEST_P(Robustness, DegenerateTrianglesNeverHitAndNeverHideTheirNeighbours) {
+  // A strip of ordinary triangles; between each pair a zero-area triangle (three collinear
+  // points, or a repeated vertex) and a needle 1e-7 wide.
+  auto mesh = std::make_shared<TriangleMesh>();
+  std::vector<std::uint32_t> ordinary, zero_area;
+  for (int i = 0; i < 200; ++i) {
+    const float x = float(i);
+    const auto base = std::uint32_t(mesh->positions.size());
+    mesh->positions.insert(mesh->positions.end(),
+                           {{x, 0, 0}, {x + 1, 0, 0}, {x, 1, 0},            // ordinary
+                            {x, 0, 0.5f}, {x + 0.5f, 0.5f, 0.5f}, {x + 1, 1, 0.5f}, // collinear
+                            {x + 0.2f, 0.2f, 0.2f}, {x + 0.7f, 0.3f, 0.2f},          // repeated
+                            {x, 0.5f, 0.3f}, {x + 1, 0.5f, 0.3f}, {x + 0.5f, 0.5f + 1e-7f, 0.3f}}); // needle
+    ordinary.push_back(std::uint32_t(mesh->triangles.size()));
+    mesh->triangles.emplace_back(base, base + 1, base + 2);
+    zero_area.push_back(std::uint32_t(mesh->triangles.size()));
+    mesh->triangles.emplace_back(base + 3, base + 4, base + 5);
+    zero_area.push_back(std::uint32_t(mesh->triangles.size()));
+    mesh->triangles.emplace_back(base + 6, base + 7, base + 6);
+    mesh->triangles.emplace_back(base + 8, base + 9, base + 10);
+  }
+  mesh->compute_vertex_normals();
+  ecs::Registry reg;
+  const ecs::Entity e = reg.create();
+  reg.emplace<Transform>(e, test::at(vec3(0)));
+  reg.emplace<Mesh>(e, Mesh{mesh, {}, {}, 0});
+  reg.emplace<Kinematics>(e, Kinematics{Kinematics::Type::Static});
+  const test::TracedWorld world(reg, backend());
+  const std::set<std::uint32_t> zero(zero_area.begin(), zero_area.end());
+  Count count;
+  std::mt19937 rng(8);
+  std::uniform_real_distribution<float> u01(0.05f, 0.4f);
+  for (const std::uint32_t t : ordinary) {
+    for (int k = 0; k < 10; ++k) {
+      // From above, through the degenerate layers, at a point inside the ordinary triangle.
+      const uvec3 tri = mesh->triangles[t];
+      const float a = u01(rng), b = u01(rng);
+      const vec3 p = (1 - a - b) * mesh->positions[tri.x] + a * mesh->positions[tri.y] + b * mesh->positions[tri.z];
+      Ray ray;
+      ray.origin = p + vec3(0.01f, 0.02f, 2.0f);
+      ray.direction = glm::normalize(p - ray.origin);
+      const Hit hit = world.intersect(ray);
+      ++count.shot;
+      const bool bad = !hit.hit() || !std::isfinite(hit.t) || zero.count(hit.primitive) != 0 ||
+                       !std::isfinite(hit.uv.x) || !std::isfinite(hit.uv.y);
+      count.bad += bad ? 1 : 0;
+    }
+  }
+  // Aimed straight at the zero-area triangles (edge-on and face-on): never a hit on one of them.
+  for (const std::uint32_t t : zero_area) {
+    const uvec3 tri = mesh->triangles[t];
+    const vec3 p = (mesh->positions[tri.x] + mesh->positions[tri.y] + mesh->positions[tri.z]) / 3.0f;
+    for (const vec3& from : {p + vec3(0, 0, 3), p + vec3(0.3f, -0.2f, 3), p + vec3(-3, -3, 0)}) {
+      Ray ray;
+      ray.origin = from;
+      ray.direction = glm::normalize(p - from);
+      const Hit hit = world.intersect(ray);
+      ++count.shot;
+      count.bad += (hit.hit() && (zero.count(hit.primitive) != 0 || !std::isfinite(hit.t))) ? 1 : 0;
+    }
+  }
+  record("degenerate: zero-area and needle triangles", count);
+  EXPECT_EQ(count.bad, 0);
+}
+
+TEST_P(Robustness, InvalidRaysMissCleanly) {
+  ecs::Registry reg;
+  test::add_mesh(reg, test::primitive("sphere", 1.0f), test::at(vec3(0)));
+  test::add_mesh(reg, test::primitive("box", 1.0f), test::at(vec3(3, 0, 0)), Material{}, Kinematics::Type::Free);
+  const test::TracedWorld world(reg, backend());
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  std::vector<Ray> rays;
+  const auto add = [&](vec3 o, vec3 d, float tnear = 0.0f, float tfar = inf) {
+    Ray r;
+    r.origin = o;
+    r.direction = d;
+    r.tnear = tnear;
+    r.tfar = tfar;
+    rays.push_back(r);
+  };
+  add(vec3(nan, 0, 5), vec3(0, 0, -1));
+  add(vec3(0, 0, 5), vec3(0, nan, -1));
+  add(vec3(0, 0, 5), vec3(0, 0, -inf));
+  add(vec3(inf, 0, 5), vec3(-1, 0, 0));
+  add(vec3(0, 0, 5), vec3(0, 0, 0));
+  add(vec3(0, 0, 5), vec3(0, 0, -1), nan, inf);
+  add(vec3(0, 0, 5), vec3(0, 0, -1), 0.0f, nan);
+  add(vec3(0, 0, 5), vec3(0, 0, -1), 6.0f, 2.0f);
+  add(vec3(3, 0, 5), vec3(0, 0, -1), inf, inf);
+  std::vector<Hit> hits(rays.size());
+  std::vector<std::uint8_t> occluded(rays.size(), 7);
+  world.tracer->intersect(rays, hits);
+  world.tracer->occluded(rays, occluded);
+  Count count;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    ++count.shot;
+    const bool bad = hits[i].hit() || occluded[i] != 0;
+    count.bad += bad ? 1 : 0;
+    EXPECT_FALSE(hits[i].hit()) << "ray " << i;
+    EXPECT_EQ(occluded[i], 0) << "ray " << i;
+  }
+  record("invalid rays (NaN, Inf, zero direction, empty interval)", count);
+  // The same tracer still answers valid rays afterwards.
+  Ray ok;
+  ok.origin = vec3(0, 0, 5);
+  ok.direction = vec3(0, 0, -1);
+  EXPECT_NEAR(world.intersect(ok).t, 4.0f, 1e-3f);
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, Robustness, ::testing::ValuesIn(test::available_backends()),
+                         [](const auto& info) { return test::test_name(info.param); });
+
+} // namespace
+} // namespace specula
