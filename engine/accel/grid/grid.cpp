@@ -100,6 +100,11 @@ struct Resolution {
   return out;
 }
 
+/// Finite and within ±kGridMaxCoordinate, so that the grid's own spans and products stay finite.
+[[nodiscard]] bool usable(const vec3& p) {
+  return is_finite(p) && glm::all(glm::lessThanEqual(glm::abs(p), vec3(kGridMaxCoordinate)));
+}
+
 template <typename F>
 void for_each_range(std::size_t count, F&& body) {
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1024),
@@ -140,7 +145,7 @@ void UniformGrid::build(const TriangleView& tris, const GridBuildOptions& option
   Aabb box;
   for (std::uint32_t i = 0; i < tris.count; ++i) {
     const vec3 &p0 = tris.vertex(i, 0), &p1 = tris.vertex(i, 1), &p2 = tris.vertex(i, 2);
-    if (!is_finite(p0) || !is_finite(p1) || !is_finite(p2)) continue;
+    if (!usable(p0) || !usable(p1) || !usable(p2)) continue;
     valid.push_back(i);
     box.grow(p0);
     box.grow(p1);
@@ -153,8 +158,7 @@ void UniformGrid::build(const TriangleView& tris, const GridBuildOptions& option
   }
 
   // ---- Resolution -------------------------------------------------------------------------------
-  vec3 extent = box.extent();
-  if (!is_finite(extent)) extent = glm::min(extent, vec3(std::numeric_limits<float>::max()));
+  const vec3 extent = box.extent();
   const vec3 abs_max = glm::max(glm::abs(box.min), glm::abs(box.max));
   const float magnitude = std::max({abs_max.x, abs_max.y, abs_max.z});
   // A cell smaller than ~8 float steps of the coordinates cannot be told apart from its

@@ -33,6 +33,10 @@ namespace specula::accel {
 
 /// Most cells along one axis (the DDA's step bound grows with it).
 inline constexpr std::uint32_t kGridMaxAxisResolution = 1024;
+/// Triangles with a coordinate beyond ±2^64 are left out of the grid like non-finite ones: the
+/// grid's spans stay finite, and neither triangle test survives such coordinates anyway (its
+/// products of three coordinate differences overflow from about 1e13 on).
+inline constexpr float kGridMaxCoordinate = 0x1p64f;
 
 struct GridBuildOptions {
   float density = 4.0f;               ///< target cells per triangle (λ)
@@ -57,8 +61,8 @@ struct GridTraceInfo {
 
 class UniformGrid {
 public:
-  /// Builds over `tris`, which must outlive the grid (read in place). Triangles with a NaN or
-  /// infinite vertex are left out; no valid triangle gives an empty grid.
+  /// Builds over `tris`, which must outlive the grid (read in place). Triangles with a NaN,
+  /// infinite or beyond-kGridMaxCoordinate vertex are left out; none left gives an empty grid.
   void build(const TriangleView& tris, const GridBuildOptions& options = {});
 
   [[nodiscard]] bool empty() const { return header_.cell_count == 0; }
