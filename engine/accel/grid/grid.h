@@ -9,12 +9,13 @@
 /// cell_start (cell count + 1 offsets) and the triangle index array; cell
 /// c = x + res.x · (y + res.y · z) lists indices[cell_start[c] .. cell_start[c + 1]), ascending.
 ///
-/// Resolution: cell count ≈ density · triangle count (λ = 4 by default, the middle of the 2–8
-/// range in which Wald et al.'s coherent grid traversal and Cleary & Wyvill's analysis find the
-/// cost flat), cube cells of side cbrt(volume / target), resolution ceil(extent / side) per axis,
-/// at most kGridMaxAxisResolution per axis and options.max_cells in all. A flat scene (an axis of
-/// zero extent) takes the side from the area (or length) instead and gets one cell of padding
-/// across its flat axes.
+/// Resolution: cell count ≈ λ · triangle count, cube cells of side cbrt(volume / target), i.e.
+/// res_axis = ceil(extent_axis · cbrt(λN / V)), the usual rule (as in Wald et al. 2006, "Ray
+/// Tracing Animated Scenes using Coherent Grid Traversal"), at most kGridMaxAxisResolution per axis
+/// and options.max_cells in all. λ = 4 by default: on a 100k-triangle surface mesh and a 100k soup
+/// the ray rate is flat within noise for λ in 2–8 and falls at 16, while memory and build time grow
+/// with λ. A flat scene (an axis shorter than one cell) takes the side from the area (or length)
+/// of the other axes instead, and gets one cell across its flat axes, padded equally either side.
 ///
 /// Build: two passes over the triangles (count, prefix sum, fill) into the flat arrays, each
 /// triangle listed in every cell its box spans that Akenine-Möller's separating-axis test
