@@ -320,19 +320,31 @@ private:
       }
     }
 
-    // New local indices keep the old order, so the filtered lists stay sorted.
-    std::vector<std::uint32_t> remap_below(n), remap_above(n);
-    std::vector<std::uint32_t> straddling;
-    for (std::uint32_t l = 0; l < n; ++l) {
-      if (side[l] != kAboveOnly) {
-        remap_below[l] = std::uint32_t(below.tris.size());
-        below.tris.push_back(in.tris[l]);
+    // New local indices keep the old order, so the filtered lists stay sorted. Every array is
+    // sized once: the per-node allocations, not the passes, dominate small nodes.
+    std::size_t n_below = 0, n_above = 0, n_both = 0;
+    for (std::size_t l = 0; l < n; ++l) {
+      n_below += side[l] != kAboveOnly;
+      n_above += side[l] != kBelowOnly;
+      n_both += side[l] == kBoth;
+    }
+    std::vector<std::uint32_t> remap(n); // the index in the child it goes to (below if both)
+    std::vector<std::uint32_t> straddling(n_both);
+    below.tris.resize(n_below);
+    above.tris.resize(n_above);
+    {
+      std::uint32_t b = 0, a = 0, k = 0;
+      for (std::uint32_t l = 0; l < n; ++l) {
+        if (side[l] == kBoth) straddling[k++] = l;
+        if (side[l] != kAboveOnly) {
+          remap[l] = b;
+          below.tris[b++] = in.tris[l];
+        }
+        if (side[l] != kBelowOnly) {
+          if (side[l] == kAboveOnly) remap[l] = a;
+          above.tris[a++] = in.tris[l];
+        }
       }
-      if (side[l] != kBelowOnly) {
-        remap_above[l] = std::uint32_t(above.tris.size());
-        above.tris.push_back(in.tris[l]);
-      }
-      if (side[l] == kBoth) straddling.push_back(l);
     }
 
     below.box = in.box;
@@ -341,8 +353,24 @@ private:
     above.box.min[split.axis] = split.pos;
 
     // The straddling triangles' events in each child, from their parts inside the child box.
+    // Their indices in the children: remap[l] below, and above the count of triangles above
+    // before it, which the loop keeps as it walks the straddling triangles in order.
     EventLists new_below, new_above;
-    for (std::uint32_t l : straddling) {
+    for (std::size_t a = 0; a < 3; ++a) {
+      new_below[a].reserve(2 * n_both);
+      new_above[a].reserve(2 * n_both);
+    }
+    std::vector<std::uint32_t> above_index(n_both);
+    {
+      std::uint32_t a = 0;
+      std::size_t k = 0;
+      for (std::uint32_t l = 0; l < n && k < n_both; ++l) {
+        if (side[l] == kBoth) above_index[k++] = a;
+        if (side[l] != kBelowOnly) ++a;
+      }
+    }
+    for (std::size_t k = 0; k < n_both; ++k) {
+      const std::uint32_t l = straddling[k];
       const std::uint32_t prim = in.tris[l];
       const Aabb whole = tris_.bounds(prim);
       for (int child = 0; child < 2; ++child) {
@@ -357,33 +385,45 @@ private:
           part.min = glm::max(whole.min, box.min);
           part.max = glm::min(whole.max, box.max);
         }
-        push_events(part, child == 0 ? remap_below[l] : remap_above[l],
+        push_events(part, child == 0 ? remap[l] : above_index[k],
                     child == 0 ? new_below : new_above);
       }
     }
-    c.events += 6 * straddling.size();
+    c.events += 6 * n_both;
 
+    // One axis: a counting pass, then the filtered events and the sorted new ones merged straight
+    // into the child's list.
     auto split_axis = [&](std::size_t a) {
-      std::vector<Event>& out_below = below.events[a];
-      std::vector<Event>& out_above = above.events[a];
-      std::vector<Event> kept_below, kept_above;
-      kept_below.reserve(in.events[a].size() / 2 + 8);
-      kept_above.reserve(in.events[a].size() / 2 + 8);
-      for (const Event& e : in.events[a]) {
-        const std::uint32_t l = e.local();
-        if (side[l] == kBelowOnly)
-          kept_below.push_back(make_event(e.pos, e.type(), remap_below[l]));
-        else if (side[l] == kAboveOnly)
-          kept_above.push_back(make_event(e.pos, e.type(), remap_above[l]));
-      }
+      const std::vector<Event>& events = in.events[a];
       std::sort(new_below[a].begin(), new_below[a].end());
       std::sort(new_above[a].begin(), new_above[a].end());
-      out_below.resize(kept_below.size() + new_below[a].size());
-      std::merge(kept_below.begin(), kept_below.end(), new_below[a].begin(), new_below[a].end(),
-                 out_below.begin());
-      out_above.resize(kept_above.size() + new_above[a].size());
-      std::merge(kept_above.begin(), kept_above.end(), new_above[a].begin(), new_above[a].end(),
-                 out_above.begin());
+      std::size_t kept_below = 0, kept_above = 0;
+      for (const Event& e : events) {
+        const std::uint8_t s = side[e.local()];
+        kept_below += s == kBelowOnly;
+        kept_above += s == kAboveOnly;
+      }
+      std::vector<Event>& out_below = below.events[a];
+      std::vector<Event>& out_above = above.events[a];
+      out_below.resize(kept_below + new_below[a].size());
+      out_above.resize(kept_above + new_above[a].size());
+      std::size_t ib = 0, ia = 0, jb = 0, ja = 0;
+      const std::vector<Event>& nb = new_below[a];
+      const std::vector<Event>& na = new_above[a];
+      for (const Event& e : events) {
+        const std::uint32_t l = e.local();
+        if (side[l] == kBelowOnly) {
+          const Event moved = make_event(e.pos, e.type(), remap[l]);
+          while (jb < nb.size() && nb[jb] < moved) out_below[ib++] = nb[jb++];
+          out_below[ib++] = moved;
+        } else if (side[l] == kAboveOnly) {
+          const Event moved = make_event(e.pos, e.type(), remap[l]);
+          while (ja < na.size() && na[ja] < moved) out_above[ia++] = na[ja++];
+          out_above[ia++] = moved;
+        }
+      }
+      while (jb < nb.size()) out_below[ib++] = nb[jb++];
+      while (ja < na.size()) out_above[ia++] = na[ja++];
     };
     if (options_.parallel && n >= kParallelAxes) {
       tbb::parallel_invoke([&] { split_axis(0); }, [&] { split_axis(1); },
@@ -391,7 +431,7 @@ private:
     } else {
       for (std::size_t a = 0; a < 3; ++a) split_axis(a);
     }
-    c.events += in.events[0].size() + in.events[1].size() + in.events[2].size();
+    c.events += 2 * (in.events[0].size() + in.events[1].size() + in.events[2].size());
     for (std::size_t a = 0; a < 3; ++a)
       c.sort_work += sort_cost(new_below[a].size()) + sort_cost(new_above[a].size());
   }
