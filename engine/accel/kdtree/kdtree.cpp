@@ -1,0 +1,753 @@
+#include "specula/accel/kdtree/kdtree.h"
+
+#include <tbb/parallel_invoke.h>
+#include <tbb/parallel_sort.h>
+
+#include <immintrin.h>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <utility>
+
+namespace specula::accel {
+
+namespace {
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+constexpr int kStackSize = 64;
+constexpr std::uint32_t kMaxDepthLimit = kStackSize - 1;
+/// Local triangle indices and leaf counts live in 30 bits (events pack the type above them, nodes
+/// the axis below them).
+constexpr std::uint32_t kMaxTriangles = 1u << 30;
+
+// Relative slack of the traversal's interval decisions. The split distance (s - o)·(1/d) is within
+// ~3 ulp of the exact one and hit distances are within a few ulp too: a child is skipped, or the
+// traversal stopped after a leaf, only when the decision holds with this margin.
+constexpr float kSlack = 1e-5f;
+constexpr float kDown = 1.0f - kSlack;
+constexpr float kUp = 1.0f + kSlack;
+
+// Parallel build: a node with at least this many triangles builds its children as two tasks, and
+// one with at least kParallelAxes sweeps and splits its three axes as three tasks. Structural
+// thresholds (sizes, never thread counts), so the tree does not depend on the pool.
+constexpr std::size_t kParallelChildren = 2048;
+constexpr std::size_t kParallelAxes = 16384;
+
+// ---- Build --------------------------------------------------------------------------------------
+
+// Event types in sweep order at equal positions (Wald & Havran §5.1: end < planar < start).
+enum : std::uint32_t { kEnd = 0, kPlanar = 1, kStart = 2 };
+
+/// One event: a triangle's clipped extent starts, ends or lies flat at `pos` on the list's axis.
+/// `key` packs the type above the node-local triangle index, so (pos, key) is a total order that
+/// sorts by position, then type, then triangle: any sort gives the same list.
+struct Event {
+  float pos;
+  std::uint32_t key;
+  [[nodiscard]] std::uint32_t type() const { return key >> 30; }
+  [[nodiscard]] std::uint32_t local() const { return key & (kMaxTriangles - 1); }
+};
+static_assert(sizeof(Event) == 8);
+
+[[nodiscard]] inline bool operator<(const Event& a, const Event& b) {
+  return a.pos < b.pos || (a.pos == b.pos && a.key < b.key);
+}
+
+[[nodiscard]] inline Event make_event(float pos, std::uint32_t type, std::uint32_t local) {
+  return Event{pos, (type << 30) | local};
+}
+
+using EventLists = std::array<std::vector<Event>, 3>;
+
+/// A node waiting to be built: its box, its triangles (indices into the view, ascending) and its
+/// three event lists over node-local indices into `tris`.
+struct NodeInput {
+  Aabb box;
+  std::vector<std::uint32_t> tris;
+  EventLists events;
+};
+
+struct Counters {
+  std::uint32_t leaves = 0, empty_leaves = 0, max_depth = 0;
+  std::uint64_t references = 0, events = 0, sort_work = 0;
+  double sah = 0.0; ///< Σ cost·area, divided by the root's area at the end
+
+  void add(const Counters& o) {
+    leaves += o.leaves;
+    empty_leaves += o.empty_leaves;
+    max_depth = std::max(max_depth, o.max_depth);
+    references += o.references;
+    events += o.events;
+    sort_work += o.sort_work;
+    sah += o.sah;
+  }
+};
+
+/// A built subtree: nodes with `above` indices relative to its first node and leaf offsets
+/// relative to its first index.
+struct Subtree {
+  std::vector<gpu::KdNode> nodes;
+  std::vector<std::uint32_t> indices;
+  Counters counters;
+};
+
+[[nodiscard]] float half_area(const vec3& e) { return e.x * e.y + e.y * e.z + e.z * e.x; }
+
+[[nodiscard]] std::uint64_t sort_cost(std::size_t k) {
+  return k < 2 ? 0 : std::uint64_t(k) * std::uint64_t(std::bit_width(k - 1));
+}
+
+/// The bounds of triangle (p0, p1, p2) clipped to `box`: Sutherland–Hodgman against the six
+/// planes, then widened by a few ulp on its non-flat axes (the clipped vertices are rounded) and
+/// cut back to the box. False when nothing is left.
+bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& box, Aabb& out) {
+  std::array<vec3, 9> poly_a, poly_b; // a triangle clipped by six planes has at most 9 vertices
+  vec3* in = poly_a.data();
+  vec3* cut = poly_b.data();
+  in[0] = p0;
+  in[1] = p1;
+  in[2] = p2;
+  int n = 3;
+  for (int axis = 0; axis < 3 && n > 0; ++axis) {
+    for (int side = 0; side < 2 && n > 0; ++side) {
+      const float plane = side == 0 ? box.min[axis] : box.max[axis];
+      int m = 0;
+      for (int i = 0; i < n; ++i) {
+        const vec3& a = in[i];
+        const vec3& b = in[(i + 1) % n];
+        const bool a_in = side == 0 ? a[axis] >= plane : a[axis] <= plane;
+        const bool b_in = side == 0 ? b[axis] >= plane : b[axis] <= plane;
+        if (a_in) cut[m++] = a;
+        if (a_in != b_in) { // a and b lie on opposite sides: the denominator is not zero
+          const float t = (plane - a[axis]) / (b[axis] - a[axis]);
+          vec3 p = a + t * (b - a);
+          p[axis] = plane;
+          cut[m++] = p;
+        }
+      }
+      std::swap(in, cut);
+      n = m;
+    }
+  }
+  if (n == 0) return false;
+  Aabb b;
+  for (int i = 0; i < n; ++i) b.grow(in[i]);
+  for (int axis = 0; axis < 3; ++axis) {
+    if (b.max[axis] > b.min[axis]) {
+      const float pad = 4.0f * std::numeric_limits<float>::epsilon() *
+                        std::max(std::abs(b.min[axis]), std::abs(b.max[axis]));
+      b.min[axis] -= pad;
+      b.max[axis] += pad;
+    }
+  }
+  b.min = glm::max(b.min, box.min);
+  b.max = glm::min(b.max, box.max);
+  if (b.empty()) return false;
+  out = b;
+  return true;
+}
+
+void push_events(const Aabb& b, std::uint32_t local, EventLists& lists) {
+  for (int axis = 0; axis < 3; ++axis) {
+    if (b.min[axis] == b.max[axis]) {
+      lists[std::size_t(axis)].push_back(make_event(b.min[axis], kPlanar, local));
+    } else {
+      lists[std::size_t(axis)].push_back(make_event(b.min[axis], kStart, local));
+      lists[std::size_t(axis)].push_back(make_event(b.max[axis], kEnd, local));
+    }
+  }
+}
+
+struct Split {
+  float cost = kInf;
+  int axis = -1;
+  float pos = 0.0f;
+  bool planar_below = true; ///< the side that takes the triangles lying in the plane
+};
+
+class Builder {
+public:
+  Builder(const TriangleView& tris, const KdBuildOptions& options, std::uint32_t max_depth)
+      : tris_(tris), options_(options), max_depth_(max_depth) {}
+
+  /// Builds `in` at `depth`, appending its subtree (depth first) to `out`.
+  void build(NodeInput&& in, std::uint32_t depth, Subtree& out) const {
+    Counters& c = out.counters;
+    c.max_depth = std::max(c.max_depth, depth);
+    const std::size_t n = in.tris.size();
+    c.events += in.events[0].size() + in.events[1].size() + in.events[2].size();
+    const float area = half_area(in.box.extent());
+    const std::size_t node = out.nodes.size();
+    out.nodes.push_back({});
+
+    Split split;
+    if (n > options_.leaf_size && depth < max_depth_ && area > 0.0f) split = find_split(in, n);
+    if (split.axis < 0 || !(split.cost < options_.intersection_cost * float(n))) {
+      make_leaf(in, area, out, node);
+      return;
+    }
+
+    NodeInput below, above;
+    split_node(in, split, below, above, c);
+    in = NodeInput{}; // the parent's lists are no longer needed while the children build
+    c.sah += double(options_.traversal_cost) * double(area);
+
+    std::size_t above_index;
+    if (options_.parallel && n >= kParallelChildren) {
+      Subtree sub_below, sub_above;
+      tbb::parallel_invoke([&] { build(std::move(below), depth + 1, sub_below); },
+                           [&] { build(std::move(above), depth + 1, sub_above); });
+      splice(out, sub_below);
+      above_index = out.nodes.size();
+      splice(out, sub_above);
+    } else {
+      build(std::move(below), depth + 1, out);
+      above_index = out.nodes.size();
+      build(std::move(above), depth + 1, out);
+    }
+    if (above_index >= kMaxTriangles) throw std::length_error("kd-tree: too many nodes");
+    out.nodes[node].bits = (std::uint32_t(above_index) << 2) | std::uint32_t(split.axis);
+    out.nodes[node].split = split.pos;
+  }
+
+private:
+  static void splice(Subtree& out, const Subtree& sub) {
+    const auto node_base = std::uint32_t(out.nodes.size());
+    const auto index_base = std::uint32_t(out.indices.size());
+    for (gpu::KdNode n : sub.nodes) {
+      if ((n.bits & 3u) == gpu::kKdLeaf)
+        n.first += index_base;
+      else
+        n.bits += node_base << 2;
+      out.nodes.push_back(n);
+    }
+    out.indices.insert(out.indices.end(), sub.indices.begin(), sub.indices.end());
+    out.counters.add(sub.counters);
+  }
+
+  void make_leaf(const NodeInput& in, float area, Subtree& out, std::size_t node) const {
+    Counters& c = out.counters;
+    const auto n = std::uint32_t(in.tris.size());
+    out.nodes[node].bits = (n << 2) | gpu::kKdLeaf;
+    out.nodes[node].first = std::uint32_t(out.indices.size());
+    out.indices.insert(out.indices.end(), in.tris.begin(), in.tris.end());
+    ++c.leaves;
+    if (n == 0) ++c.empty_leaves;
+    c.references += n;
+    c.sah += double(options_.intersection_cost) * double(n) * double(area);
+  }
+
+  [[nodiscard]] float sah(float p_below, float p_above, std::size_t n_below,
+                          std::size_t n_above) const {
+    const float cost = options_.traversal_cost +
+                       options_.intersection_cost *
+                           (p_below * float(n_below) + p_above * float(n_above));
+    return (n_below == 0 || n_above == 0) ? options_.empty_bonus * cost : cost;
+  }
+
+  /// The sweep of Wald & Havran §5.1 over one axis's sorted events: the best plane strictly inside
+  /// the box (a plane on the boundary cuts nothing off).
+  [[nodiscard]] Split sweep(const NodeInput& in, int axis, std::size_t n) const {
+    Split best;
+    const vec3 extent = in.box.extent();
+    const float lo = in.box.min[axis], hi = in.box.max[axis];
+    if (!(hi > lo)) return best;
+    const float inv_area = 1.0f / half_area(extent);
+    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+    const float cap = extent[u] * extent[v];
+    const float perimeter = extent[u] + extent[v];
+    const std::vector<Event>& ev = in.events[std::size_t(axis)];
+    std::size_t n_below = 0, n_above = n;
+    for (std::size_t i = 0; i < ev.size();) {
+      const float p = ev[i].pos;
+      std::size_t ending = 0, planar = 0, starting = 0;
+      while (i < ev.size() && ev[i].pos == p && ev[i].type() == kEnd) ++ending, ++i;
+      while (i < ev.size() && ev[i].pos == p && ev[i].type() == kPlanar) ++planar, ++i;
+      while (i < ev.size() && ev[i].pos == p && ev[i].type() == kStart) ++starting, ++i;
+      n_above -= planar + ending;
+      if (p > lo && p < hi) {
+        const float p_below = (cap + (p - lo) * perimeter) * inv_area;
+        const float p_above = (cap + (hi - p) * perimeter) * inv_area;
+        const float cost_below = sah(p_below, p_above, n_below + planar, n_above);
+        const float cost_above = sah(p_below, p_above, n_below, n_above + planar);
+        if (cost_below < best.cost) best = {cost_below, axis, p, true};
+        if (cost_above < best.cost) best = {cost_above, axis, p, false};
+      }
+      n_below += starting + planar;
+    }
+    return best;
+  }
+
+  [[nodiscard]] Split find_split(const NodeInput& in, std::size_t n) const {
+    std::array<Split, 3> s;
+    if (options_.parallel && n >= kParallelAxes) {
+      tbb::parallel_invoke([&] { s[0] = sweep(in, 0, n); }, [&] { s[1] = sweep(in, 1, n); },
+                           [&] { s[2] = sweep(in, 2, n); });
+    } else {
+      for (int a = 0; a < 3; ++a) s[std::size_t(a)] = sweep(in, a, n);
+    }
+    Split best = s[0]; // ties go to the lower axis
+    for (std::size_t a = 1; a < 3; ++a)
+      if (s[a].cost < best.cost) best = s[a];
+    return best;
+  }
+
+  enum Side : std::uint8_t { kBoth = 0, kBelowOnly = 1, kAboveOnly = 2 };
+
+  /// Classification, list split and the straddling triangles' new events (Wald & Havran §5.2–5.3),
+  /// all linear in the node's events but for the sort of the new events.
+  void split_node(const NodeInput& in, const Split& split, NodeInput& below, NodeInput& above,
+                  Counters& c) const {
+    const std::size_t n = in.tris.size();
+    const auto axis = std::size_t(split.axis);
+    std::vector<std::uint8_t> side(n, kBoth);
+    for (const Event& e : in.events[axis]) {
+      const std::uint32_t type = e.type();
+      if (type == kEnd && e.pos <= split.pos) {
+        side[e.local()] = kBelowOnly;
+      } else if (type == kStart && e.pos >= split.pos) {
+        side[e.local()] = kAboveOnly;
+      } else if (type == kPlanar) {
+        if (e.pos < split.pos || (e.pos == split.pos && split.planar_below))
+          side[e.local()] = kBelowOnly;
+        else
+          side[e.local()] = kAboveOnly;
+      }
+    }
+
+    // New local indices keep the old order, so the filtered lists stay sorted. Every array is
+    // sized once: the per-node allocations, not the passes, dominate small nodes.
+    std::size_t n_below = 0, n_above = 0, n_both = 0;
+    for (std::size_t l = 0; l < n; ++l) {
+      n_below += side[l] != kAboveOnly;
+      n_above += side[l] != kBelowOnly;
+      n_both += side[l] == kBoth;
+    }
+    std::vector<std::uint32_t> remap(n); // the index in the child it goes to (below if both)
+    std::vector<std::uint32_t> straddling(n_both);
+    below.tris.resize(n_below);
+    above.tris.resize(n_above);
+    {
+      std::uint32_t b = 0, a = 0, k = 0;
+      for (std::uint32_t l = 0; l < n; ++l) {
+        if (side[l] == kBoth) straddling[k++] = l;
+        if (side[l] != kAboveOnly) {
+          remap[l] = b;
+          below.tris[b++] = in.tris[l];
+        }
+        if (side[l] != kBelowOnly) {
+          if (side[l] == kAboveOnly) remap[l] = a;
+          above.tris[a++] = in.tris[l];
+        }
+      }
+    }
+
+    below.box = in.box;
+    below.box.max[split.axis] = split.pos;
+    above.box = in.box;
+    above.box.min[split.axis] = split.pos;
+
+    // The straddling triangles' events in each child, from their parts inside the child box.
+    // Their indices in the children: remap[l] below, and above the count of triangles above
+    // before it, which the loop keeps as it walks the straddling triangles in order.
+    EventLists new_below, new_above;
+    for (std::size_t a = 0; a < 3; ++a) {
+      new_below[a].reserve(2 * n_both);
+      new_above[a].reserve(2 * n_both);
+    }
+    std::vector<std::uint32_t> above_index(n_both);
+    {
+      std::uint32_t a = 0;
+      std::size_t k = 0;
+      for (std::uint32_t l = 0; l < n && k < n_both; ++l) {
+        if (side[l] == kBoth) above_index[k++] = a;
+        if (side[l] != kBelowOnly) ++a;
+      }
+    }
+    for (std::size_t k = 0; k < n_both; ++k) {
+      const std::uint32_t l = straddling[k];
+      const std::uint32_t prim = in.tris[l];
+      const Aabb whole = tris_.bounds(prim);
+      for (int child = 0; child < 2; ++child) {
+        const Aabb& box = child == 0 ? below.box : above.box;
+        Aabb part;
+        const bool clipped = options_.perfect_splits &&
+                             clipped_bounds(tris_.vertex(prim, 0), tris_.vertex(prim, 1),
+                                            tris_.vertex(prim, 2), box, part);
+        if (!clipped) {
+          // No clipping, or clipping lost the sliver to rounding: the triangle's box cut to the
+          // child box, never empty for a triangle that straddles the plane.
+          part.min = glm::max(whole.min, box.min);
+          part.max = glm::min(whole.max, box.max);
+        }
+        push_events(part, child == 0 ? remap[l] : above_index[k],
+                    child == 0 ? new_below : new_above);
+      }
+    }
+    c.events += 6 * n_both;
+
+    // One axis: a counting pass, then the filtered events and the sorted new ones merged straight
+    // into the child's list.
+    auto split_axis = [&](std::size_t a) {
+      const std::vector<Event>& events = in.events[a];
+      std::sort(new_below[a].begin(), new_below[a].end());
+      std::sort(new_above[a].begin(), new_above[a].end());
+      std::size_t kept_below = 0, kept_above = 0;
+      for (const Event& e : events) {
+        const std::uint8_t s = side[e.local()];
+        kept_below += s == kBelowOnly;
+        kept_above += s == kAboveOnly;
+      }
+      std::vector<Event>& out_below = below.events[a];
+      std::vector<Event>& out_above = above.events[a];
+      out_below.resize(kept_below + new_below[a].size());
+      out_above.resize(kept_above + new_above[a].size());
+      std::size_t ib = 0, ia = 0, jb = 0, ja = 0;
+      const std::vector<Event>& nb = new_below[a];
+      const std::vector<Event>& na = new_above[a];
+      for (const Event& e : events) {
+        const std::uint32_t l = e.local();
+        if (side[l] == kBelowOnly) {
+          const Event moved = make_event(e.pos, e.type(), remap[l]);
+          while (jb < nb.size() && nb[jb] < moved) out_below[ib++] = nb[jb++];
+          out_below[ib++] = moved;
+        } else if (side[l] == kAboveOnly) {
+          const Event moved = make_event(e.pos, e.type(), remap[l]);
+          while (ja < na.size() && na[ja] < moved) out_above[ia++] = na[ja++];
+          out_above[ia++] = moved;
+        }
+      }
+      while (jb < nb.size()) out_below[ib++] = nb[jb++];
+      while (ja < na.size()) out_above[ia++] = na[ja++];
+    };
+    if (options_.parallel && n >= kParallelAxes) {
+      tbb::parallel_invoke([&] { split_axis(0); }, [&] { split_axis(1); },
+                           [&] { split_axis(2); });
+    } else {
+      for (std::size_t a = 0; a < 3; ++a) split_axis(a);
+    }
+    c.events += 2 * (in.events[0].size() + in.events[1].size() + in.events[2].size());
+    for (std::size_t a = 0; a < 3; ++a)
+      c.sort_work += sort_cost(new_below[a].size()) + sort_cost(new_above[a].size());
+  }
+
+  const TriangleView& tris_;
+  const KdBuildOptions& options_;
+  std::uint32_t max_depth_;
+};
+
+} // namespace
+
+void KdTree::build(const TriangleView& tris, const KdBuildOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  tris_ = tris;
+  bounds_ = Aabb{};
+  nodes_.clear();
+  indices_.clear();
+  stats_ = KdBuildStats{};
+  if (tris.count >= kMaxTriangles) throw std::length_error("kd-tree: too many triangles");
+
+  // The root: every triangle whose vertices are all finite, with its events.
+  NodeInput root;
+  root.tris.reserve(tris.count);
+  for (std::uint32_t i = 0; i < tris.count; ++i) {
+    if (is_finite(tris.vertex(i, 0)) && is_finite(tris.vertex(i, 1)) &&
+        is_finite(tris.vertex(i, 2)))
+      root.tris.push_back(i);
+  }
+  stats_.skipped_triangles = tris.count - std::uint32_t(root.tris.size());
+  const std::size_t n = root.tris.size();
+  if (n == 0) {
+    stats_.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    return;
+  }
+  for (std::size_t a = 0; a < 3; ++a) root.events[a].reserve(2 * n);
+  for (std::uint32_t l = 0; l < n; ++l) {
+    const Aabb b = tris.bounds(root.tris[l]);
+    bounds_.grow(b);
+    push_events(b, l, root.events);
+  }
+  root.box = bounds_;
+  Counters sorting;
+  for (std::size_t a = 0; a < 3; ++a) {
+    sorting.sort_work += sort_cost(root.events[a].size());
+    if (options.parallel)
+      tbb::parallel_sort(root.events[a].begin(), root.events[a].end());
+    else
+      std::sort(root.events[a].begin(), root.events[a].end());
+  }
+
+  std::uint32_t max_depth = options.max_depth;
+  if (max_depth == 0) max_depth = std::uint32_t(8.0 + 1.3 * std::log2(double(n)));
+  max_depth = std::min(max_depth, kMaxDepthLimit);
+
+  const float root_area = half_area(bounds_.extent());
+  Subtree tree;
+  tree.counters = sorting;
+  Builder(tris, options, max_depth).build(std::move(root), 0, tree);
+  nodes_ = std::move(tree.nodes);
+  indices_ = std::move(tree.indices);
+
+  const Counters& c = tree.counters;
+  stats_.nodes = std::uint32_t(nodes_.size());
+  stats_.leaves = c.leaves;
+  stats_.empty_leaves = c.empty_leaves;
+  stats_.max_depth = c.max_depth;
+  stats_.leaf_references = c.references;
+  stats_.sah_cost = root_area > 0.0f ? float(c.sah / double(root_area)) : 0.0f;
+  stats_.bytes = nodes_.size() * sizeof(gpu::KdNode) + indices_.size() * sizeof(std::uint32_t);
+  stats_.events_processed = c.events;
+  stats_.sort_work = c.sort_work;
+  stats_.build_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+// ---- Single-ray traversal -----------------------------------------------------------------------
+
+template <TriangleTest Test, bool AnyHit>
+bool KdTree::traverse(PreparedRay& r, TriangleHit* hit) const {
+  if (nodes_.empty() || !r.valid()) return false;
+  float tmin, tmax;
+  if (!intersect_box(r, bounds_.min, bounds_.max, tmin, tmax)) return false;
+
+  struct Entry {
+    std::uint32_t node;
+    float tmin, tmax;
+  };
+  Entry stack[kStackSize];
+  int sp = 0;
+  std::uint32_t node = 0;
+  bool found = false;
+  const gpu::KdNode* nodes = nodes_.data();
+  for (;;) {
+    const gpu::KdNode n = nodes[node];
+    const std::uint32_t axis = n.bits & 3u;
+    if (axis != gpu::kKdLeaf) {
+      const float o = r.org[int(axis)];
+      const float t_split = (n.split - o) * r.inv_dir[int(axis)];
+      // The child on the origin's side comes first; a ray in the plane goes below first, like
+      // its direction's sign would have it (pbrt).
+      const bool below_first = o < n.split || (o == n.split && r.dir[int(axis)] <= 0.0f);
+      const std::uint32_t first = below_first ? node + 1 : n.bits >> 2;
+      const std::uint32_t second = below_first ? n.bits >> 2 : node + 1;
+      if (std::isnan(t_split)) { // a ray in the plane, parallel to it: both, conservatively
+        stack[sp++] = {second, tmin, tmax};
+        node = first;
+      } else if (t_split <= 0.0f || t_split > tmax * kUp) {
+        node = first;
+      } else if (t_split < tmin * kDown) {
+        node = second;
+      } else {
+        stack[sp++] = {second, t_split, tmax};
+        node = first;
+        tmax = t_split;
+      }
+      continue;
+    }
+
+    const std::uint32_t count = n.bits >> 2;
+    const std::uint32_t* ids = indices_.data() + n.first;
+    for (std::uint32_t k = 0; k < count; ++k) {
+      if constexpr (AnyHit) {
+        if (intersect_any<Test>(r, tris_, ids[k])) return true;
+      } else {
+        if (intersect_closest<Test>(r, tris_, ids[k], *hit)) found = true;
+      }
+    }
+    // Front to back: once the closest hit lies before a cell's entry, no later cell can do better
+    // (a triangle with a hit point in an earlier cell is referenced by that cell too).
+    if (found && r.tfar < tmax * kDown) return true;
+    for (;;) {
+      if (sp == 0) return found;
+      const Entry& e = stack[--sp];
+      if (found && r.tfar < e.tmin * kDown) return true;
+      node = e.node;
+      tmin = e.tmin;
+      tmax = e.tmax;
+      break;
+    }
+  }
+}
+
+bool KdTree::intersect(PreparedRay& r, TriangleHit& hit, TriangleTest test) const {
+  if (test == TriangleTest::watertight)
+    return traverse<TriangleTest::watertight, false>(r, &hit);
+  return traverse<TriangleTest::moller_trumbore, false>(r, &hit);
+}
+
+bool KdTree::occluded(const PreparedRay& r, TriangleTest test) const {
+  PreparedRay copy = r;
+  if (test == TriangleTest::watertight)
+    return traverse<TriangleTest::watertight, true>(copy, nullptr);
+  return traverse<TriangleTest::moller_trumbore, true>(copy, nullptr);
+}
+
+// ---- Packet traversal ---------------------------------------------------------------------------
+
+namespace {
+
+/// What the packet kernels read of a tree.
+struct KdView {
+  const gpu::KdNode* nodes;
+  const std::uint32_t* indices;
+  const TriangleView* tris;
+};
+
+} // namespace
+
+// The packet kernel is written once (kdtree_packet.inl) over a small set of vector operations and
+// compiled twice: for SSE (baseline x86-64) and, in functions with the avx2 target attribute, for
+// AVX2, chosen at run time.
+namespace sse {
+namespace {
+constexpr int kLanes = 4;
+using Vf = __m128;
+#define SPECULA_KD_TARGET
+inline Vf vset1(float x) { return _mm_set1_ps(x); }
+inline Vf vload(const float* p) { return _mm_load_ps(p); }
+inline Vf vsub(Vf a, Vf b) { return _mm_sub_ps(a, b); }
+inline Vf vmul(Vf a, Vf b) { return _mm_mul_ps(a, b); }
+inline Vf vmin(Vf a, Vf b) { return _mm_min_ps(a, b); } // b where either is NaN
+inline Vf vmax(Vf a, Vf b) { return _mm_max_ps(a, b); } // b where either is NaN
+inline Vf vge(Vf a, Vf b) { return _mm_cmpge_ps(a, b); }
+inline Vf vle(Vf a, Vf b) { return _mm_cmple_ps(a, b); }
+inline Vf vlt(Vf a, Vf b) { return _mm_cmplt_ps(a, b); }
+inline Vf vnan(Vf a) { return _mm_cmpunord_ps(a, a); }
+inline Vf vor(Vf a, Vf b) { return _mm_or_ps(a, b); }
+inline unsigned vmask(Vf a) { return unsigned(_mm_movemask_ps(a)); }
+#include "kdtree_packet.inl"
+#undef SPECULA_KD_TARGET
+} // namespace
+} // namespace sse
+
+namespace avx2 {
+namespace {
+constexpr int kLanes = 8;
+using Vf = __m256;
+#define SPECULA_KD_TARGET __attribute__((target("avx2,fma")))
+SPECULA_KD_TARGET inline Vf vset1(float x) { return _mm256_set1_ps(x); }
+SPECULA_KD_TARGET inline Vf vload(const float* p) { return _mm256_load_ps(p); }
+SPECULA_KD_TARGET inline Vf vsub(Vf a, Vf b) { return _mm256_sub_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vmul(Vf a, Vf b) { return _mm256_mul_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vmin(Vf a, Vf b) { return _mm256_min_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vmax(Vf a, Vf b) { return _mm256_max_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vge(Vf a, Vf b) { return _mm256_cmp_ps(a, b, _CMP_GE_OQ); }
+SPECULA_KD_TARGET inline Vf vle(Vf a, Vf b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }
+SPECULA_KD_TARGET inline Vf vlt(Vf a, Vf b) { return _mm256_cmp_ps(a, b, _CMP_LT_OQ); }
+SPECULA_KD_TARGET inline Vf vnan(Vf a) { return _mm256_cmp_ps(a, a, _CMP_UNORD_Q); }
+SPECULA_KD_TARGET inline Vf vor(Vf a, Vf b) { return _mm256_or_ps(a, b); }
+SPECULA_KD_TARGET inline unsigned vmask(Vf a) { return unsigned(_mm256_movemask_ps(a)); }
+#include "kdtree_packet.inl"
+#undef SPECULA_KD_TARGET
+} // namespace
+} // namespace avx2
+
+namespace {
+
+[[nodiscard]] bool cpu_has_avx2() {
+  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  return has;
+}
+
+} // namespace
+
+template <int N, TriangleTest Test>
+void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active) const {
+  if (nodes_.empty()) return;
+  PreparedRay prepared[N];
+  TriangleHit lane_hits[N];
+  alignas(32) float tmin[N];
+  alignas(32) float tmax[N];
+  unsigned mask = 0;
+  for (int i = 0; i < N; ++i) {
+    tmin[i] = 0.0f;
+    tmax[i] = -1.0f;
+    if (!active[i]) continue;
+    prepared[i] = PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
+                                    vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i],
+                                    rays.tfar[i]);
+    if (!prepared[i].valid()) continue;
+    if (!intersect_box(prepared[i], bounds_.min, bounds_.max, tmin[i], tmax[i])) continue;
+    mask |= 1u << i;
+  }
+  if (mask == 0) return;
+
+  // One direction sign per axis over the live lanes, or each lane on its own.
+  bool coherent = std::popcount(mask) > 1;
+  std::uint32_t neg[3] = {0, 0, 0};
+  const int lead = std::countr_zero(mask);
+  for (int a = 0; a < 3 && coherent; ++a) {
+    neg[a] = prepared[lead].neg[a];
+    for (unsigned m = mask; m; m &= m - 1)
+      coherent = coherent && prepared[std::countr_zero(m)].neg[a] == neg[a];
+  }
+
+  bool found[N] = {};
+  if (coherent) {
+    const KdView view{nodes_.data(), indices_.data(), &tris_};
+    for (int i = 0; i < N; ++i) lane_hits[i] = TriangleHit{};
+    if constexpr (N == 8) {
+      avx2::traverse_packet<Test>(view, prepared, lane_hits, tmin, tmax, mask, neg);
+    } else {
+      sse::traverse_packet<Test>(view, prepared, lane_hits, tmin, tmax, mask, neg);
+    }
+    for (unsigned m = mask; m; m &= m - 1) found[std::countr_zero(m)] = lane_hits[std::countr_zero(m)].hit();
+  } else {
+    for (unsigned m = mask; m; m &= m - 1) {
+      const int i = std::countr_zero(m);
+      found[i] = traverse<Test, false>(prepared[i], &lane_hits[i]);
+    }
+  }
+  for (int i = 0; i < N; ++i) {
+    if (!found[i]) continue;
+    rays.tfar[i] = prepared[i].tfar;
+    hits.t[i] = lane_hits[i].t;
+    hits.u[i] = lane_hits[i].u;
+    hits.v[i] = lane_hits[i].v;
+    hits.prim[i] = lane_hits[i].prim;
+  }
+}
+
+void KdTree::intersect4(RayPacket<4>& rays, PacketHits<4>& hits, const bool active[4],
+                        TriangleTest test) const {
+  if (test == TriangleTest::watertight)
+    intersect_packet<4, TriangleTest::watertight>(rays, hits, active);
+  else
+    intersect_packet<4, TriangleTest::moller_trumbore>(rays, hits, active);
+}
+
+void KdTree::intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[8],
+                        TriangleTest test) const {
+  if (cpu_has_avx2()) {
+    if (test == TriangleTest::watertight)
+      intersect_packet<8, TriangleTest::watertight>(rays, hits, active);
+    else
+      intersect_packet<8, TriangleTest::moller_trumbore>(rays, hits, active);
+    return;
+  }
+  // No AVX2: two packets of four.
+  for (int half = 0; half < 2; ++half) {
+    RayPacket<4> r4;
+    PacketHits<4> h4;
+    for (int i = 0; i < 4; ++i) {
+      const int j = 4 * half + i;
+      r4.ox[i] = rays.ox[j], r4.oy[i] = rays.oy[j], r4.oz[i] = rays.oz[j];
+      r4.dx[i] = rays.dx[j], r4.dy[i] = rays.dy[j], r4.dz[i] = rays.dz[j];
+      r4.tnear[i] = rays.tnear[j], r4.tfar[i] = rays.tfar[j];
+      h4.t[i] = hits.t[j], h4.u[i] = hits.u[j], h4.v[i] = hits.v[j], h4.prim[i] = hits.prim[j];
+    }
+    intersect4(r4, h4, active + 4 * half, test);
+    for (int i = 0; i < 4; ++i) {
+      const int j = 4 * half + i;
+      rays.tfar[j] = r4.tfar[i];
+      hits.t[j] = h4.t[i], hits.u[j] = h4.u[i], hits.v[j] = h4.v[i], hits.prim[j] = h4.prim[i];
+    }
+  }
+}
+
+} // namespace specula::accel

@@ -1,0 +1,102 @@
+// The packet kd-tree traversal, included twice by kdtree.cpp: once for SSE (Vf = __m128, 4 lanes)
+// and once for AVX2 (Vf = __m256, 8 lanes, every function with the avx2 target attribute). The
+// includer defines kLanes, Vf, the v* operations and SPECULA_KD_TARGET.
+//
+// Wald, Slusallek, Benthin & Wagner, "Interactive Rendering with Coherent Ray Tracing" (2001), §4:
+// rays sharing the sign of their direction on every axis agree on which child of a node is the near
+// one, so the packet walks the tree as one ray with per-lane intervals and an active mask: it goes
+// to the near child only, the far child only, or to both (far on the stack) when its lanes differ.
+// Leaves test each live lane with the scalar triangle test.
+
+SPECULA_KD_TARGET inline Vf load_tfar(const PreparedRay* rays) {
+  alignas(32) float lane[kLanes];
+  for (int i = 0; i < kLanes; ++i) lane[i] = rays[i].tfar;
+  return vload(lane);
+}
+
+/// Traverses the lanes in `mask` (bits), whose directions all have the signs `neg`, from the root
+/// over their box intervals [tmin_in, tmax_in]. Closer hits land in `hits` and rays[i].tfar.
+template <TriangleTest Test>
+SPECULA_KD_TARGET void traverse_packet(const KdView& kd, PreparedRay* rays, TriangleHit* hits,
+                                       const float* tmin_in, const float* tmax_in, unsigned mask,
+                                       const std::uint32_t neg[3]) {
+  alignas(32) float lane[kLanes];
+  Vf org[3], inv[3];
+  for (int a = 0; a < 3; ++a) {
+    for (int i = 0; i < kLanes; ++i) lane[i] = rays[i].org[a];
+    org[a] = vload(lane);
+    for (int i = 0; i < kLanes; ++i) lane[i] = rays[i].inv_dir[a];
+    inv[a] = vload(lane);
+  }
+  const Vf down = vset1(kDown), up = vset1(kUp);
+  Vf tmin = vload(tmin_in), tmax = vload(tmax_in);
+  Vf tfar = load_tfar(rays);
+
+  struct Entry {
+    Vf tmin, tmax;
+    std::uint32_t node;
+    unsigned mask;
+  };
+  Entry stack[kStackSize];
+  int sp = 0;
+  unsigned alive = mask; // lanes not finished yet
+  std::uint32_t node = 0;
+  for (;;) {
+    const gpu::KdNode n = kd.nodes[node];
+    const std::uint32_t axis = n.bits & 3u;
+    if (axis != gpu::kKdLeaf) {
+      const Vf t_split = vmul(vsub(vset1(n.split), org[axis]), inv[axis]);
+      // A NaN split distance (a ray in the plane, parallel to it) needs both children.
+      const Vf nan = vnan(t_split);
+      const unsigned need_near = mask & vmask(vor(vge(t_split, vmul(tmin, down)), nan));
+      const unsigned need_far = mask & vmask(vor(vle(t_split, vmul(tmax, up)), nan));
+      const std::uint32_t below = node + 1, above = n.bits >> 2;
+      const std::uint32_t near_child = neg[axis] ? above : below;
+      const std::uint32_t far_child = neg[axis] ? below : above;
+      if (need_far == 0 && need_near != 0) {
+        node = near_child;
+        mask = need_near;
+        tmax = vmin(t_split, tmax);
+        continue;
+      }
+      if (need_near == 0 && need_far != 0) {
+        node = far_child;
+        mask = need_far;
+        tmin = vmax(t_split, tmin);
+        continue;
+      }
+      if (need_near != 0) {
+        stack[sp++] = {vmax(t_split, tmin), tmax, far_child, need_far};
+        node = near_child;
+        mask = need_near;
+        tmax = vmin(t_split, tmax);
+        continue;
+      }
+    } else {
+      const std::uint32_t count = n.bits >> 2;
+      const std::uint32_t* ids = kd.indices + n.first;
+      for (unsigned m = mask; m; m &= m - 1) {
+        const int i = std::countr_zero(m);
+        for (std::uint32_t k = 0; k < count; ++k)
+          intersect_closest<Test>(rays[i], *kd.tris, ids[k], hits[i]);
+      }
+      if (count != 0) {
+        tfar = load_tfar(rays);
+        // Lanes whose hit lies before this cell's exit are done (front to back).
+        alive &= ~(mask & vmask(vlt(tfar, vmul(tmax, down))));
+      }
+    }
+    // Pop the nearest pending cell that still has live lanes not already past it.
+    for (;;) {
+      if (sp == 0) return;
+      const Entry& e = stack[--sp];
+      alive &= ~(e.mask & vmask(vlt(tfar, vmul(e.tmin, down))));
+      mask = e.mask & alive;
+      if (mask == 0) continue;
+      node = e.node;
+      tmin = e.tmin;
+      tmax = e.tmax;
+      break;
+    }
+  }
+}

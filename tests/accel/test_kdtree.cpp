@@ -1,0 +1,611 @@
+// The SAH kd-tree (engine/accel/kdtree): hits against the brute-force reference, any-hit, packets,
+// the tree's structural invariants, a deterministic parallel build, the O(N log N) work bound, and
+// rays and triangles that must not break anything.
+#include "specula/accel/kdtree/kdtree.h"
+
+#include <gtest/gtest.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <string>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+using namespace specula;
+using namespace specula::accel;
+
+namespace {
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+struct Mesh {
+  std::string name;
+  std::vector<vec3> positions;
+  std::vector<uvec3> triangles;
+
+  [[nodiscard]] TriangleView view() const {
+    return {positions.data(), triangles.data(), std::uint32_t(triangles.size())};
+  }
+  void add(const vec3& a, const vec3& b, const vec3& c) {
+    const auto base = std::uint32_t(positions.size());
+    positions.insert(positions.end(), {a, b, c});
+    triangles.emplace_back(base, base + 1, base + 2);
+  }
+};
+
+Mesh uv_sphere(int rings, int segments, float radius, const vec3& centre) {
+  Mesh m{"sphere", {}, {}};
+  for (int i = 0; i <= rings; ++i) {
+    const float theta = 3.14159265f * float(i) / float(rings);
+    for (int j = 0; j < segments; ++j) {
+      const float phi = 6.2831853f * float(j) / float(segments);
+      m.positions.push_back(centre + radius * vec3(std::sin(theta) * std::cos(phi), std::cos(theta),
+                                                   std::sin(theta) * std::sin(phi)));
+    }
+  }
+  for (int i = 0; i < rings; ++i) {
+    for (int j = 0; j < segments; ++j) {
+      const auto a = std::uint32_t(i * segments + j);
+      const auto b = std::uint32_t(i * segments + (j + 1) % segments);
+      const auto c = a + std::uint32_t(segments), d = b + std::uint32_t(segments);
+      if (i != 0) m.triangles.emplace_back(a, b, d); // the pole rows have one zero-area triangle
+      if (i != rings - 1) m.triangles.emplace_back(a, d, c);
+    }
+  }
+  return m;
+}
+
+Mesh cube() {
+  Mesh m{"cube", {}, {}};
+  for (int i = 0; i < 8; ++i)
+    m.positions.emplace_back(float(i & 1) * 2.0f - 1.0f, float((i >> 1) & 1) * 2.0f - 1.0f,
+                             float((i >> 2) & 1) * 2.0f - 1.0f);
+  const unsigned faces[6][4] = {{0, 1, 3, 2}, {4, 6, 7, 5}, {0, 4, 5, 1},
+                                {2, 3, 7, 6}, {0, 2, 6, 4}, {1, 5, 7, 3}};
+  for (const auto& f : faces) {
+    m.triangles.emplace_back(f[0], f[1], f[2]);
+    m.triangles.emplace_back(f[0], f[2], f[3]);
+  }
+  return m;
+}
+
+/// n triangles of about `size` with centres uniform in [-1, 1]^3.
+Mesh soup(std::uint32_t n, float size, std::uint32_t seed) {
+  Mesh m{"soup", {}, {}};
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const vec3 c(unit(rng), unit(rng), unit(rng));
+    m.add(c + size * vec3(unit(rng), unit(rng), unit(rng)),
+          c + size * vec3(unit(rng), unit(rng), unit(rng)),
+          c + size * vec3(unit(rng), unit(rng), unit(rng)));
+  }
+  return m;
+}
+
+/// A k × k grid of unit squares in the plane z = 0 (the scene's box is flat).
+Mesh flat_grid(int k) {
+  Mesh m{"grid", {}, {}};
+  for (int y = 0; y <= k; ++y)
+    for (int x = 0; x <= k; ++x) m.positions.emplace_back(float(x), float(y), 0.0f);
+  for (int y = 0; y < k; ++y) {
+    for (int x = 0; x < k; ++x) {
+      const auto a = std::uint32_t(y * (k + 1) + x), b = a + 1, c = a + std::uint32_t(k + 1),
+                 d = c + 1;
+      m.triangles.emplace_back(a, b, d);
+      m.triangles.emplace_back(a, d, c);
+    }
+  }
+  return m;
+}
+
+/// A sphere plus zero-area triangles (repeated vertices, collinear vertices), needles, slivers in
+/// the planes of the sphere's box, and one triangle with a NaN vertex.
+Mesh degenerate_mesh() {
+  Mesh m = uv_sphere(16, 24, 1.0f, vec3(0.0f));
+  m.name = "degenerate";
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+  for (int i = 0; i < 300; ++i) {
+    const vec3 a(unit(rng), unit(rng), unit(rng));
+    const vec3 b(unit(rng), unit(rng), unit(rng));
+    switch (i % 5) {
+    case 0: m.add(a, a, a); break;                        // a point
+    case 1: m.add(a, b, 0.5f * (a + b)); break;           // collinear
+    case 2: m.add(a, b, b + vec3(1e-6f, 0.0f, 0.0f)); break; // a needle
+    case 3: m.add(a, b, a + vec3(0.0f, 1e-7f, 1e-7f)); break;
+    default: m.add(vec3(a.x, a.y, 1.0f), vec3(b.x, b.y, 1.0f), vec3(a.x, b.y, 1.0f)); break;
+    }
+  }
+  m.add(vec3(0.0f), vec3(kNaN, 0.0f, 0.0f), vec3(1.0f));
+  return m;
+}
+
+struct RaySet {
+  std::vector<PreparedRay> rays;
+};
+
+/// Half the rays from one point towards random points of the (enlarged) box, half with random
+/// origins and directions.
+std::vector<PreparedRay> make_rays(const Aabb& box, int count, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  std::normal_distribution<float> normal;
+  const vec3 lo = box.min - 0.25f * (box.extent() + vec3(1.0f));
+  const vec3 hi = box.max + 0.25f * (box.extent() + vec3(1.0f));
+  auto inside = [&] {
+    return lo + (hi - lo) * vec3(unit(rng), unit(rng), unit(rng));
+  };
+  const vec3 eye = box.center() + vec3(0.3f, 0.7f, 2.5f) * (box.extent() + vec3(1.0f));
+  std::vector<PreparedRay> rays;
+  for (int i = 0; i < count; ++i) {
+    if (i % 2 == 0) {
+      rays.push_back(PreparedRay::make(eye, inside() - eye, 0.0f, kInf));
+    } else {
+      vec3 d(normal(rng), normal(rng), normal(rng));
+      if (d == vec3(0.0f)) d = vec3(0, 0, 1);
+      rays.push_back(PreparedRay::make(inside(), d, 0.0f, i % 7 == 1 ? 2.0f : kInf));
+    }
+  }
+  return rays;
+}
+
+bool same_hit(const TriangleHit& got, const TriangleHit& want) {
+  if (got.hit() != want.hit()) return false;
+  if (!got.hit()) return true;
+  if (got.prim == want.prim) return got.t == want.t && got.u == want.u && got.v == want.v;
+  return std::abs(got.t - want.t) <= 1e-5f * std::max(1.0f, std::abs(want.t));
+}
+
+template <TriangleTest Test>
+void check_against_brute_force(const Mesh& mesh, const std::vector<PreparedRay>& rays) {
+  KdTree tree;
+  tree.build(mesh.view());
+  const TriangleView tris = mesh.view();
+  int wrong = 0, hits = 0, occlusion_wrong = 0;
+  for (const PreparedRay& ray : rays) {
+    const TriangleHit want = brute_force_closest<Test>(tris, ray);
+    PreparedRay r = ray;
+    TriangleHit got;
+    const bool hit = tree.intersect(r, got, Test);
+    hits += want.hit();
+    const bool ok = hit == got.hit() && same_hit(got, want) && (!hit || r.tfar == got.t);
+    if (!ok && ++wrong <= 5) {
+      ADD_FAILURE() << mesh.name << ": ray o=(" << ray.org.x << ", " << ray.org.y << ", "
+                    << ray.org.z << ") d=(" << ray.dir.x << ", " << ray.dir.y << ", " << ray.dir.z
+                    << ") kd prim " << got.prim << " t " << got.t << ", reference prim "
+                    << want.prim << " t " << want.t;
+    }
+    if (tree.occluded(ray, Test) != want.hit()) ++occlusion_wrong;
+  }
+  EXPECT_EQ(wrong, 0) << mesh.name << " over " << rays.size() << " rays";
+  EXPECT_EQ(occlusion_wrong, 0) << mesh.name;
+  EXPECT_GT(hits, int(rays.size()) / 20) << mesh.name << ": the rays should mostly hit something";
+}
+
+std::vector<Mesh> test_meshes() {
+  // The dense soup's large, crossing triangles straddle many cells: hits found in a cell often lie
+  // beyond it, which is what the traversal's termination must get right.
+  Mesh dense = soup(1500, 0.6f, 12);
+  dense.name = "dense soup";
+  return {uv_sphere(24, 48, 1.0f, vec3(0.5f, -0.25f, 2.0f)), cube(), soup(2000, 0.08f, 11),
+          std::move(dense), flat_grid(24), degenerate_mesh()};
+}
+
+/// Calls f(node, box, depth) on every node in depth-first order, checking that the order of
+/// the array is that order.
+template <class F>
+void walk(const KdTree& tree, F&& f) {
+  std::uint32_t expected = 0;
+  auto rec = [&](auto&& self, std::uint32_t node, const Aabb& box, std::uint32_t depth) -> void {
+    ASSERT_EQ(node, expected) << "nodes are not in depth-first order";
+    ++expected;
+    const gpu::KdNode n = tree.nodes()[node];
+    f(node, box, depth);
+    if ((n.bits & 3u) == gpu::kKdLeaf) return;
+    const int axis = int(n.bits & 3u);
+    Aabb below = box, above = box;
+    below.max[axis] = n.split;
+    above.min[axis] = n.split;
+    self(self, node + 1, below, depth + 1);
+    ASSERT_EQ(n.bits >> 2, expected) << "the child above does not follow the subtree below";
+    self(self, n.bits >> 2, above, depth + 1);
+  };
+  rec(rec, 0, tree.bounds(), 0);
+  EXPECT_EQ(expected, tree.nodes().size());
+}
+
+bool same_tree(const KdTree& a, const KdTree& b) {
+  return a.nodes().size() == b.nodes().size() && a.indices().size() == b.indices().size() &&
+         std::memcmp(a.nodes().data(), b.nodes().data(), a.nodes().size_bytes()) == 0 &&
+         std::equal(a.indices().begin(), a.indices().end(), b.indices().begin());
+}
+
+template <int N>
+RayPacket<N> pack(const std::vector<PreparedRay>& rays, std::size_t first) {
+  RayPacket<N> p;
+  for (int i = 0; i < N; ++i) {
+    const PreparedRay& r = rays[(first + std::size_t(i)) % rays.size()];
+    p.ox[i] = r.org.x, p.oy[i] = r.org.y, p.oz[i] = r.org.z;
+    p.dx[i] = r.dir.x, p.dy[i] = r.dir.y, p.dz[i] = r.dir.z;
+    p.tnear[i] = r.tnear, p.tfar[i] = r.tfar;
+  }
+  return p;
+}
+
+template <int N>
+void check_packets(const Mesh& mesh, const std::vector<PreparedRay>& rays, bool coherent_only) {
+  KdTree tree;
+  tree.build(mesh.view());
+  std::mt19937 rng(1234);
+  int wrong = 0, lanes = 0;
+  // Coherent: the even rays (all from one eye). Mixed: consecutive rays of both kinds.
+  std::vector<PreparedRay> source;
+  for (std::size_t i = 0; i < rays.size(); ++i)
+    if (!coherent_only || i % 2 == 0) source.push_back(rays[i]);
+  // Packets of neighbouring camera rays share their signs: sort the eye rays by direction.
+  if (coherent_only) {
+    std::sort(source.begin(), source.end(), [](const PreparedRay& a, const PreparedRay& b) {
+      return std::make_tuple(a.neg[0], a.neg[1], a.neg[2], a.dir.x) <
+             std::make_tuple(b.neg[0], b.neg[1], b.neg[2], b.dir.x);
+    });
+  }
+  for (std::size_t first = 0; first < source.size(); first += N) {
+    RayPacket<N> packet = pack<N>(source, first);
+    const RayPacket<N> original = packet;
+    bool active[N];
+    for (int i = 0; i < N; ++i) active[i] = rng() % 5 != 0;
+    PacketHits<N> hits;
+    hits.clear();
+    for (int i = 0; i < N; ++i) hits.u[i] = -7.0f; // a marker: untouched lanes keep it
+    if constexpr (N == 4)
+      tree.intersect4(packet, hits, active);
+    else
+      tree.intersect8(packet, hits, active);
+    for (int i = 0; i < N; ++i) {
+      ++lanes;
+      PreparedRay r = source[(first + std::size_t(i)) % source.size()];
+      TriangleHit want;
+      if (active[i]) tree.intersect(r, want);
+      TriangleHit got;
+      got.prim = hits.prim[i];
+      got.t = hits.t[i];
+      got.u = hits.u[i];
+      got.v = hits.v[i];
+      bool ok = same_hit(got, want) && packet.tfar[i] == (want.hit() ? got.t : original.tfar[i]);
+      if (!want.hit()) ok = ok && got.u == -7.0f;
+      if (!ok && ++wrong <= 5)
+        ADD_FAILURE() << mesh.name << " packet " << N << " lane " << i << " active " << active[i]
+                      << ": prim " << got.prim << " t " << got.t << ", single ray prim "
+                      << want.prim << " t " << want.t;
+    }
+  }
+  EXPECT_EQ(wrong, 0) << mesh.name << " over " << lanes << " lanes";
+}
+
+} // namespace
+
+TEST(KdTree, ClosestHitMatchesBruteForce) {
+  int total = 0;
+  for (const Mesh& mesh : test_meshes()) {
+    Aabb box;
+    for (const vec3& p : mesh.positions)
+      if (is_finite(p)) box.grow(p);
+    const auto rays = make_rays(box, 24000, 99);
+    total += int(rays.size());
+    check_against_brute_force<TriangleTest::watertight>(mesh, rays);
+  }
+  EXPECT_GE(total, 100000);
+}
+
+TEST(KdTree, ClosestHitMatchesBruteForceWithMollerTrumbore) {
+  for (const Mesh& mesh : test_meshes()) {
+    Aabb box;
+    for (const vec3& p : mesh.positions)
+      if (is_finite(p)) box.grow(p);
+    check_against_brute_force<TriangleTest::moller_trumbore>(mesh, make_rays(box, 6000, 5));
+  }
+}
+
+// Rays aimed exactly at the grid's vertices and edges: a split plane through every vertex line,
+// and hits on the planes themselves. The kd-tree must find a hit wherever the reference does.
+TEST(KdTree, RaysThroughSplitPlanesAndSharedEdges) {
+  const Mesh grid = flat_grid(16);
+  const Mesh box = cube();
+  std::vector<PreparedRay> rays;
+  for (int y = 0; y <= 32; ++y) {
+    for (int x = 0; x <= 32; ++x) {
+      const vec3 target(float(x) * 0.5f, float(y) * 0.5f, 0.0f);
+      rays.push_back(PreparedRay::make(vec3(3.3f, 7.1f, 5.0f), target - vec3(3.3f, 7.1f, 5.0f),
+                                       0.0f, kInf));
+      rays.push_back(PreparedRay::make(target + vec3(0, 0, 1), vec3(0, 0, -1), 0.0f, kInf));
+      // In the plane of the grid, along its lines: parallel to every triangle, so no hit.
+      rays.push_back(PreparedRay::make(vec3(-1.0f, float(y) * 0.5f, 0.0f), vec3(1, 0, 0), 0.0f,
+                                       kInf));
+    }
+  }
+  check_against_brute_force<TriangleTest::watertight>(grid, rays);
+  std::vector<PreparedRay> cube_rays;
+  for (int i = -8; i <= 8; ++i)
+    for (int j = -8; j <= 8; ++j) {
+      const vec3 o(float(i) * 0.25f, float(j) * 0.25f, 3.0f);
+      cube_rays.push_back(PreparedRay::make(o, vec3(0, 0, -1), 0.0f, kInf));
+      cube_rays.push_back(PreparedRay::make(vec3(0.0f), vec3(float(i), float(j), 4.0f), 0.0f, kInf));
+    }
+  check_against_brute_force<TriangleTest::watertight>(box, cube_rays);
+}
+
+TEST(KdTree, PacketsMatchSingleRays) {
+  for (const Mesh& mesh : test_meshes()) {
+    Aabb box;
+    for (const vec3& p : mesh.positions)
+      if (is_finite(p)) box.grow(p);
+    const auto rays = make_rays(box, 8000, 4242);
+    check_packets<4>(mesh, rays, true);
+    check_packets<4>(mesh, rays, false);
+    check_packets<8>(mesh, rays, true);
+    check_packets<8>(mesh, rays, false);
+  }
+}
+
+TEST(KdTree, CameraPacketMatchesReference) {
+  // A camera-like packet: every lane from one eye into the sphere, all directions with the same
+  // signs, plus one lane that misses and one with an invalid direction.
+  const Mesh sphere = uv_sphere(24, 48, 1.0f, vec3(0.0f));
+  KdTree tree;
+  tree.build(sphere.view());
+  RayPacket<8> p;
+  const bool active[8] = {true, true, true, true, true, true, true, true};
+  for (int i = 0; i < 8; ++i) {
+    p.ox[i] = -3.0f, p.oy[i] = -3.0f, p.oz[i] = -3.0f;
+    p.dx[i] = 1.0f + 0.02f * float(i), p.dy[i] = 1.0f, p.dz[i] = 1.0f - 0.01f * float(i);
+    p.tnear[i] = 0.0f, p.tfar[i] = kInf;
+  }
+  p.dx[6] = 1.0f, p.dy[6] = 0.05f, p.dz[6] = 0.05f; // passes beside the sphere
+  p.dx[7] = 0.0f, p.dy[7] = 0.0f, p.dz[7] = 0.0f;   // invalid
+  PacketHits<8> hits;
+  hits.clear();
+  tree.intersect8(p, hits, active);
+  for (int i = 0; i < 8; ++i) {
+    PreparedRay r = PreparedRay::make(vec3(p.ox[i], p.oy[i], p.oz[i]),
+                                      vec3(p.dx[i], p.dy[i], p.dz[i]), 0.0f, kInf);
+    const TriangleHit want = brute_force_closest(sphere.view(), r);
+    EXPECT_EQ(hits.prim[i], want.prim) << "lane " << i;
+    if (want.hit()) {
+      EXPECT_EQ(hits.t[i], want.t);
+    }
+  }
+  EXPECT_EQ(hits.prim[6], 0xFFFFFFFFu);
+  EXPECT_EQ(hits.prim[7], 0xFFFFFFFFu);
+}
+
+TEST(KdTree, StructuralInvariants) {
+  for (const Mesh& mesh : test_meshes()) {
+    KdTree tree;
+    tree.build(mesh.view());
+    const TriangleView tris = mesh.view();
+    ASSERT_FALSE(tree.empty());
+    std::vector<std::vector<std::uint32_t>> leaves_of(tris.count);
+    std::vector<Aabb> leaf_boxes;
+    std::uint32_t leaves = 0, max_depth = 0;
+    std::uint64_t references = 0;
+    walk(tree, [&](std::uint32_t node, const Aabb& box, std::uint32_t depth) {
+      const gpu::KdNode n = tree.nodes()[node];
+      max_depth = std::max(max_depth, depth);
+      if ((n.bits & 3u) != gpu::kKdLeaf) {
+        const int axis = int(n.bits & 3u);
+        EXPECT_GT(n.split, box.min[axis]) << mesh.name << " node " << node;
+        EXPECT_LT(n.split, box.max[axis]) << mesh.name << " node " << node;
+        return;
+      }
+      ++leaves;
+      const std::uint32_t count = n.bits >> 2;
+      references += count;
+      ASSERT_LE(std::uint64_t(n.first) + count, tree.indices().size());
+      for (std::uint32_t k = 0; k < count; ++k) {
+        const std::uint32_t prim = tree.indices()[n.first + k];
+        ASSERT_LT(prim, tris.count);
+        leaves_of[prim].push_back(std::uint32_t(leaf_boxes.size()));
+      }
+      leaf_boxes.push_back(box);
+    });
+    EXPECT_EQ(leaves, tree.stats().leaves);
+    EXPECT_EQ(references, tree.stats().leaf_references);
+    EXPECT_EQ(references, tree.indices().size());
+    EXPECT_EQ(max_depth, tree.stats().max_depth);
+    EXPECT_EQ(tree.stats().bytes, tree.nodes().size_bytes() + tree.indices().size_bytes());
+    // Every finite triangle is referenced, and the leaves referencing it cover its points: its
+    // vertices and centroid each lie in (the closure of) one of them.
+    for (std::uint32_t prim = 0; prim < tris.count; ++prim) {
+      const vec3 p[3] = {tris.vertex(prim, 0), tris.vertex(prim, 1), tris.vertex(prim, 2)};
+      if (!is_finite(p[0]) || !is_finite(p[1]) || !is_finite(p[2])) {
+        EXPECT_TRUE(leaves_of[prim].empty()) << mesh.name << ": a NaN triangle is referenced";
+        continue;
+      }
+      ASSERT_FALSE(leaves_of[prim].empty()) << mesh.name << " triangle " << prim;
+      // (The centroid is clamped to the triangle's box: a flat axis keeps its exact value.)
+      const Aabb tb = tris.bounds(prim);
+      const vec3 centroid = glm::clamp((p[0] + p[1] + p[2]) / 3.0f, tb.min, tb.max);
+      const vec3 points[4] = {p[0], p[1], p[2], centroid};
+      for (const vec3& q : points) {
+        bool covered = false;
+        for (std::uint32_t leaf : leaves_of[prim]) {
+          const Aabb& b = leaf_boxes[leaf];
+          covered = covered || (glm::all(glm::greaterThanEqual(q, b.min)) &&
+                                glm::all(glm::lessThanEqual(q, b.max)));
+        }
+        EXPECT_TRUE(covered) << mesh.name << " triangle " << prim;
+      }
+    }
+  }
+}
+
+TEST(KdTree, BuildIsDeterministicForAnyThreadCount) {
+  const Mesh mesh = soup(40000, 0.03f, 3);
+  KdTree one, two, sequential;
+  // Two threads first: (this TBB) gives a later arena no worker once an arena of one has run.
+  tbb::task_arena(2).execute([&] { two.build(mesh.view()); });
+  tbb::task_arena(1).execute([&] { one.build(mesh.view()); });
+  KdBuildOptions options;
+  options.parallel = false;
+  sequential.build(mesh.view(), options);
+  EXPECT_GT(one.nodes().size(), 1000u);
+  EXPECT_TRUE(same_tree(one, two));
+  EXPECT_TRUE(same_tree(one, sequential));
+  EXPECT_EQ(one.stats().sah_cost, two.stats().sah_cost);
+  EXPECT_EQ(one.stats().events_processed, two.stats().events_processed);
+}
+
+// O(N log N), not O(N log² N), without a clock: the per-node passes touch each event a constant
+// number of times, so the events they process grow like N log N (the depth grows like log N); and
+// the only sort of a size comparable to N is the first one — the later sorts (of the straddling
+// triangles' new events) add a bounded fraction to it. A build that re-sorted at every node would
+// do sort work ~ N log² N, growing by far more than 4 per quadrupling of N.
+TEST(KdTree, BuildWorkGrowsLikeNLogN) {
+  std::vector<double> per_nlogn;
+  for (std::uint32_t n : {1024u, 4096u, 16384u, 65536u}) {
+    // The same scene at every size: triangles shrink as their number grows.
+    const Mesh mesh = soup(n, 0.5f / std::cbrt(float(n)), 17);
+    KdTree tree;
+    tree.build(mesh.view());
+    const double nlogn = double(n) * std::log2(double(n));
+    per_nlogn.push_back(double(tree.stats().events_processed) / nlogn);
+    const double first_sort = 3.0 * 2.0 * double(n) * std::ceil(std::log2(2.0 * double(n)));
+    EXPECT_LE(double(tree.stats().sort_work), 1.5 * first_sort) << "n = " << n;
+  }
+  for (std::size_t i = 1; i < per_nlogn.size(); ++i) {
+    // Over 1k → 64k, log2 N grows by 1.6 and so would this ratio for N log² N work.
+    EXPECT_LT(per_nlogn[i] / per_nlogn[0], 1.25) << "events per N log N: " << per_nlogn[i];
+    EXPECT_GT(per_nlogn[i] / per_nlogn[0], 0.75) << "events per N log N: " << per_nlogn[i];
+  }
+}
+
+TEST(KdTree, InvalidRaysMiss) {
+  const Mesh sphere = uv_sphere(12, 24, 1.0f, vec3(0.0f));
+  KdTree tree;
+  tree.build(sphere.view());
+  const vec3 o(0.0f, 0.0f, -5.0f), d(0.0f, 0.0f, 1.0f);
+  const PreparedRay bad[] = {
+      PreparedRay::make(vec3(kNaN, 0.0f, -5.0f), d, 0.0f, kInf),
+      PreparedRay::make(vec3(0.0f, kInf, -5.0f), d, 0.0f, kInf),
+      PreparedRay::make(o, vec3(0.0f, kNaN, 1.0f), 0.0f, kInf),
+      PreparedRay::make(o, vec3(0.0f, 0.0f, kInf), 0.0f, kInf),
+      PreparedRay::make(o, vec3(0.0f), 0.0f, kInf),
+      PreparedRay::make(o, d, kNaN, kInf),
+      PreparedRay::make(o, d, 0.0f, kNaN),
+      PreparedRay::make(o, d, 3.0f, 2.0f),
+      PreparedRay::make(o, d, -1.0f, kInf),
+  };
+  for (const PreparedRay& ray : bad) {
+    PreparedRay r = ray;
+    TriangleHit hit;
+    EXPECT_FALSE(tree.intersect(r, hit));
+    EXPECT_FALSE(hit.hit());
+    EXPECT_FALSE(tree.occluded(ray));
+    EXPECT_FALSE(tree.intersect(r, hit, TriangleTest::moller_trumbore));
+  }
+  // The valid ray they were made from hits.
+  PreparedRay good = PreparedRay::make(o, d, 0.0f, kInf);
+  TriangleHit hit;
+  EXPECT_TRUE(tree.intersect(good, hit));
+  EXPECT_NEAR(good.tfar, 4.0f, 0.05f);
+
+  // Packets: invalid lanes miss, valid ones hit.
+  RayPacket<4> p;
+  for (int i = 0; i < 4; ++i) {
+    p.ox[i] = 0.0f, p.oy[i] = 0.0f, p.oz[i] = -5.0f;
+    p.dx[i] = 0.0f, p.dy[i] = 0.0f, p.dz[i] = 1.0f;
+    p.tnear[i] = 0.0f, p.tfar[i] = kInf;
+  }
+  p.ox[1] = kNaN;
+  p.dz[2] = 0.0f;
+  p.tnear[3] = 10.0f, p.tfar[3] = 1.0f;
+  PacketHits<4> hits;
+  hits.clear();
+  const bool active[4] = {true, true, true, true};
+  tree.intersect4(p, hits, active);
+  EXPECT_TRUE(hits.prim[0] != 0xFFFFFFFFu);
+  EXPECT_EQ(hits.prim[1], 0xFFFFFFFFu);
+  EXPECT_EQ(hits.prim[2], 0xFFFFFFFFu);
+  EXPECT_EQ(hits.prim[3], 0xFFFFFFFFu);
+}
+
+TEST(KdTree, EmptyAndDegenerateInputs) {
+  KdTree tree;
+  tree.build(TriangleView{});
+  EXPECT_TRUE(tree.empty());
+  PreparedRay r = PreparedRay::make(vec3(0.0f), vec3(0, 0, 1), 0.0f, kInf);
+  TriangleHit hit;
+  EXPECT_FALSE(tree.intersect(r, hit));
+  EXPECT_FALSE(tree.occluded(r));
+  RayPacket<8> p = pack<8>({r}, 0);
+  PacketHits<8> hits;
+  hits.clear();
+  const bool active[8] = {true, true, true, true, true, true, true, true};
+  tree.intersect8(p, hits, active);
+  for (std::uint32_t prim : hits.prim) EXPECT_EQ(prim, 0xFFFFFFFFu);
+
+  // Only NaN triangles: an empty tree.
+  Mesh nan_only{"nan", {}, {}};
+  nan_only.add(vec3(kNaN), vec3(1.0f), vec3(2.0f));
+  nan_only.add(vec3(0.0f), vec3(kInf, 0.0f, 0.0f), vec3(2.0f));
+  tree.build(nan_only.view());
+  EXPECT_TRUE(tree.empty());
+  EXPECT_EQ(tree.stats().skipped_triangles, 2u);
+  EXPECT_FALSE(tree.intersect(r, hit));
+
+  // One triangle; the same triangle many times over (no split helps: depth-limited or a leaf);
+  // points only (a box of zero area).
+  Mesh one{"one", {}, {}};
+  one.add(vec3(-1, -1, 2), vec3(1, -1, 2), vec3(0, 1, 2));
+  tree.build(one.view());
+  r = PreparedRay::make(vec3(0.0f), vec3(0, 0, 1), 0.0f, kInf);
+  EXPECT_TRUE(tree.intersect(r, hit));
+  EXPECT_EQ(hit.prim, 0u);
+
+  Mesh same{"same", {}, {}};
+  for (int i = 0; i < 500; ++i) same.add(vec3(-1, -1, 2), vec3(1, -1, 2), vec3(0, 1, 2));
+  tree.build(same.view());
+  r = PreparedRay::make(vec3(0.0f), vec3(0, 0, 1), 0.0f, kInf);
+  hit = {};
+  EXPECT_TRUE(tree.intersect(r, hit));
+  EXPECT_EQ(hit.t, 2.0f);
+
+  Mesh points{"points", {}, {}};
+  for (int i = 0; i < 50; ++i) points.add(vec3(1.0f), vec3(1.0f), vec3(1.0f));
+  tree.build(points.view());
+  EXPECT_FALSE(tree.empty());
+  r = PreparedRay::make(vec3(0.0f), vec3(1.0f), 0.0f, kInf);
+  hit = {};
+  EXPECT_FALSE(tree.intersect(r, hit));
+}
+
+TEST(KdTree, OptionsAndStats) {
+  const Mesh mesh = uv_sphere(32, 64, 1.0f, vec3(0.0f));
+  KdTree perfect, loose;
+  perfect.build(mesh.view());
+  KdBuildOptions options;
+  options.perfect_splits = false;
+  options.max_depth = 12;
+  loose.build(mesh.view(), options);
+  EXPECT_LE(loose.stats().max_depth, 12u);
+  EXPECT_GT(perfect.stats().leaves, 1u);
+  EXPECT_GT(perfect.stats().sah_cost, 0.0f);
+  // Clipping can only tighten the events, so the tree's cost does not get worse.
+  EXPECT_LE(perfect.stats().sah_cost, loose.stats().sah_cost * 1.05f);
+  const auto rays = make_rays(perfect.bounds(), 4000, 8);
+  for (const PreparedRay& ray : rays) {
+    PreparedRay a = ray, b = ray;
+    TriangleHit ha, hb;
+    perfect.intersect(a, ha);
+    loose.intersect(b, hb);
+    ASSERT_TRUE(same_hit(hb, ha));
+  }
+}
