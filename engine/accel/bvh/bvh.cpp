@@ -118,9 +118,9 @@ private:
     std::uint32_t mid = 0;
     Aabb left, right;
   };
-  struct Bin {
-    Aabb box;
-    std::uint32_t count = 0;
+  struct Bin { // no default initialisation: only the bins in use are cleared, per node
+    vec3 lo, hi;
+    std::uint32_t count;
   };
 
   void node(Ref* refs, std::uint32_t begin, std::uint32_t end, const Aabb& bounds,
@@ -198,7 +198,9 @@ private:
 
     if (depth < Bvh::kSahDepthLimit) {
       const std::uint32_t bins = opt_.bins;
-      std::array<std::array<Bin, kMaxBins>, 3> bin{};
+      Bin bin[3][kMaxBins];
+      for (auto& axis_bins : bin)
+        for (std::uint32_t i = 0; i < bins; ++i) axis_bins[i] = {vec3(kInf), vec3(-kInf), 0};
       float scale[3];
       bool usable[3];
       for (int a = 0; a < 3; ++a) {
@@ -212,8 +214,8 @@ private:
         for (int a = 0; a < 3; ++a) {
           if (!usable[a]) continue;
           Bin& b = bin[a][bin_of(c[a], cmin[a], scale[a], bins)];
-          b.box.min = glm::min(b.box.min, r.lo);
-          b.box.max = glm::max(b.box.max, r.hi);
+          b.lo = glm::min(b.lo, r.lo);
+          b.hi = glm::max(b.hi, r.hi);
           ++b.count;
         }
       }
@@ -226,14 +228,14 @@ private:
         Aabb box;
         std::uint32_t count = 0;
         for (std::uint32_t i = bins - 1; i > 0; --i) {
-          box.grow(bin[a][i].box);
+          box.grow(Aabb{bin[a][i].lo, bin[a][i].hi});
           count += bin[a][i].count;
           right_cost[i] = count ? half_area(box.min, box.max) * float(count) : -1.0f;
         }
         box = Aabb{};
         count = 0;
         for (std::uint32_t i = 1; i < bins; ++i) {
-          box.grow(bin[a][i - 1].box);
+          box.grow(Aabb{bin[a][i - 1].lo, bin[a][i - 1].hi});
           count += bin[a][i - 1].count;
           if (count == 0 || right_cost[i] < 0.0f) continue;
           const float cost = opt_.traversal_cost * area +
@@ -254,7 +256,8 @@ private:
         });
         s.leaf = false;
         s.mid = std::uint32_t(mid - refs);
-        for (std::uint32_t i = 0; i < bins; ++i) (i < best_bin ? s.left : s.right).grow(bin[a][i].box);
+        for (std::uint32_t i = 0; i < bins; ++i)
+          (i < best_bin ? s.left : s.right).grow(Aabb{bin[a][i].lo, bin[a][i].hi});
         return s;
       }
     }
