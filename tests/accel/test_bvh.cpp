@@ -1,0 +1,777 @@
+// The BVH for dynamic objects (engine/accel/bvh): every query against brute force, the structure's
+// invariants, refit, selective restructuring, lazy expansion (also from several threads), packets
+// and the generic traversal over boxes.
+#include "specula/accel/bvh/bvh.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <numbers>
+#include <random>
+#include <set>
+#include <thread>
+#include <vector>
+
+using namespace specula;
+using namespace specula::accel;
+
+namespace {
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+struct Mesh {
+  std::vector<vec3> positions;
+  std::vector<uvec3> triangles;
+  [[nodiscard]] TriangleView view() const {
+    return {positions.data(), triangles.data(), std::uint32_t(triangles.size())};
+  }
+};
+
+Mesh uv_sphere(int rings, int segments, float radius, vec3 centre) {
+  Mesh m;
+  for (int r = 0; r <= rings; ++r) {
+    const float theta = std::numbers::pi_v<float> * float(r) / float(rings);
+    for (int s = 0; s < segments; ++s) {
+      const float phi = 2.0f * std::numbers::pi_v<float> * float(s) / float(segments);
+      m.positions.push_back(centre + radius * vec3(std::sin(theta) * std::cos(phi), std::cos(theta),
+                                                   std::sin(theta) * std::sin(phi)));
+    }
+  }
+  auto at = [segments](int r, int s) { return std::uint32_t(r * segments + (s % segments)); };
+  for (int r = 0; r < rings; ++r)
+    for (int s = 0; s < segments; ++s) {
+      m.triangles.push_back({at(r, s), at(r + 1, s), at(r + 1, s + 1)});
+      m.triangles.push_back({at(r, s), at(r + 1, s + 1), at(r, s + 1)});
+    }
+  return m;
+}
+
+Mesh random_soup(int count, std::uint32_t seed, float extent, float size) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> pos(-extent, extent), off(-size, size);
+  Mesh m;
+  for (int i = 0; i < count; ++i) {
+    const vec3 c(pos(rng), pos(rng), pos(rng));
+    for (int k = 0; k < 3; ++k) m.positions.push_back(c + vec3(off(rng), off(rng), off(rng)));
+    const auto b = std::uint32_t(3 * i);
+    m.triangles.push_back({b, b + 1, b + 2});
+  }
+  return m;
+}
+
+Mesh flat_grid(int nx, int ny) {
+  Mesh m;
+  for (int y = 0; y <= ny; ++y)
+    for (int x = 0; x <= nx; ++x)
+      m.positions.push_back(vec3(float(x) / float(nx) * 4.0f - 2.0f, float(y) / float(ny) * 4.0f - 2.0f, 0.0f));
+  auto at = [nx](int x, int y) { return std::uint32_t(y * (nx + 1) + x); };
+  for (int y = 0; y < ny; ++y)
+    for (int x = 0; x < nx; ++x) {
+      m.triangles.push_back({at(x, y), at(x + 1, y), at(x + 1, y + 1)});
+      m.triangles.push_back({at(x, y), at(x + 1, y + 1), at(x, y + 1)});
+    }
+  return m;
+}
+
+/// A soup with degenerate triangles mixed in: repeated vertices, collinear points, duplicates,
+/// and many triangles sharing one centroid.
+Mesh degenerate_mix(std::uint32_t seed) {
+  Mesh m = random_soup(1200, seed, 1.5f, 0.3f);
+  std::mt19937 rng(seed + 1);
+  std::uniform_real_distribution<float> pos(-1.5f, 1.5f);
+  auto add = [&m](vec3 a, vec3 b, vec3 c) {
+    const auto base = std::uint32_t(m.positions.size());
+    m.positions.insert(m.positions.end(), {a, b, c});
+    m.triangles.push_back({base, base + 1, base + 2});
+  };
+  for (int i = 0; i < 200; ++i) {
+    const vec3 a(pos(rng), pos(rng), pos(rng)), b(pos(rng), pos(rng), pos(rng));
+    add(a, a, a);                 // a point
+    add(a, b, a);                 // a segment
+    add(a, 0.5f * (a + b), b);    // collinear
+  }
+  for (int i = 0; i < 300; ++i) add(vec3(-0.2f, 0, 0), vec3(0.2f, 0, 0), vec3(0, 0.3f, 0.01f * float(i % 3)));
+  for (int i = 0; i < 100; ++i) m.triangles.push_back(m.triangles[std::size_t(i)]); // duplicates
+  return m;
+}
+
+/// Rays from a pinhole towards the mesh (coherent) and between random points (incoherent), with
+/// axis-parallel directions and rays starting inside mixed in.
+std::vector<Ray> make_rays(const Aabb& box, int count, std::uint32_t seed, bool coherent) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  const vec3 c = box.center();
+  const float radius = glm::length(box.extent()) * 0.5f + 1e-3f;
+  std::vector<Ray> rays;
+  rays.reserve(std::size_t(count));
+  const vec3 eye = c + vec3(0.3f, 0.5f, 2.5f) * radius;
+  const int side = int(std::sqrt(float(count))) + 1;
+  for (int i = 0; i < count; ++i) {
+    Ray r;
+    if (coherent) {
+      const float x = (float(i % side) + 0.5f) / float(side) * 2.0f - 1.0f;
+      const float y = (float(i / side) + 0.5f) / float(side) * 2.0f - 1.0f;
+      r.origin = eye;
+      r.direction = glm::normalize(c - eye + radius * vec3(x, y, 0.3f * x * y));
+    } else {
+      auto point = [&] {
+        return box.min - 0.2f * box.extent() + 1.4f * box.extent() * vec3(u01(rng), u01(rng), u01(rng));
+      };
+      r.origin = point();
+      r.direction = point() - r.origin;
+      if (i % 16 == 0) r.direction = vec3(0.0f, 0.0f, u01(rng) < 0.5f ? -1.0f : 1.0f);
+      if (i % 16 == 1) r.direction = vec3(u01(rng) < 0.5f ? -1.0f : 1.0f, 0.0f, 0.0f);
+      if (i % 16 == 2) r.direction = vec3(0.0f, u01(rng) - 0.5f, 1.0f);
+      if (i % 8 == 3) r.tfar = u01(rng) * radius;
+      if (i % 8 == 4) r.tnear = u01(rng) * 0.5f * radius;
+    }
+    rays.push_back(r);
+  }
+  return rays;
+}
+
+bool same_hit(const TriangleHit& a, const TriangleHit& b) {
+  if (a.hit() != b.hit()) return false;
+  if (!a.hit()) return true;
+  if (a.prim == b.prim) return a.t == b.t;
+  return std::abs(a.t - b.t) <= 1e-5f * std::max(1.0f, std::abs(b.t));
+}
+
+template <TriangleTest Test>
+int mismatches_against_brute_force(const Bvh& bvh, const TriangleView& view, const std::vector<Ray>& rays) {
+  int bad = 0;
+  for (const Ray& ray : rays) {
+    const TriangleHit ref = brute_force_closest<Test>(view, PreparedRay::make(ray));
+    PreparedRay r = PreparedRay::make(ray);
+    TriangleHit hit;
+    const bool found = bvh.intersect(r, hit, Test);
+    bool ok = found == ref.hit() && same_hit(hit, ref) && (!found || r.tfar == hit.t);
+    ok = ok && bvh.occluded(PreparedRay::make(ray), Test) == ref.hit();
+    if (!ok && ++bad <= 3)
+      ADD_FAILURE() << "ray o=(" << ray.origin.x << "," << ray.origin.y << "," << ray.origin.z
+                    << ") d=(" << ray.direction.x << "," << ray.direction.y << "," << ray.direction.z
+                    << ") bvh prim " << hit.prim << " t " << hit.t << ", brute force prim " << ref.prim
+                    << " t " << ref.t;
+  }
+  return bad;
+}
+
+int mismatches(const Bvh& bvh, const TriangleView& view, const std::vector<Ray>& rays) {
+  return mismatches_against_brute_force<TriangleTest::watertight>(bvh, view, rays) +
+         mismatches_against_brute_force<TriangleTest::moller_trumbore>(bvh, view, rays);
+}
+
+Aabb mesh_bounds(const Mesh& m) {
+  Aabb b;
+  for (const vec3& p : m.positions)
+    if (is_finite(p)) b.grow(p);
+  return b;
+}
+
+bool contains(const gpu::BvhNode& outer, const gpu::BvhNode& inner) {
+  if (inner.bounds_min.x > inner.bounds_max.x) return true; // empty
+  return glm::all(glm::lessThanEqual(outer.bounds_min, inner.bounds_min)) &&
+         glm::all(glm::greaterThanEqual(outer.bounds_max, inner.bounds_max));
+}
+
+/// Walks the reachable tree: each primitive exactly once, children inside parents, leaves within
+/// max_leaf, each box the exact union of its children (or its triangles' boxes when `tris`).
+void check_structure(const Bvh& bvh, std::uint32_t prim_count, std::uint32_t max_leaf,
+                     const TriangleView* tris = nullptr) {
+  const auto nodes = bvh.nodes();
+  const auto indices = bvh.indices();
+  ASSERT_EQ(indices.size(), prim_count);
+  std::vector<int> seen(prim_count, 0);
+  std::vector<std::uint32_t> stack{0};
+  std::uint32_t reached = 0, leaves = 0;
+  while (!stack.empty()) {
+    const std::uint32_t i = stack.back();
+    stack.pop_back();
+    ASSERT_LT(i, nodes.size());
+    ++reached;
+    const gpu::BvhNode& n = nodes[i];
+    if (n.count == 0) {
+      for (std::uint32_t k = 0; k < 2; ++k) {
+        ASSERT_GT(n.index + k, i) << "children follow their parent";
+        EXPECT_TRUE(contains(n, nodes[n.index + k]));
+        stack.push_back(n.index + k);
+      }
+      const gpu::BvhNode& a = nodes[n.index];
+      const gpu::BvhNode& b = nodes[n.index + 1];
+      EXPECT_EQ(n.bounds_min, glm::min(a.bounds_min, b.bounds_min));
+      EXPECT_EQ(n.bounds_max, glm::max(a.bounds_max, b.bounds_max));
+      continue;
+    }
+    const std::uint32_t count = n.count & ~gpu::kBvhUnbuilt;
+    if (!(n.count & gpu::kBvhUnbuilt)) {
+      EXPECT_LE(count, max_leaf);
+      ++leaves;
+    }
+    Aabb box;
+    for (std::uint32_t e = n.index; e < n.index + count; ++e) {
+      ASSERT_LT(indices[e], prim_count);
+      ++seen[indices[e]];
+      if (tris) {
+        bool finite = true;
+        for (int k = 0; k < 3; ++k) finite = finite && is_finite(tris->vertex(indices[e], k));
+        if (finite) box.grow(tris->bounds(indices[e]));
+      }
+    }
+    if (tris) {
+      EXPECT_EQ(n.bounds_min, box.min);
+      EXPECT_EQ(n.bounds_max, box.max);
+    }
+  }
+  for (std::uint32_t p = 0; p < prim_count; ++p) ASSERT_EQ(seen[p], 1) << "primitive " << p;
+  EXPECT_EQ(bvh.stats().nodes, reached);
+  EXPECT_EQ(bvh.stats().leaves, leaves);
+}
+
+/// The leaves of a tree as (bounds, sorted primitives), in traversal order: two trees with the same
+/// topology and boxes give the same list whatever their layout.
+struct LeafSig {
+  vec3 lo, hi;
+  std::vector<std::uint32_t> prims;
+  bool operator==(const LeafSig&) const = default;
+};
+std::vector<LeafSig> leaf_signature(const Bvh& bvh) {
+  std::vector<LeafSig> out;
+  const auto nodes = bvh.nodes();
+  if (nodes.empty()) return out;
+  std::vector<std::uint32_t> stack{0};
+  while (!stack.empty()) {
+    const gpu::BvhNode& n = nodes[stack.back()];
+    stack.pop_back();
+    if (n.count == 0) {
+      stack.push_back(n.index + 1);
+      stack.push_back(n.index);
+      continue;
+    }
+    LeafSig s{n.bounds_min, n.bounds_max, {}};
+    for (std::uint32_t e = n.index; e < n.index + (n.count & ~gpu::kBvhUnbuilt); ++e)
+      s.prims.push_back(bvh.indices()[e]);
+    std::sort(s.prims.begin(), s.prims.end());
+    out.push_back(std::move(s));
+  }
+  return out;
+}
+
+struct NamedMesh {
+  const char* name;
+  Mesh mesh;
+};
+
+std::vector<NamedMesh> test_meshes() {
+  return {{"sphere", uv_sphere(32, 48, 1.0f, vec3(0.2f, -0.1f, 0.3f))},
+          {"soup", random_soup(3000, 7, 2.0f, 0.25f)},
+          {"grid", flat_grid(40, 30)},
+          {"degenerate", degenerate_mix(11)}};
+}
+
+} // namespace
+
+TEST(Bvh, EmptyInputGivesAnEmptyTree) {
+  Bvh bvh;
+  EXPECT_TRUE(bvh.empty());
+  bvh.build(TriangleView{});
+  EXPECT_TRUE(bvh.empty());
+  EXPECT_TRUE(bvh.nodes().empty());
+  PreparedRay r = PreparedRay::make(vec3(0), vec3(0, 0, 1), 0.0f, kInf);
+  TriangleHit hit;
+  EXPECT_FALSE(bvh.intersect(r, hit));
+  EXPECT_FALSE(bvh.occluded(r));
+  int calls = 0;
+  bvh.traverse(r, [&](std::uint32_t, PreparedRay&) { return ++calls, false; });
+  EXPECT_EQ(calls, 0);
+  bvh.build(std::span<const Aabb>{}, {.lazy = true});
+  EXPECT_TRUE(bvh.empty());
+  bvh.expand_all();
+  RayPacket<4> p{};
+  PacketHits<4> h;
+  h.clear();
+  const bool active[4] = {true, true, true, true};
+  bvh.intersect4(p, h, active);
+  EXPECT_EQ(h.prim[0], 0xFFFFFFFFu);
+}
+
+TEST(Bvh, ClosestAndAnyHitEqualBruteForce) {
+  int total_rays = 0;
+  for (const NamedMesh& nm : test_meshes()) {
+    SCOPED_TRACE(nm.name);
+    const TriangleView view = nm.mesh.view();
+    Bvh bvh;
+    bvh.build(view);
+    check_structure(bvh, view.count, 4, &view);
+    const Aabb box = mesh_bounds(nm.mesh);
+    for (bool coherent : {true, false}) {
+      const auto rays = make_rays(box, 13000, 100 + (coherent ? 1u : 0u), coherent);
+      EXPECT_EQ(mismatches(bvh, view, rays), 0) << (coherent ? "coherent" : "incoherent");
+      total_rays += int(rays.size());
+    }
+  }
+  EXPECT_GE(total_rays, 100000);
+}
+
+TEST(Bvh, OptionsAreHonoured) {
+  const Mesh m = random_soup(2000, 3, 2.0f, 0.2f);
+  const TriangleView view = m.view();
+  const auto rays = make_rays(mesh_bounds(m), 3000, 5, false);
+  for (std::uint32_t max_leaf : {1u, 2u, 8u})
+    for (std::uint32_t bins : {2u, 8u, 32u, 1000u}) {
+      SCOPED_TRACE(testing::Message() << "max_leaf " << max_leaf << " bins " << bins);
+      Bvh bvh;
+      bvh.build(view, {.bins = bins, .max_leaf = max_leaf, .intersection_cost = 0.5f});
+      check_structure(bvh, view.count, max_leaf, &view);
+      EXPECT_EQ(mismatches(bvh, view, rays), 0);
+      EXPECT_GT(bvh.stats().sah_cost, 0.0f);
+      EXPECT_FLOAT_EQ(bvh.stats().sah_cost, bvh.sah_cost());
+    }
+}
+
+TEST(Bvh, BuildIsDeterministicWhateverTheThreadCount) {
+  const Mesh m = random_soup(30000, 21, 4.0f, 0.1f); // large enough for parallel subtrees
+  Bvh many, one;
+  many.build(m.view());
+  {
+    tbb::global_control single(tbb::global_control::max_allowed_parallelism, 1);
+    one.build(m.view());
+  }
+  ASSERT_EQ(many.nodes().size(), one.nodes().size());
+  EXPECT_EQ(0, std::memcmp(many.nodes().data(), one.nodes().data(), many.nodes().size_bytes()));
+  EXPECT_TRUE(std::equal(many.indices().begin(), many.indices().end(), one.indices().begin()));
+  check_structure(many, m.view().count, 4, nullptr);
+}
+
+TEST(Bvh, InvalidRaysMissWithoutTraversal) {
+  const Mesh m = uv_sphere(8, 12, 1.0f, vec3(0));
+  Bvh bvh;
+  bvh.build(m.view());
+  const Ray bad[] = {{vec3(kNaN, 0, 3), 0.0f, vec3(0, 0, -1), kInf},
+                     {vec3(0, 0, 3), 0.0f, vec3(0, 0, 0), kInf},
+                     {vec3(0, 0, 3), 0.0f, vec3(0, kInf, -1), kInf},
+                     {vec3(0, 0, 3), 2.0f, vec3(0, 0, -1), 1.0f},
+                     {vec3(0, 0, 3), -1.0f, vec3(0, 0, -1), kInf}};
+  for (const Ray& ray : bad) {
+    PreparedRay r = PreparedRay::make(ray);
+    TriangleHit hit;
+    EXPECT_FALSE(bvh.intersect(r, hit));
+    EXPECT_FALSE(bvh.occluded(r));
+    int calls = 0;
+    bvh.traverse(r, [&](std::uint32_t, PreparedRay&) { return ++calls, false; });
+    EXPECT_EQ(calls, 0);
+  }
+}
+
+TEST(Bvh, NanVerticesAndBoxesDoNotBreakTheBuild) {
+  Mesh m = random_soup(2000, 9, 2.0f, 0.3f);
+  for (std::size_t i = 0; i < m.positions.size(); i += 37) m.positions[i].y = kNaN;
+  for (std::size_t i = 5; i < m.positions.size(); i += 101) m.positions[i].x = kInf;
+  const TriangleView view = m.view();
+  for (bool lazy : {false, true}) {
+    Bvh bvh;
+    bvh.build(view, {.lazy = lazy});
+    bvh.expand_all();
+    check_structure(bvh, view.count, 4, &view);
+    EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 3000, 17, false)), 0);
+  }
+  // All NaN: a tree that nothing enters.
+  std::vector<Aabb> boxes(50, Aabb{vec3(kNaN), vec3(kNaN)});
+  boxes[7] = Aabb{vec3(0), vec3(1)};
+  Bvh bvh;
+  bvh.build(boxes);
+  EXPECT_EQ(bvh.indices().size(), boxes.size());
+  PreparedRay r = PreparedRay::make(vec3(0.5f, 0.5f, -1), vec3(0, 0, 1), 0.0f, kInf);
+  std::vector<std::uint32_t> visited;
+  bvh.traverse(r, [&](std::uint32_t prim, PreparedRay&) { return visited.push_back(prim), false; });
+  EXPECT_TRUE(std::find(visited.begin(), visited.end(), 7u) != visited.end());
+}
+
+TEST(Bvh, PacketsEqualSingleRaysPerLane) {
+  const Mesh m = random_soup(4000, 31, 2.0f, 0.3f);
+  const TriangleView view = m.view();
+  Bvh bvh;
+  bvh.build(view);
+  const auto coherent = make_rays(mesh_bounds(m), 4096, 41, true);
+  const auto incoherent = make_rays(mesh_bounds(m), 4096, 43, false);
+  std::mt19937 rng(47);
+  for (TriangleTest test : {TriangleTest::watertight, TriangleTest::moller_trumbore})
+    for (const auto* rays : {&coherent, &incoherent}) {
+      int bad = 0;
+      auto run = [&]<int N>(std::integral_constant<int, N>) {
+        for (std::size_t base = 0; base + N <= rays->size(); base += N) {
+          RayPacket<N> p;
+          PacketHits<N> h;
+          h.clear();
+          bool active[N];
+          for (int i = 0; i < N; ++i) {
+            Ray ray = (*rays)[base + std::size_t(i)];
+            if (rng() % 9 == 0) ray.direction = -ray.direction; // mixed signs in a packet
+            if (rng() % 13 == 0) ray.direction = vec3(0); // invalid lane
+            p.ox[i] = ray.origin.x, p.oy[i] = ray.origin.y, p.oz[i] = ray.origin.z;
+            p.dx[i] = ray.direction.x, p.dy[i] = ray.direction.y, p.dz[i] = ray.direction.z;
+            p.tnear[i] = ray.tnear, p.tfar[i] = ray.tfar;
+            active[i] = rng() % 7 != 0;
+          }
+          const RayPacket<N> before = p;
+          if constexpr (N == 4) bvh.intersect4(p, h, active, test);
+          else bvh.intersect8(p, h, active, test);
+          for (int i = 0; i < N; ++i) {
+            PreparedRay r = PreparedRay::make(vec3(before.ox[i], before.oy[i], before.oz[i]),
+                                              vec3(before.dx[i], before.dy[i], before.dz[i]),
+                                              before.tnear[i], before.tfar[i]);
+            TriangleHit single;
+            if (active[i]) bvh.intersect(r, single, test);
+            const TriangleHit packet{h.t[i], h.u[i], h.v[i], h.prim[i]};
+            const bool ok = same_hit(packet, single) && p.tfar[i] == r.tfar;
+            if (!ok && ++bad <= 3)
+              ADD_FAILURE() << "N=" << N << " lane " << i << " packet prim " << packet.prim << " t "
+                            << packet.t << ", single prim " << single.prim << " t " << single.t;
+          }
+        }
+      };
+      run(std::integral_constant<int, 4>{});
+      run(std::integral_constant<int, 8>{});
+      EXPECT_EQ(bad, 0);
+    }
+}
+
+TEST(Bvh, RefitAfterDeformationStaysExact) {
+  Mesh m = uv_sphere(40, 60, 1.0f, vec3(0));
+  const std::vector<vec3> rest = m.positions;
+  Bvh bvh;
+  bvh.build(m.view());
+  // A wave.
+  for (std::size_t i = 0; i < m.positions.size(); ++i) {
+    const vec3 p = rest[i];
+    m.positions[i] = p + vec3(0.0f, 0.3f * std::sin(4.0f * p.x + 2.0f * p.z), 0.0f);
+  }
+  bvh.refit(m.view());
+  {
+    const TriangleView view = m.view();
+    check_structure(bvh, view.count, 4, &view);
+    EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 6000, 51, false)), 0);
+    EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 6000, 52, true)), 0);
+  }
+  // A large random displacement, into a new vertex array.
+  std::mt19937 rng(53);
+  std::uniform_real_distribution<float> d(-1.5f, 1.5f);
+  Mesh moved = m;
+  for (vec3& p : moved.positions) p += vec3(d(rng), d(rng), d(rng));
+  bvh.refit(moved.view());
+  const TriangleView view = moved.view();
+  check_structure(bvh, view.count, 4, &view);
+  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(moved), 6000, 54, false)), 0);
+  EXPECT_GT(bvh.sah_cost(), bvh.stats().sah_cost); // it degraded
+}
+
+TEST(Bvh, RestructureRebuildsOnlyDegradedSubtrees) {
+  Mesh m = flat_grid(80, 80);
+  Bvh bvh;
+  bvh.build(m.view());
+  const float built = bvh.sah_cost();
+
+  // No degradation (the same mesh, then a rigid translation): nothing rebuilt.
+  bvh.refit(m.view());
+  RestructureStats rs = bvh.restructure(m.view(), 1.3f);
+  EXPECT_EQ(rs.subtrees_rebuilt, 0u);
+  EXPECT_GT(rs.nodes_visited, 0u);
+  for (vec3& p : m.positions) p += vec3(3.0f, -1.0f, 0.5f);
+  bvh.refit(m.view());
+  rs = bvh.restructure(m.view(), 1.3f);
+  EXPECT_EQ(rs.subtrees_rebuilt, 0u);
+  EXPECT_NEAR(bvh.sah_cost(), built, 1e-3f * built);
+
+  // A local, heavy deformation: scramble the vertices in one corner of the grid.
+  std::mt19937 rng(61);
+  std::uniform_real_distribution<float> d(-0.3f, 0.3f);
+  std::vector<bool> deformed_vertex(m.positions.size(), false);
+  for (std::size_t i = 0; i < m.positions.size(); ++i) {
+    const vec3 p = m.positions[i] - vec3(3.0f, -1.0f, 0.5f);
+    if (p.x < -1.4f && p.y < -1.4f) {
+      m.positions[i] += vec3(d(rng), d(rng), 0.0f); // in the plane: the root box stays
+      deformed_vertex[i] = true;
+    }
+  }
+  std::vector<bool> deformed(m.triangles.size(), false);
+  for (std::size_t t = 0; t < m.triangles.size(); ++t)
+    for (int k = 0; k < 3; ++k) deformed[t] = deformed[t] || deformed_vertex[m.triangles[t][k]];
+  bvh.refit(m.view());
+  const std::vector<gpu::BvhNode> old_nodes(bvh.nodes().begin(), bvh.nodes().end());
+  const std::vector<std::uint32_t> old_indices(bvh.indices().begin(), bvh.indices().end());
+  rs = bvh.restructure(m.view(), 1.3f);
+  EXPECT_GE(rs.subtrees_rebuilt, 1u);
+  EXPECT_LT(rs.sah_after, rs.sah_before);
+  EXPECT_FLOAT_EQ(rs.sah_after, bvh.sah_cost());
+  const TriangleView view = m.view();
+  check_structure(bvh, view.count, 4, &view);
+  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 8000, 62, false)), 0);
+  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 8000, 63, true)), 0);
+
+  // Old and new trees side by side: where they differ is a rebuilt subtree, and every rebuilt
+  // subtree holds deformed triangles; the root was not rebuilt.
+  const auto nodes = bvh.nodes();
+  auto prims_of = [](std::span<const gpu::BvhNode> ns, std::span<const std::uint32_t> idx, std::uint32_t root) {
+    std::vector<std::uint32_t> out, stack{root};
+    while (!stack.empty()) {
+      const gpu::BvhNode& n = ns[stack.back()];
+      stack.pop_back();
+      if (n.count == 0) stack.insert(stack.end(), {n.index, n.index + 1});
+      else
+        for (std::uint32_t e = n.index; e < n.index + n.count; ++e) out.push_back(idx[e]);
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+  };
+  std::uint32_t differing = 0;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> stack{{0u, 0u}};
+  bool root_differs = false;
+  while (!stack.empty()) {
+    const auto [o, n] = stack.back();
+    stack.pop_back();
+    const gpu::BvhNode& a = old_nodes[o];
+    const gpu::BvhNode& b = nodes[n];
+    ASSERT_EQ(a.bounds_min, b.bounds_min);
+    ASSERT_EQ(a.bounds_max, b.bounds_max);
+    bool same = (a.count == 0) == (b.count == 0);
+    if (same && a.count == 0) {
+      for (std::uint32_t k = 0; k < 2; ++k)
+        same = same && old_nodes[a.index + k].bounds_min == nodes[b.index + k].bounds_min &&
+               old_nodes[a.index + k].bounds_max == nodes[b.index + k].bounds_max;
+    } else if (same) {
+      same = prims_of(old_nodes, old_indices, o) == prims_of(nodes, bvh.indices(), n);
+    }
+    if (!same) {
+      ++differing;
+      root_differs = root_differs || o == 0;
+      const auto prims = prims_of(nodes, bvh.indices(), n);
+      EXPECT_TRUE(std::any_of(prims.begin(), prims.end(), [&](std::uint32_t p) { return deformed[p]; }));
+      continue;
+    }
+    if (a.count == 0) {
+      stack.push_back({a.index, b.index});
+      stack.push_back({a.index + 1, b.index + 1});
+    }
+  }
+  EXPECT_GE(differing, 1u);
+  EXPECT_LE(differing, rs.subtrees_rebuilt);
+  EXPECT_FALSE(root_differs);
+
+  // A second restructure right after finds nothing to do.
+  bvh.refit(m.view());
+  EXPECT_EQ(bvh.restructure(m.view(), 1.3f).subtrees_rebuilt, 0u);
+}
+
+TEST(Bvh, RestructureAfterGlobalScramble) {
+  Mesh m = uv_sphere(30, 40, 1.0f, vec3(0));
+  Bvh bvh;
+  bvh.build(m.view());
+  std::mt19937 rng(71);
+  std::shuffle(m.positions.begin(), m.positions.end(), rng); // every triangle is now a sliver across
+  bvh.refit(m.view());
+  const RestructureStats rs = bvh.restructure(m.view(), 1.3f);
+  EXPECT_GE(rs.subtrees_rebuilt, 1u);
+  EXPECT_LT(rs.sah_after, rs.sah_before);
+  const TriangleView view = m.view();
+  check_structure(bvh, view.count, 4, &view);
+  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 6000, 72, false)), 0);
+  // Refit still works on the restructured layout.
+  for (vec3& p : m.positions) p *= 1.5f;
+  bvh.refit(m.view());
+  check_structure(bvh, view.count, 4, &view);
+  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 3000, 73, false)), 0);
+}
+
+TEST(Bvh, LazyTreeEqualsEagerTree) {
+  const Mesh m = random_soup(20000, 81, 3.0f, 0.15f);
+  const TriangleView view = m.view();
+  Bvh eager, lazy;
+  eager.build(view);
+  lazy.build(view, {.lazy = true, .lazy_depth = 3});
+  EXPECT_LT(lazy.stats().nodes, eager.stats().nodes);
+  bool any_unbuilt = false;
+  for (const gpu::BvhNode& n : lazy.nodes()) any_unbuilt = any_unbuilt || (n.count & gpu::kBvhUnbuilt);
+  EXPECT_TRUE(any_unbuilt);
+  const auto rays = make_rays(mesh_bounds(m), 2000, 82, true); // a narrow view: not every subtree
+  for (const Ray& ray : rays) {
+    PreparedRay a = PreparedRay::make(ray), b = a;
+    TriangleHit ha, hb;
+    eager.intersect(a, ha);
+    lazy.intersect(b, hb);
+    ASSERT_TRUE(same_hit(ha, hb));
+  }
+  const std::uint32_t expansions = lazy.stats().lazy_expansions;
+  EXPECT_GT(expansions, 0u);
+  lazy.expand_all();
+  EXPECT_GT(lazy.stats().lazy_expansions, expansions);
+  for (const gpu::BvhNode& n : lazy.nodes()) EXPECT_EQ(n.count & gpu::kBvhUnbuilt, 0u);
+  check_structure(lazy, view.count, 4, &view);
+  EXPECT_EQ(lazy.stats().nodes, eager.stats().nodes);
+  EXPECT_EQ(leaf_signature(lazy), leaf_signature(eager)); // the same tree, laid out differently
+  EXPECT_FLOAT_EQ(lazy.sah_cost(), eager.sah_cost());
+}
+
+TEST(Bvh, LazyExpansionFromSeveralThreads) {
+  const Mesh m = random_soup(30000, 91, 3.0f, 0.15f);
+  const TriangleView view = m.view();
+  Bvh eager;
+  eager.build(view);
+  const auto rays = make_rays(mesh_bounds(m), 24000, 92, false);
+  std::vector<TriangleHit> expected(rays.size());
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    PreparedRay r = PreparedRay::make(rays[i]);
+    eager.intersect(r, expected[i]);
+  }
+  for (int round = 0; round < 3; ++round) {
+    Bvh lazy;
+    lazy.build(view, {.lazy = true, .lazy_depth = 2});
+    constexpr int kThreads = 4;
+    std::vector<int> bad(kThreads, 0);
+    std::vector<std::thread> threads;
+    for (int t = 0; t < kThreads; ++t)
+      threads.emplace_back([&, t] {
+        // Every thread walks all rays from a different start: the same subtrees at the same time.
+        for (std::size_t k = 0; k < rays.size(); ++k) {
+          const std::size_t i = (k + std::size_t(t) * rays.size() / kThreads) % rays.size();
+          PreparedRay r = PreparedRay::make(rays[i]);
+          TriangleHit hit;
+          lazy.intersect(r, hit);
+          if (!same_hit(hit, expected[i])) ++bad[std::size_t(t)];
+          if (k % 7 == 0) {
+            RayPacket<8> p;
+            PacketHits<8> h;
+            h.clear();
+            bool active[8];
+            for (int j = 0; j < 8; ++j) {
+              const Ray& q = rays[(i + std::size_t(j)) % rays.size()];
+              p.ox[j] = q.origin.x, p.oy[j] = q.origin.y, p.oz[j] = q.origin.z;
+              p.dx[j] = q.direction.x, p.dy[j] = q.direction.y, p.dz[j] = q.direction.z;
+              p.tnear[j] = q.tnear, p.tfar[j] = q.tfar;
+              active[j] = true;
+            }
+            lazy.intersect8(p, h, active);
+            for (int j = 0; j < 8; ++j)
+              if (!same_hit({h.t[j], h.u[j], h.v[j], h.prim[j]}, expected[(i + std::size_t(j)) % rays.size()]))
+                ++bad[std::size_t(t)];
+          }
+        }
+      });
+    for (auto& th : threads) th.join();
+    for (int t = 0; t < kThreads; ++t) EXPECT_EQ(bad[std::size_t(t)], 0) << "thread " << t;
+    EXPECT_GT(lazy.stats().lazy_expansions, 0u);
+    lazy.expand_all();
+    check_structure(lazy, view.count, 4, &view);
+    EXPECT_EQ(leaf_signature(lazy), leaf_signature(eager));
+  }
+}
+
+TEST(Bvh, LazyTreeRefitsAndRestructures) {
+  Mesh m = uv_sphere(40, 50, 1.0f, vec3(0));
+  Bvh bvh;
+  bvh.build(m.view(), {.lazy = true, .lazy_depth = 4});
+  std::mt19937 rng(95);
+  std::uniform_real_distribution<float> d(-0.8f, 0.8f);
+  for (vec3& p : m.positions) p += vec3(d(rng), d(rng), d(rng));
+  bvh.refit(m.view());
+  const TriangleView view = m.view();
+  check_structure(bvh, view.count, 4, &view);
+  bvh.restructure(m.view(), 1.2f);
+  check_structure(bvh, view.count, 4, &view);
+  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 5000, 96, false)), 0);
+  bvh.expand_all();
+  check_structure(bvh, view.count, 4, &view);
+}
+
+TEST(Bvh, BoxTraversalVisitsExactlyTheOverlappedBoxes) {
+  std::mt19937 rng(101);
+  std::uniform_real_distribution<float> pos(-5.0f, 5.0f), size(0.05f, 0.8f);
+  std::vector<Aabb> boxes(3000);
+  for (Aabb& b : boxes) {
+    const vec3 c(pos(rng), pos(rng), pos(rng));
+    const vec3 h(size(rng), size(rng), size(rng));
+    b = {c - h, c + h};
+  }
+  Aabb all;
+  for (const Aabb& b : boxes) all.grow(b);
+  for (bool lazy : {false, true}) {
+    Bvh bvh;
+    bvh.build(boxes, {.max_leaf = 1, .lazy = lazy, .lazy_depth = 3});
+    check_structure(bvh, std::uint32_t(boxes.size()), 1);
+    int bad = 0;
+    for (const Ray& ray : make_rays(all, 3000, 102, false)) {
+      PreparedRay r = PreparedRay::make(ray);
+      std::vector<std::uint32_t> visited;
+      bvh.traverse(r, [&](std::uint32_t prim, PreparedRay&) { return visited.push_back(prim), false; });
+      std::vector<std::uint32_t> expected;
+      if (r.valid())
+        for (std::uint32_t i = 0; i < boxes.size(); ++i) {
+          float t0, t1;
+          if (intersect_box(r, boxes[i].min, boxes[i].max, t0, t1)) expected.push_back(i);
+        }
+      std::sort(visited.begin(), visited.end());
+      if (visited != expected) ++bad;
+    }
+    EXPECT_EQ(bad, 0) << (lazy ? "lazy" : "eager");
+  }
+  // With bigger leaves every overlapped box is still visited, each once.
+  Bvh bvh;
+  bvh.build(boxes, {.max_leaf = 4});
+  for (const Ray& ray : make_rays(all, 500, 103, false)) {
+    PreparedRay r = PreparedRay::make(ray);
+    std::vector<std::uint32_t> visited;
+    bvh.traverse(r, [&](std::uint32_t prim, PreparedRay&) { return visited.push_back(prim), false; });
+    std::sort(visited.begin(), visited.end());
+    EXPECT_TRUE(std::adjacent_find(visited.begin(), visited.end()) == visited.end());
+    for (std::uint32_t i = 0; i < boxes.size(); ++i) {
+      float t0, t1;
+      if (intersect_box(r, boxes[i].min, boxes[i].max, t0, t1)) {
+        EXPECT_TRUE(std::binary_search(visited.begin(), visited.end(), i));
+      }
+    }
+  }
+}
+
+TEST(Bvh, BoxTraversalIsFrontToBackAndStops) {
+  std::vector<Aabb> boxes;
+  for (int i = 0; i < 200; ++i) boxes.push_back({vec3(float(i), -0.4f, -0.4f), vec3(float(i) + 0.5f, 0.4f, 0.4f)});
+  std::mt19937 rng(111);
+  std::shuffle(boxes.begin(), boxes.end(), rng);
+  Bvh bvh;
+  bvh.build(boxes, {.max_leaf = 1});
+  for (float dir : {1.0f, -1.0f}) {
+    PreparedRay r = PreparedRay::make(vec3(dir > 0 ? -1.0f : 201.0f, 0.01f, 0.02f), vec3(dir, 0.001f, 0), 0.0f, kInf);
+    std::vector<float> xs;
+    bvh.traverse(r, [&](std::uint32_t prim, PreparedRay&) { return xs.push_back(boxes[prim].min.x), false; });
+    ASSERT_EQ(xs.size(), boxes.size());
+    for (std::size_t i = 1; i < xs.size(); ++i) EXPECT_EQ(xs[i] > xs[i - 1], dir > 0);
+    // Stop at the third box; shrink tfar past the tenth: later boxes are not visited.
+    int calls = 0;
+    bvh.traverse(r, [&](std::uint32_t, PreparedRay&) { return ++calls == 3; });
+    EXPECT_EQ(calls, 3);
+    PreparedRay s = r;
+    calls = 0;
+    bvh.traverse(s, [&](std::uint32_t prim, PreparedRay& q) {
+      ++calls;
+      if (calls == 10) q.tfar = std::abs(boxes[prim].min.x - q.org.x) + 0.1f;
+      return false;
+    });
+    EXPECT_EQ(calls, 10);
+  }
+}
+
+TEST(Bvh, MovedTreeKeepsWorking) {
+  const Mesh m = uv_sphere(16, 24, 1.0f, vec3(0));
+  Bvh a;
+  a.build(m.view(), {.lazy = true, .lazy_depth = 2});
+  Bvh b = std::move(a);
+  Bvh c;
+  c = std::move(b);
+  const TriangleView view = m.view();
+  EXPECT_EQ(mismatches(c, view, make_rays(mesh_bounds(m), 2000, 121, false)), 0);
+  a.build(m.view()); // a moved-from tree can be built again
+  EXPECT_EQ(mismatches(a, view, make_rays(mesh_bounds(m), 500, 122, false)), 0);
+}
