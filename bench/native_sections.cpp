@@ -66,7 +66,7 @@ double fitted_exponent(const std::vector<double>& x, const std::vector<double>& 
 
 template <typename F>
 double in_arena(std::uint32_t threads, F&& f) {
-  tbb::task_arena arena(int(threads));
+  tbb::task_arena arena{static_cast<int>(threads)};
   double ms = 0.0;
   arena.execute([&] { ms = time_ms(f); });
   return ms;
@@ -204,7 +204,7 @@ SecondaryRays make_secondary(const Tracer& reference, const SceneLayer& layer, c
 
 double batch_ms(std::uint32_t threads, const Tracer& tracer, const std::vector<Ray>& rays,
                 bool shadow) {
-  tbb::task_arena arena(int(threads));
+  tbb::task_arena arena{static_cast<int>(threads)};
   double ms = 0.0;
   arena.execute([&] {
     ms = time_ms([&] {

@@ -4,6 +4,7 @@
 
 #include "specula/core/math.h"
 
+#include <cmath>
 #include <cstdint>
 #include <limits>
 
@@ -15,6 +16,20 @@ struct Ray {
   vec3 direction{0.0f, 0.0f, -1.0f};
   float tfar = std::numeric_limits<float>::infinity();
 };
+
+/// Whether a ray can be traced: finite origin and direction, a non-zero direction, and a
+/// non-empty interval 0 ≤ tnear ≤ tfar with tnear finite (tfar may be +inf). Every backend answers
+/// any other ray with a miss (and "not occluded") without tracing it.
+[[nodiscard]] inline bool traceable(const vec3& origin, const vec3& direction, float tnear,
+                                    float tfar) {
+  return is_finite(origin) && is_finite(direction) &&
+         !(direction.x == 0.0f && direction.y == 0.0f && direction.z == 0.0f) &&
+         !std::isnan(tfar) && tnear >= 0.0f && tnear <= tfar &&
+         tnear < std::numeric_limits<float>::infinity();
+}
+[[nodiscard]] inline bool traceable(const Ray& r) {
+  return traceable(r.origin, r.direction, r.tnear, r.tfar);
+}
 
 /// Hit::instance of a miss.
 inline constexpr std::uint32_t kNoInstance = 0xFFFFFFFFu;

@@ -17,6 +17,8 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <random>
 #include <string>
 #include <vector>
@@ -54,18 +56,55 @@ std::vector<Ray> make_rays(const Aabb& bounds, const vec3& eye, std::uint32_t se
   return rays;
 }
 
+/// Every triangle of every live instance tested (the arbiter when the two tracers disagree).
+Hit brute_force(const SceneTables& t, const Ray& ray) {
+  Hit best;
+  for (std::uint32_t slot = 0; slot < t.instances.size(); ++slot) {
+    if (!t.live(slot)) continue;
+    const gpu::GpuInstance& inst = t.instances[slot];
+    const gpu::GpuMesh& m = t.meshes[inst.mesh];
+    const mat4 object_from_world = glm::inverse(inst.world_from_object);
+    const accel::TriangleView view{t.positions.data() + m.first_vertex,
+                                   t.triangles.data() + m.first_triangle, m.triangle_count};
+    const accel::PreparedRay r = accel::PreparedRay::make(
+        vec3(object_from_world * vec4(ray.origin, 1.0f)), mat3(object_from_world) * ray.direction,
+        ray.tnear, std::min(ray.tfar, best.t));
+    const accel::TriangleHit h = accel::brute_force_closest(view, r);
+    if (h.hit() && h.t < best.t) {
+      best.t = h.t;
+      best.instance = slot;
+      best.primitive = h.prim;
+      best.uv = vec2(h.u, h.v);
+    }
+  }
+  return best;
+}
+
 struct Comparison {
-  std::size_t rays = 0, hits = 0, ties = 0, mismatches = 0, occlusion_mismatches = 0;
+  std::size_t rays = 0, hits = 0, ties = 0, grazes = 0, mismatches = 0, occlusion_mismatches = 0;
   std::string first_mismatch;
 };
 
-/// A ray that grazes a triangle's edge: either tracer may rightly call it a hit or a miss.
-bool grazes_edge(const Hit& h) {
-  constexpr float e = 1e-5f;
-  return h.uv.x < e || h.uv.y < e || h.uv.x + h.uv.y > 1.0f - e;
+/// |cos θ| between a ray and the world-space normal of the triangle it hit.
+float cos_to_normal(const SceneTables& tables, const Hit& h, const vec3& direction) {
+  const gpu::GpuInstance& inst = tables.instances[h.instance];
+  const vec3 n = mat3(vec3(inst.normal_from_object[0]), vec3(inst.normal_from_object[1]),
+                      vec3(inst.normal_from_object[2])) * h.object_normal;
+  return std::abs(glm::dot(glm::normalize(n), direction));
 }
 
-Comparison compare(const Tracer& reference, const Tracer& tested, const std::vector<Ray>& rays) {
+/// A ray that grazes a triangle — within 1e-4 of an edge in barycentrics (Embree rounds an
+/// instance's transform differently: 6e-5 seen at t = 16 through a scaled, rotated instance), or
+/// within 1e-2 of its plane in angle (a silhouette): either tracer may rightly call it a hit or a
+/// miss.
+bool grazes(const SceneTables& tables, const Hit& h, const vec3& direction) {
+  constexpr float e = 1e-4f;
+  return h.uv.x < e || h.uv.y < e || h.uv.x + h.uv.y > 1.0f - e ||
+         cos_to_normal(tables, h, direction) < 1e-2f;
+}
+
+Comparison compare(const Tracer& reference, const Tracer& tested, const std::vector<Ray>& rays,
+                   const SceneTables& tables) {
   std::vector<Hit> a(rays.size()), b(rays.size());
   std::vector<std::uint8_t> occ(rays.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), 4096), [&](const auto& range) {
@@ -82,21 +121,53 @@ Comparison compare(const Tracer& reference, const Tracer& tested, const std::vec
     if (hb.hit() != (occ[i] != 0)) ++c.occlusion_mismatches;
     bool ok;
     if (!ha.hit() || !hb.hit()) {
-      ok = ha.hit() == hb.hit() || grazes_edge(ha.hit() ? ha : hb);
+      ok = ha.hit() == hb.hit();
+      if (!ok && grazes(tables, ha.hit() ? ha : hb, rays[i].direction)) {
+        ++c.grazes;
+        ok = true;
+      }
     } else {
       ++c.hits;
-      const bool close = std::abs(ha.t - hb.t) <= 1e-5f * std::max(ha.t, hb.t);
+      // Relative to the distance, or to the coordinates' magnitude for a hit very close to its
+      // origin (a t of 1e-3 from an origin at 8 carries 8·2⁻²⁴ of absolute rounding).
+      const vec3 o = glm::abs(rays[i].origin);
+      const float scale = std::max({ha.t, hb.t, o.x, o.y, o.z});
+      bool close = std::abs(ha.t - hb.t) <= 1e-5f * scale;
       const bool same = ha.instance == hb.instance && ha.primitive == hb.primitive;
+      if (!close && same) {
+        // The same triangle at a grazing angle: t is ill-conditioned there (each tracer rounds
+        // the instance transform its own way), so the tolerance grows with 1 / |cos θ|.
+        const float cos_theta = cos_to_normal(tables, ha, rays[i].direction);
+        close = std::abs(ha.t - hb.t) <= 1e-5f * scale / std::max(cos_theta, 1e-2f);
+      }
       ok = close;
-      if (close && !same) ++c.ties;
+      // One tracer found a hit the other passed: fine only where the ray grazes the edge of the
+      // nearer triangle (a silhouette), within float rounding of either test.
+      if (!close && grazes(tables, ha.t < hb.t ? ha : hb, rays[i].direction)) {
+        ++c.grazes;
+        ok = true;
+      }
+      if (close && !same) {
+        if (c.ties < 5 && std::getenv("SPECULA_DEBUG_TIES"))
+          std::printf("tie ray %zu: o=(%g %g %g) d=(%g %g %g) a t=%g inst=%u prim=%u, b t=%g inst=%u prim=%u\n", i,
+                      rays[i].origin.x, rays[i].origin.y, rays[i].origin.z, rays[i].direction.x,
+                      rays[i].direction.y, rays[i].direction.z, ha.t, ha.instance, ha.primitive,
+                      hb.t, hb.instance, hb.primitive);
+        ++c.ties;
+      }
     }
     if (!ok) {
-      if (c.mismatches == 0)
-        c.first_mismatch = "ray " + std::to_string(i) + ": reference t=" + std::to_string(ha.t) +
+      if (c.mismatches == 0) {
+        const Hit bf = brute_force(tables, rays[i]);
+        c.first_mismatch = "ray " + std::to_string(i) + ": brute force t=" + std::to_string(bf.t) +
+                           " inst=" + std::to_string(bf.instance) + " prim=" +
+                           std::to_string(bf.primitive) + ", reference t=" + std::to_string(ha.t) +
                            " inst=" + std::to_string(ha.instance) + " prim=" +
                            std::to_string(ha.primitive) + ", tested t=" + std::to_string(hb.t) +
                            " inst=" + std::to_string(hb.instance) + " prim=" +
-                           std::to_string(hb.primitive);
+                           std::to_string(hb.primitive) + " (reference uv " +
+                           std::to_string(ha.uv.x) + " " + std::to_string(ha.uv.y) + ")";
+      }
       ++c.mismatches;
     }
   }
@@ -109,8 +180,10 @@ void expect_agreement(const Comparison& c, const std::string& what) {
   EXPECT_GT(c.hits, c.rays / 8) << "the scene must be hit, not mostly missed";
   EXPECT_EQ(c.mismatches, 0u) << c.first_mismatch;
   EXPECT_EQ(c.occlusion_mismatches, 0u);
-  // Ties are rays through shared edges: a handful at most among random rays.
+  // Ties are rays through shared edges, grazes rays along silhouette edges: a handful at most
+  // among random rays.
   EXPECT_LE(c.ties * 10000, c.rays);
+  EXPECT_LE(c.grazes * 100000, c.rays);
 }
 
 /// Static scene: a finely tessellated sphere, boxes, a plane and a random soup of big and small
@@ -120,7 +193,8 @@ void build_static_scene(ecs::Registry& reg) {
   test::add_mesh(reg, test::primitive("plane", 1, vec3(30, 1, 30)), test::at(vec3(0)));
   for (int i = 0; i < 6; ++i)
     test::add_mesh(reg, test::primitive("box", 1, vec3(1.0f + float(i) * 0.3f, 2.0f, 0.7f)),
-                   test::at(vec3(-6.0f + 2.2f * float(i), 1.0f, -4.0f),  vec3(1.0f),
+                   // Clear of the ground: coplanar faces would make every hit there a tie.
+                   test::at(vec3(-6.0f + 2.2f * float(i), 1.05f, -4.0f), vec3(1.0f),
                             glm::angleAxis(0.3f * float(i), vec3(0, 1, 0))));
   std::mt19937 rng(99);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
@@ -152,7 +226,7 @@ TEST(Differential, StaticStructuresAgreeWithEmbree) {
   const std::vector<Ray> rays = make_rays(bounds, vec3(3, 6, 14), 1234);
   for (const char* backend : {"native", "native-bvh", "native-grid"}) {
     const test::TracedWorld tested(reg, backend);
-    expect_agreement(compare(*reference.tracer, *tested.tracer, rays), backend);
+    expect_agreement(compare(*reference.tracer, *tested.tracer, rays, reference.tables()), backend);
   }
 }
 
@@ -170,7 +244,8 @@ TEST(Differential, TheMollerTrumboreOptionAgreesWithEmbreeToo) {
     options.triangle_test = accel::TriangleTest::moller_trumbore;
     NativeTracer tested(1, options);
     tested.update(reference.layer);
-    expect_agreement(compare(*reference.tracer, tested, rays), std::string(tested.name()) + " (MT)");
+    expect_agreement(compare(*reference.tracer, tested, rays, reference.tables()),
+                     std::string(tested.name()) + " (MT)");
   }
 }
 
@@ -196,6 +271,7 @@ struct DynamicScene {
       reg.emplace<Mesh>(e, reg.get<Mesh>(first));
       reg.emplace<Kinematics>(e, Kinematics{i % 2 ? Kinematics::Type::Hierarchical : Kinematics::Type::Free});
     }
+    test::add_camera(reg, vec3(0, 5, 12), vec3(0));
     blob = test::add_mesh(reg, test::primitive("sphere", 1.5f, vec3(1), 96, 48), test::at(vec3(0, 2, 4)),
                           Material{}, Kinematics::Type::Free);
     const auto& base = reg.get<Mesh>(blob).geometry->positions;
@@ -238,7 +314,17 @@ TEST(Differential, TwoLevelStructureAgreesWithEmbreeThroughRefitsAndRestructurin
           bounds.grow(inst.world_bounds_max);
         }
       const std::vector<Ray> rays = make_rays(bounds, vec3(1, 7, 13), seed++);
-      expect_agreement(compare(*scene.reg.resource<ActiveTracer>().tracer, *tested, rays),
+      if (std::getenv("SPECULA_DEBUG_TIES")) {
+        const SceneTables& t = layer.tables();
+        std::printf("static instances:");
+        for (auto s : t.static_instances) std::printf(" %u(%u tris)", s, t.meshes[t.instances[s].mesh].triangle_count);
+        std::printf("\nslot 0 mesh %u flags %u tris %u; slot 27 flags %u\n", t.instances[0].mesh, t.instances[0].flags,
+          t.meshes[t.instances[0].mesh].triangle_count, t.instances.size() > 27 ? t.instances[27].flags : 0);
+        const SceneDelta& d = layer.delta();
+        std::printf("delta: static_rebuilt %d relocated %d deformed %zu moved %zu\n", d.static_rebuilt, d.geometry_relocated, d.instances_deformed.size(), d.instances_moved.size());
+      }
+      expect_agreement(compare(*scene.reg.resource<ActiveTracer>().tracer, *tested, rays,
+                               layer.tables()),
                        std::string(backend) + " at t=" + std::to_string(time));
     }
     EXPECT_GE(refits, 4u) << backend;

@@ -17,6 +17,8 @@
 #include "specula/geometry/ray_offset.h"
 #include "specula/scene/mesh_io.h"
 
+#include <glm/gtx/component_wise.hpp>
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -27,6 +29,7 @@
 #include <random>
 #include <set>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -160,42 +163,108 @@ TEST_P(Robustness, RaysAtSharedEdgesAndVerticesNeverLeak) {
       const vec3 centre = place.translation;
       const float radius = shape.radius * place.scale;
       const TriangleMesh& mesh = *shape.mesh;
-      // Interior edges (two triangles) and the vertices all of whose edges are interior.
-      std::map<std::pair<std::uint32_t, std::uint32_t>, int> edge_use;
-      for (const uvec3& t : mesh.triangles)
-        for (int k = 0; k < 3; ++k) ++edge_use[std::minmax(t[k], t[(k + 1) % 3])];
+      // Interior edges (two triangles) and the vertices all of whose edges are interior, by
+      // position: the box's faces share positions, not indices.
+      std::map<std::tuple<float, float, float>, std::uint32_t> weld;
+      std::vector<std::uint32_t> id(mesh.positions.size());
+      for (std::size_t v = 0; v < mesh.positions.size(); ++v) {
+        const vec3& p = mesh.positions[v];
+        id[v] = weld.try_emplace({p.x, p.y, p.z}, std::uint32_t(v)).first->second;
+      }
+      // Per welded vertex and edge, the triangles around it (a target is shot at only if every
+      // one of them faces the origin the same way, so the ray crosses the surface there rather
+      // than grazing a silhouette, where it may rightly slip past).
+      std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::uint32_t>> edge_tris;
+      std::map<std::uint32_t, std::vector<std::uint32_t>> vertex_tris;
+      for (std::uint32_t t = 0; t < mesh.triangles.size(); ++t) {
+        const uvec3& tri = mesh.triangles[t];
+        for (int k = 0; k < 3; ++k) {
+          edge_tris[std::minmax(id[tri[k]], id[tri[(k + 1) % 3]])].push_back(t);
+          vertex_tris[id[tri[k]]].push_back(t);
+        }
+      }
       std::vector<bool> boundary_vertex(mesh.positions.size(), false);
-      for (const auto& [edge, uses] : edge_use)
-        if (uses != 2) boundary_vertex[edge.first] = boundary_vertex[edge.second] = true;
-      std::vector<vec3> targets; // object space
-      for (std::size_t v = 0; v < mesh.positions.size(); ++v)
-        if (!boundary_vertex[v]) targets.push_back(mesh.positions[v]);
-      for (const auto& [edge, uses] : edge_use)
-        if (uses == 2) targets.push_back(0.5f * (mesh.positions[edge.first] + mesh.positions[edge.second]));
+      for (const auto& [edge, tris] : edge_tris)
+        if (tris.size() != 2) boundary_vertex[edge.first] = boundary_vertex[edge.second] = true;
+      // Static placements are traced as the layer bakes them, in world space (rounded there: at
+      // 1e6 a bunny 0.15 across collapses onto a few float positions); instances in object space.
+      const bool baked = place.kinematics == Kinematics::Type::Static;
+      std::vector<vec3> P = mesh.positions;
+      if (baked) {
+        // The layer's own world-space vertices (recomputing them could round differently).
+        const SceneTables& tables = world.tables();
+        const gpu::GpuMesh& gm = tables.meshes[tables.instances[tables.static_instances.at(0)].mesh];
+        ASSERT_EQ(gm.vertex_count, P.size());
+        P.assign(tables.positions.begin() + gm.first_vertex,
+                 tables.positions.begin() + gm.first_vertex + gm.vertex_count);
+      }
+      struct Target {
+        vec3 p; // in the space of P
+        const std::vector<std::uint32_t>* around;
+      };
+      std::vector<Target> targets;
+      for (const auto& [v, tris] : vertex_tris)
+        if (!boundary_vertex[v]) targets.push_back({P[v], &tris});
+      for (const auto& [edge, tris] : edge_tris)
+        if (tris.size() == 2) targets.push_back({0.5f * (P[edge.first] + P[edge.second]), &tris});
+      const auto crosses = [&](const Target& target, const vec3& origin_local) {
+        int sign = 0;
+        for (const std::uint32_t t : *target.around) {
+          const uvec3& tri = mesh.triangles[t];
+          const vec3 n = glm::cross(P[tri.y] - P[tri.x], P[tri.z] - P[tri.x]);
+          if (!(glm::length(n) > 0.0f)) return false; // collapsed by rounding
+          if (baked) {
+            // Folded by rounding (its normal turned by more than ~6°): no longer the surface the
+            // edge test is about.
+            const vec3 n0 = glm::cross(mesh.positions[tri.y] - mesh.positions[tri.x],
+                                       mesh.positions[tri.z] - mesh.positions[tri.x]);
+            if (glm::dot(glm::normalize(n), glm::normalize(n0)) < 0.995f) return false;
+          }
+          const float c = glm::dot(glm::normalize(n), glm::normalize(origin_local - target.p));
+          if (std::abs(c) < 0.05f) return false;
+          const int side = c > 0.0f ? 1 : -1;
+          if (sign != 0 && side != sign) return false;
+          sign = side;
+        }
+        return true;
+      };
       const std::vector<vec3> origins =
           shape.closed ? std::vector<vec3>{centre, centre + radius * vec3(0.13f, -0.21f, 0.07f)}
                        : std::vector<vec3>{centre + radius * vec3(2.1f, 1.3f, 2.7f),
                                            centre + radius * vec3(-2.5f, 0.4f, -1.9f)};
+      const mat4 local_from_world = baked ? mat4(1.0f) : glm::inverse(m);
+      const mat4 world_from_local = baked ? mat4(1.0f) : m;
       Count count;
       for (const vec3& origin : origins) {
-        for (const vec3& target_object : targets) {
-          const vec3 target = vec3(m * vec4(target_object, 1.0f));
+        const vec3 origin_local = vec3(local_from_world * vec4(origin, 1.0f));
+        for (const Target& target_local : targets) {
+          if (!crosses(target_local, origin_local)) continue;
+          const vec3 target = vec3(world_from_local * vec4(target_local.p, 1.0f));
           Ray ray;
           ray.origin = origin;
           ray.direction = glm::normalize(target - origin);
-          if (!shape.closed) {
-            // From outside only targets whose surface faces the origin (a ray at a silhouette
-            // may rightly graze past); nothing blocks the way out there but the mesh itself.
-            if (glm::dot(glm::normalize(target - centre), -ray.direction) < 0.3f) continue;
-          }
           ++count.shot;
           if (!world.intersect(ray).hit()) ++count.bad;
         }
       }
       const std::string row = "leaks: " + shape.name + " " + place.name;
       record(row, count);
-      ASSERT_GT(count.shot, 100) << row;
-      if (watertight(backend())) EXPECT_EQ(count.bad, 0) << row << ": " << count.bad << " of " << count.shot;
+      ASSERT_GE(count.shot, 50) << row; // the 12-triangle box: 8 vertices, 18 edges, 2 origins
+      // A mesh whose triangles are only a few float steps across at its position (the bunny's,
+      // about 0.15, at 1e6 where floats are 0.0625 apart) is rounded into a crumpled,
+      // self-overlapping surface: its counts go into the table, but "a shared edge" no longer
+      // means what the test is about.
+      const float ulp = std::nextafter(glm::compMax(glm::abs(place.translation)) + radius,
+                                       std::numeric_limits<float>::infinity()) -
+                        (glm::compMax(glm::abs(place.translation)) + radius);
+      double edge_sum = 0.0;
+      for (const uvec3& t : mesh.triangles)
+        edge_sum += double(glm::length(mesh.positions[t.y] - mesh.positions[t.x]));
+      const float mean_edge = float(edge_sum / double(mesh.triangles.size())) * place.scale;
+      const bool resolved = !baked || mean_edge / ulp >= 8.0f;
+      if (watertight(backend()) && resolved) {
+        EXPECT_EQ(count.bad, 0) << row << ": " << count.bad << " of " << count.shot;
+      }
     }
   }
 }
@@ -264,15 +333,20 @@ TEST_P(Robustness, GrazingRaysAlongABoxsFacesHitIt) {
       const float angle = 1e-3f + 9e-3f * (0.5f + 0.5f * unit(rng));
       const float phi = 3.14159265f * unit(rng);
       const vec3 dir = glm::normalize(vec3(std::cos(phi) * std::cos(angle), -std::sin(angle), std::sin(phi) * std::cos(angle)));
+      // The ray through the (rounded) origin and the target itself, so that it meets the face
+      // in exact arithmetic whatever the coordinates' magnitude.
       Ray ray;
       ray.origin = target - dir * (3.0f * h);
-      ray.direction = dir;
+      if (ray.origin.y <= target.y) continue; // rounded onto the face's plane: not grazing
+      ray.direction = glm::normalize(target - ray.origin);
       ++count.shot;
       if (!world.intersect(ray).hit()) ++count.bad;
     }
     const std::string row = "grazing: box " + place.name;
     record(row, count);
-    if (watertight(backend())) EXPECT_EQ(count.bad, 0) << row;
+    if (watertight(backend())) {
+      EXPECT_EQ(count.bad, 0) << row;
+    }
   }
 }
 
@@ -349,7 +423,8 @@ TEST_P(Robustness, InvalidRaysMissCleanly) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const float inf = std::numeric_limits<float>::infinity();
   std::vector<Ray> rays;
-  const auto add = [&](vec3 o, vec3 d, float tnear = 0.0f, float tfar = inf) {
+  const auto add = [&](vec3 o, vec3 d, float tnear = 0.0f,
+                       float tfar = std::numeric_limits<float>::infinity()) {
     Ray r;
     r.origin = o;
     r.direction = d;
@@ -387,7 +462,7 @@ TEST_P(Robustness, InvalidRaysMissCleanly) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, Robustness, ::testing::ValuesIn(test::available_backends()),
-                         [](const auto& info) { return test::test_name(info.param); });
+                         [](const auto& param) { return test::test_name(param.param); });
 
 } // namespace
 } // namespace specula

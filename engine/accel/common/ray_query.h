@@ -63,11 +63,7 @@ struct PreparedRay {
 
   /// False when the ray cannot be traced (a NaN or infinite component, a zero direction, or an
   /// empty interval): such a ray misses everything and must not enter a traversal.
-  [[nodiscard]] bool valid() const {
-    return is_finite(org) && is_finite(dir) && !(dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f) &&
-           !std::isnan(tnear) && !std::isnan(tfar) && tnear >= 0.0f && tnear <= tfar &&
-           tnear < std::numeric_limits<float>::infinity();
-  }
+  [[nodiscard]] bool valid() const { return traceable(org, dir, tnear, tfar); }
 
   static PreparedRay make(const Ray& ray) { return make(ray.origin, ray.direction, ray.tnear, ray.tfar); }
   static PreparedRay make(const vec3& org, const vec3& dir, float tnear, float tfar) {

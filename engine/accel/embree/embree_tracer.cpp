@@ -222,6 +222,9 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     rtcUpdateGeometryBuffer(d.own_mesh, RTC_BUFFER_TYPE_VERTEX, 0);
     rtcCommitGeometry(d.own_mesh);
     rtcCommitScene(d.own_blas); // refit: the topology is unchanged
+    // The instance caches its scene's bounds: without this commit the top level keeps the old
+    // ones, and rays miss whatever moved outside them (found by tests/accel/test_differential).
+    rtcCommitGeometry(d.instance);
     check("refitting a deforming mesh");
     ++last_.blas_refits;
     last_.refit_ms += ms_since(start);
@@ -265,6 +268,25 @@ void to_embree(const Ray& ray, RTCRay& r) {
   r.flags = 0;
 }
 
+RTCRay& ray_of(RTCRayHit& rh) { return rh.ray; }
+RTCRay& ray_of(RTCRay& r) { return r; }
+
+/// Embree asserts (or answers garbage) on rays with NaN or infinite components: each untraceable
+/// ray of a chunk becomes a finite ray with an empty interval (tnear > tfar), which Embree skips
+/// as inactive.
+template <typename R>
+void disable_untraceable(std::span<const Ray> rays, R* chunk, std::size_t count) {
+  for (std::size_t i = 0; i < count; ++i) {
+    if (traceable(rays[i])) continue;
+    RTCRay& r = ray_of(chunk[i]);
+    r.org_x = r.org_y = r.org_z = 0.0f;
+    r.dir_x = r.dir_y = 0.0f;
+    r.dir_z = 1.0f;
+    r.tnear = 1.0f;
+    r.tfar = 0.0f;
+  }
+}
+
 } // namespace
 
 void EmbreeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
@@ -279,6 +301,7 @@ void EmbreeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) con
       chunk[i].hit.geomID = RTC_INVALID_GEOMETRY_ID;
       chunk[i].hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
     }
+    disable_untraceable(rays.subspan(first, count), chunk, count);
     rtcIntersect1M(top_, &context, chunk, unsigned(count), sizeof(RTCRayHit));
     for (std::size_t i = 0; i < count; ++i) {
       const RTCRayHit& rh = chunk[i];
@@ -304,8 +327,9 @@ void EmbreeTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> o
   for (std::size_t first = 0; first < rays.size(); first += kStreamChunk) {
     const std::size_t count = std::min(kStreamChunk, rays.size() - first);
     for (std::size_t i = 0; i < count; ++i) to_embree(rays[first + i], chunk[i]);
+    disable_untraceable(rays.subspan(first, count), chunk, count);
     rtcOccluded1M(top_, &context, chunk, unsigned(count), sizeof(RTCRay));
-    // Embree sets tfar to -inf on occlusion.
+    // Embree sets tfar to -inf on occlusion (a disabled ray keeps its tfar of 0).
     for (std::size_t i = 0; i < count; ++i) occluded[first + i] = chunk[i].tfar < 0.0f ? 1 : 0;
   }
 }
