@@ -559,18 +559,16 @@ bool KdTree::traverse(PreparedRay& r, TriangleHit* hit) const {
         if (intersect_closest<Test>(r, tris_, ids[k], *hit)) found = true;
       }
     }
-    // Front to back: once the closest hit lies before a cell's entry, no later cell can do better
-    // (a triangle with a hit point in an earlier cell is referenced by that cell too).
-    if (found && r.tfar < tmax * kDown) return true;
-    for (;;) {
-      if (sp == 0) return found;
-      const Entry& e = stack[--sp];
-      if (found && r.tfar < e.tmin * kDown) return true;
-      node = e.node;
-      tmin = e.tmin;
-      tmax = e.tmax;
-      break;
-    }
+    // Front to back: once the closest hit (or the end of the ray) lies before this cell's exit,
+    // no later cell can do better; a hit found here beyond the exit is kept, but the traversal
+    // goes on, since with perfect splits the triangle may also lie in a later cell behind a closer
+    // one. (A triangle with a hit point in an earlier cell is referenced by that cell too.)
+    if (r.tfar < tmax * kDown || sp == 0) return found;
+    const Entry& e = stack[--sp];
+    if (r.tfar < e.tmin * kDown) return found;
+    node = e.node;
+    tmin = e.tmin;
+    tmax = e.tmax;
   }
 }
 
