@@ -244,9 +244,9 @@ private:
 
   [[nodiscard]] float sah(float p_below, float p_above, std::size_t n_below,
                           std::size_t n_above) const {
-    const float cost = options_.traversal_cost +
-                       options_.intersection_cost *
-                           (p_below * float(n_below) + p_above * float(n_above));
+    const float cost =
+        options_.traversal_cost +
+        options_.intersection_cost * (p_below * float(n_below) + p_above * float(n_above));
     return (n_below == 0 || n_above == 0) ? options_.empty_bonus * cost : cost;
   }
 
@@ -376,9 +376,9 @@ private:
       for (int child = 0; child < 2; ++child) {
         const Aabb& box = child == 0 ? below.box : above.box;
         Aabb part;
-        const bool clipped = options_.perfect_splits &&
-                             clipped_bounds(tris_.vertex(prim, 0), tris_.vertex(prim, 1),
-                                            tris_.vertex(prim, 2), box, part);
+        const bool clipped =
+            options_.perfect_splits && clipped_bounds(tris_.vertex(prim, 0), tris_.vertex(prim, 1),
+                                                      tris_.vertex(prim, 2), box, part);
         if (!clipped) {
           // No clipping, or clipping lost the sliver to rounding: the triangle's box cut to the
           // child box, never empty for a triangle that straddles the plane.
@@ -426,8 +426,7 @@ private:
       while (ja < na.size()) out_above[ia++] = na[ja++];
     };
     if (options_.parallel && n >= kParallelAxes) {
-      tbb::parallel_invoke([&] { split_axis(0); }, [&] { split_axis(1); },
-                           [&] { split_axis(2); });
+      tbb::parallel_invoke([&] { split_axis(0); }, [&] { split_axis(1); }, [&] { split_axis(2); });
     } else {
       for (std::size_t a = 0; a < 3; ++a) split_axis(a);
     }
@@ -463,7 +462,8 @@ void KdTree::build(const TriangleView& tris, const KdBuildOptions& options) {
   stats_.skipped_triangles = tris.count - std::uint32_t(root.tris.size());
   const std::size_t n = root.tris.size();
   if (n == 0) {
-    stats_.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    stats_.build_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return;
   }
   for (std::size_t a = 0; a < 3; ++a) root.events[a].reserve(2 * n);
@@ -573,8 +573,7 @@ bool KdTree::traverse(PreparedRay& r, TriangleHit* hit) const {
 }
 
 bool KdTree::intersect(PreparedRay& r, TriangleHit& hit, TriangleTest test) const {
-  if (test == TriangleTest::watertight)
-    return traverse<TriangleTest::watertight, false>(r, &hit);
+  if (test == TriangleTest::watertight) return traverse<TriangleTest::watertight, false>(r, &hit);
   return traverse<TriangleTest::moller_trumbore, false>(r, &hit);
 }
 
@@ -666,9 +665,9 @@ void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const boo
     tmin[i] = 0.0f;
     tmax[i] = -1.0f;
     if (!active[i]) continue;
-    prepared[i] = PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
-                                    vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i],
-                                    rays.tfar[i]);
+    prepared[i] =
+        PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
+                          vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i], rays.tfar[i]);
     if (!prepared[i].valid()) continue;
     if (!intersect_box(prepared[i], bounds_.min, bounds_.max, tmin[i], tmax[i])) continue;
     mask |= 1u << i;
@@ -694,7 +693,8 @@ void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const boo
     } else {
       sse::traverse_packet<Test>(view, prepared, lane_hits, tmin, tmax, mask, neg);
     }
-    for (unsigned m = mask; m; m &= m - 1) found[std::countr_zero(m)] = lane_hits[std::countr_zero(m)].hit();
+    for (unsigned m = mask; m; m &= m - 1)
+      found[std::countr_zero(m)] = lane_hits[std::countr_zero(m)].hit();
   } else {
     for (unsigned m = mask; m; m &= m - 1) {
       const int i = std::countr_zero(m);
