@@ -595,6 +595,18 @@ struct KdView {
   const TriangleView* tris;
 };
 
+/// One leaf's triangles against one lane of a packet. Out of line and compiled for the baseline
+/// target: inlined into the AVX2 kernel, a compiler that contracts a·b + c into an FMA (GCC in GNU
+/// modes, Clang by default) would round the watertight test's edge functions differently from the
+/// single-ray path, and watertightness rests on that rounding being the same for both triangles
+/// of a shared edge.
+template <TriangleTest Test>
+[[gnu::noinline]] void intersect_leaf(PreparedRay& r, const TriangleView& tris,
+                                      const std::uint32_t* ids, std::uint32_t count,
+                                      TriangleHit& hit) {
+  for (std::uint32_t k = 0; k < count; ++k) intersect_closest<Test>(r, tris, ids[k], hit);
+}
+
 } // namespace
 
 // The packet kernel is written once (kdtree_packet.inl) over a small set of vector operations and

@@ -77,8 +77,7 @@ SPECULA_KD_TARGET void traverse_packet(const KdView& kd, PreparedRay* rays, Tria
       const std::uint32_t* ids = kd.indices + n.first;
       for (unsigned m = mask; m; m &= m - 1) {
         const int i = std::countr_zero(m);
-        for (std::uint32_t k = 0; k < count; ++k)
-          intersect_closest<Test>(rays[i], *kd.tris, ids[k], hits[i]);
+        intersect_leaf<Test>(rays[i], *kd.tris, ids, count, hits[i]);
       }
       if (count != 0) {
         tfar = load_tfar(rays);
