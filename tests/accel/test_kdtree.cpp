@@ -253,7 +253,8 @@ RayPacket<N> pack(const std::vector<PreparedRay>& rays, std::size_t first) {
 }
 
 template <int N>
-void check_packets(const Mesh& mesh, const std::vector<PreparedRay>& rays, bool coherent_only) {
+void check_packets(const Mesh& mesh, const std::vector<PreparedRay>& rays, bool coherent_only,
+                   TriangleTest test = TriangleTest::watertight) {
   KdTree tree;
   tree.build(mesh.view());
   std::mt19937 rng(1234);
@@ -278,14 +279,14 @@ void check_packets(const Mesh& mesh, const std::vector<PreparedRay>& rays, bool 
     hits.clear();
     for (int i = 0; i < N; ++i) hits.u[i] = -7.0f; // a marker: untouched lanes keep it
     if constexpr (N == 4)
-      tree.intersect4(packet, hits, active);
+      tree.intersect4(packet, hits, active, test);
     else
-      tree.intersect8(packet, hits, active);
+      tree.intersect8(packet, hits, active, test);
     for (int i = 0; i < N; ++i) {
       ++lanes;
       PreparedRay r = source[(first + std::size_t(i)) % source.size()];
       TriangleHit want;
-      if (active[i]) tree.intersect(r, want);
+      if (active[i]) tree.intersect(r, want, test);
       TriangleHit got;
       got.prim = hits.prim[i];
       got.t = hits.t[i];
@@ -365,6 +366,8 @@ TEST(KdTree, PacketsMatchSingleRays) {
     check_packets<4>(mesh, rays, false);
     check_packets<8>(mesh, rays, true);
     check_packets<8>(mesh, rays, false);
+    check_packets<4>(mesh, rays, true, TriangleTest::moller_trumbore);
+    check_packets<8>(mesh, rays, false, TriangleTest::moller_trumbore);
   }
 }
 
