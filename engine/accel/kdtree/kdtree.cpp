@@ -595,11 +595,8 @@ struct KdView {
   const TriangleView* tris;
 };
 
-/// One leaf's triangles against one lane of a packet. Out of line and compiled for the baseline
-/// target: inlined into the AVX2 kernel, a compiler that contracts a·b + c into an FMA (GCC in GNU
-/// modes, Clang by default) would round the watertight test's edge functions differently from the
-/// single-ray path, and watertightness rests on that rounding being the same for both triangles
-/// of a shared edge.
+/// One leaf's triangles against one lane of a packet, out of line and compiled for the baseline
+/// target, so that its bits are those of the single-ray path whatever the kernel's target.
 template <TriangleTest Test>
 [[gnu::noinline]] void intersect_leaf(PreparedRay& r, const TriangleView& tris,
                                       const std::uint32_t* ids, std::uint32_t count,
@@ -629,6 +626,14 @@ inline Vf vlt(Vf a, Vf b) { return _mm_cmplt_ps(a, b); }
 inline Vf vnan(Vf a) { return _mm_cmpunord_ps(a, a); }
 inline Vf vor(Vf a, Vf b) { return _mm_or_ps(a, b); }
 inline unsigned vmask(Vf a) { return unsigned(_mm_movemask_ps(a)); }
+inline Vf vadd(Vf a, Vf b) { return _mm_add_ps(a, b); }
+inline Vf vdiv(Vf a, Vf b) { return _mm_div_ps(a, b); }
+inline Vf vgt(Vf a, Vf b) { return _mm_cmpgt_ps(a, b); }
+inline Vf veq(Vf a, Vf b) { return _mm_cmpeq_ps(a, b); }
+inline Vf vand(Vf a, Vf b) { return _mm_and_ps(a, b); }
+inline Vf vxor(Vf a, Vf b) { return _mm_xor_ps(a, b); }
+inline Vf vzero() { return _mm_setzero_ps(); }
+inline void vstore(float* p, Vf a) { _mm_store_ps(p, a); }
 #include "kdtree_packet.inl"
 #undef SPECULA_KD_TARGET
 } // namespace
@@ -638,7 +643,10 @@ namespace avx2 {
 namespace {
 constexpr int kLanes = 8;
 using Vf = __m256;
-#define SPECULA_KD_TARGET __attribute__((target("avx2,fma")))
+// AVX2 without FMA: GCC contracts a·b + c into an FMA even in ISO C++ mode, which would round the
+// watertight test differently from the scalar path (and from lane to lane of a shared edge); the
+// kernel has no use for FMA.
+#define SPECULA_KD_TARGET __attribute__((target("avx2")))
 SPECULA_KD_TARGET inline Vf vset1(float x) { return _mm256_set1_ps(x); }
 SPECULA_KD_TARGET inline Vf vload(const float* p) { return _mm256_load_ps(p); }
 SPECULA_KD_TARGET inline Vf vsub(Vf a, Vf b) { return _mm256_sub_ps(a, b); }
@@ -651,6 +659,14 @@ SPECULA_KD_TARGET inline Vf vlt(Vf a, Vf b) { return _mm256_cmp_ps(a, b, _CMP_LT
 SPECULA_KD_TARGET inline Vf vnan(Vf a) { return _mm256_cmp_ps(a, a, _CMP_UNORD_Q); }
 SPECULA_KD_TARGET inline Vf vor(Vf a, Vf b) { return _mm256_or_ps(a, b); }
 SPECULA_KD_TARGET inline unsigned vmask(Vf a) { return unsigned(_mm256_movemask_ps(a)); }
+SPECULA_KD_TARGET inline Vf vadd(Vf a, Vf b) { return _mm256_add_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vdiv(Vf a, Vf b) { return _mm256_div_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vgt(Vf a, Vf b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
+SPECULA_KD_TARGET inline Vf veq(Vf a, Vf b) { return _mm256_cmp_ps(a, b, _CMP_EQ_OQ); }
+SPECULA_KD_TARGET inline Vf vand(Vf a, Vf b) { return _mm256_and_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vxor(Vf a, Vf b) { return _mm256_xor_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vzero() { return _mm256_setzero_ps(); }
+SPECULA_KD_TARGET inline void vstore(float* p, Vf a) { _mm256_store_ps(p, a); }
 #include "kdtree_packet.inl"
 #undef SPECULA_KD_TARGET
 } // namespace
@@ -659,7 +675,7 @@ SPECULA_KD_TARGET inline unsigned vmask(Vf a) { return unsigned(_mm256_movemask_
 namespace {
 
 [[nodiscard]] bool cpu_has_avx2() {
-  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  static const bool has = __builtin_cpu_supports("avx2");
   return has;
 }
 
