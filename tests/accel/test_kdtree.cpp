@@ -356,6 +356,33 @@ TEST(KdTree, RaysThroughSplitPlanesAndSharedEdges) {
   check_against_brute_force<TriangleTest::watertight>(box, cube_rays);
 }
 
+// Vertices and ray origins on a 1/8 lattice, directions with zero components: triangles lie in
+// split planes and rays run inside them, where both children cover the same stretch of the ray
+// and the traversal stack is not sorted by distance.
+TEST(KdTree, RaysLyingInSplitPlanes) {
+  Mesh lattice{"lattice soup", {}, {}};
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+  auto snap = [](const vec3& p) { return glm::round(p * 8.0f) / 8.0f; };
+  for (int i = 0; i < 800; ++i) {
+    const vec3 c(unit(rng), unit(rng), unit(rng));
+    lattice.add(snap(c + 0.15f * vec3(unit(rng), unit(rng), unit(rng))),
+                snap(c + 0.15f * vec3(unit(rng), unit(rng), unit(rng))),
+                snap(c + 0.15f * vec3(unit(rng), unit(rng), unit(rng))));
+  }
+  std::vector<PreparedRay> rays;
+  for (int i = 0; i < 20000; ++i) {
+    const vec3 o = snap(1.2f * vec3(unit(rng), unit(rng), unit(rng)));
+    vec3 d = glm::round(vec3(unit(rng), unit(rng), unit(rng)) * 1.5f); // components in {-1, 0, 1}
+    if (d == vec3(0.0f)) d = vec3(0.0f, -1.0f, 0.0f);
+    if (i % 2 == 1) d[i % 3] = -0.0f; // the sign of zero picks the side that comes first
+    rays.push_back(PreparedRay::make(o, d, 0.0f, kInf));
+  }
+  check_against_brute_force<TriangleTest::watertight>(lattice, rays);
+  check_packets<4>(lattice, rays, false);
+  check_packets<8>(lattice, rays, false);
+}
+
 TEST(KdTree, PacketsMatchSingleRays) {
   for (const Mesh& mesh : test_meshes()) {
     Aabb box;

@@ -559,16 +559,20 @@ bool KdTree::traverse(PreparedRay& r, TriangleHit* hit) const {
         if (intersect_closest<Test>(r, tris_, ids[k], *hit)) found = true;
       }
     }
-    // Front to back: once the closest hit (or the end of the ray) lies before this cell's exit,
-    // no later cell can do better; a hit found here beyond the exit is kept, but the traversal
-    // goes on, since with perfect splits the triangle may also lie in a later cell behind a closer
-    // one. (A triangle with a hit point in an earlier cell is referenced by that cell too.)
-    if (r.tfar < tmax * kDown || sp == 0) return found;
-    const Entry& e = stack[--sp];
-    if (r.tfar < e.tmin * kDown) return found;
-    node = e.node;
-    tmin = e.tmin;
-    tmax = e.tmax;
+    // The nearest pending cell that the ray (shortened by its hits) still reaches. A hit found
+    // here beyond the cell's exit is kept, but does not end the traversal: with perfect splits a
+    // closer triangle may lie in a later cell. Each entry is culled on its own entry distance
+    // rather than stopping at the first one beyond the hit: a ray lying in a split plane visits
+    // both children over the same interval, and then the stack is not sorted by distance.
+    for (;;) {
+      if (sp == 0) return found;
+      const Entry& e = stack[--sp];
+      if (r.tfar < e.tmin * kDown) continue;
+      node = e.node;
+      tmin = e.tmin;
+      tmax = e.tmax;
+      break;
+    }
   }
 }
 

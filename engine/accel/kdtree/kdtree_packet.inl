@@ -136,7 +136,6 @@ SPECULA_KD_TARGET void traverse_packet(const KdView& kd, PreparedRay* rays, Tria
   };
   Entry stack[kStackSize];
   int sp = 0;
-  unsigned alive = mask; // lanes not finished yet
   std::uint32_t node = 0;
   for (;;) {
     const gpu::KdNode n = kd.nodes[node];
@@ -181,18 +180,14 @@ SPECULA_KD_TARGET void traverse_packet(const KdView& kd, PreparedRay* rays, Tria
           intersect_leaf<Test>(rays[i], *kd.tris, ids, count, hits[i]);
         }
       }
-      if (count != 0) {
-        tfar = load_tfar(rays);
-        // Lanes whose hit lies before this cell's exit are done (front to back).
-        alive &= ~(mask & vmask(vlt(tfar, vmul(tmax, down))));
-      }
+      if (count != 0) tfar = load_tfar(rays);
     }
-    // Pop the nearest pending cell that still has live lanes not already past it.
+    // Pop the nearest pending cell with lanes that still reach it (each entry culled on its own,
+    // as in the single-ray traversal: lanes in a split plane make the stack unsorted).
     for (;;) {
       if (sp == 0) return;
       const Entry& e = stack[--sp];
-      alive &= ~(e.mask & vmask(vlt(tfar, vmul(e.tmin, down))));
-      mask = e.mask & alive;
+      mask = e.mask & ~vmask(vlt(tfar, vmul(e.tmin, down)));
       if (mask == 0) continue;
       node = e.node;
       tmin = e.tmin;
