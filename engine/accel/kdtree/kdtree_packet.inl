@@ -6,7 +6,8 @@
 // rays sharing the sign of their direction on every axis agree on which child of a node is the near
 // one, so the packet walks the tree as one ray with per-lane intervals and an active mask: it goes
 // to the near child only, the far child only, or to both (far on the stack) when its lanes differ.
-// Leaves test each live lane with the scalar triangle test.
+// Leaves test one triangle against all lanes at once (the watertight test, when the lanes share
+// their ray space: dominant axis and shear axes) or each lane with the scalar test.
 
 SPECULA_KD_TARGET inline Vf load_tfar(const PreparedRay* rays) {
   alignas(32) float lane[kLanes];
