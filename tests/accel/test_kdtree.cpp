@@ -117,11 +117,21 @@ Mesh degenerate_mesh() {
     const vec3 a(unit(rng), unit(rng), unit(rng));
     const vec3 b(unit(rng), unit(rng), unit(rng));
     switch (i % 5) {
-    case 0: m.add(a, a, a); break;                        // a point
-    case 1: m.add(a, b, 0.5f * (a + b)); break;           // collinear
-    case 2: m.add(a, b, b + vec3(1e-6f, 0.0f, 0.0f)); break; // a needle
-    case 3: m.add(a, b, a + vec3(0.0f, 1e-7f, 1e-7f)); break;
-    default: m.add(vec3(a.x, a.y, 1.0f), vec3(b.x, b.y, 1.0f), vec3(a.x, b.y, 1.0f)); break;
+    case 0:
+      m.add(a, a, a);
+      break; // a point
+    case 1:
+      m.add(a, b, 0.5f * (a + b));
+      break; // collinear
+    case 2:
+      m.add(a, b, b + vec3(1e-6f, 0.0f, 0.0f));
+      break; // a needle
+    case 3:
+      m.add(a, b, a + vec3(0.0f, 1e-7f, 1e-7f));
+      break;
+    default:
+      m.add(vec3(a.x, a.y, 1.0f), vec3(b.x, b.y, 1.0f), vec3(a.x, b.y, 1.0f));
+      break;
     }
   }
   m.add(vec3(0.0f), vec3(kNaN, 0.0f, 0.0f), vec3(1.0f));
@@ -140,9 +150,7 @@ std::vector<PreparedRay> make_rays(const Aabb& box, int count, std::uint32_t see
   std::normal_distribution<float> normal;
   const vec3 lo = box.min - 0.25f * (box.extent() + vec3(1.0f));
   const vec3 hi = box.max + 0.25f * (box.extent() + vec3(1.0f));
-  auto inside = [&] {
-    return lo + (hi - lo) * vec3(unit(rng), unit(rng), unit(rng));
-  };
+  auto inside = [&] { return lo + (hi - lo) * vec3(unit(rng), unit(rng), unit(rng)); };
   const vec3 eye = box.center() + vec3(0.3f, 0.7f, 2.5f) * (box.extent() + vec3(1.0f));
   std::vector<PreparedRay> rays;
   for (int i = 0; i < count; ++i) {
@@ -195,8 +203,12 @@ std::vector<Mesh> test_meshes() {
   // beyond it, which is what the traversal's termination must get right.
   Mesh dense = soup(1500, 0.6f, 12);
   dense.name = "dense soup";
-  return {uv_sphere(24, 48, 1.0f, vec3(0.5f, -0.25f, 2.0f)), cube(), soup(2000, 0.08f, 11),
-          std::move(dense), flat_grid(24), degenerate_mesh()};
+  return {uv_sphere(24, 48, 1.0f, vec3(0.5f, -0.25f, 2.0f)),
+          cube(),
+          soup(2000, 0.08f, 11),
+          std::move(dense),
+          flat_grid(24),
+          degenerate_mesh()};
 }
 
 /// Calls f(node, box, depth) on every node in depth-first order, checking that the order of
@@ -241,7 +253,8 @@ RayPacket<N> pack(const std::vector<PreparedRay>& rays, std::size_t first) {
 }
 
 template <int N>
-void check_packets(const Mesh& mesh, const std::vector<PreparedRay>& rays, bool coherent_only) {
+void check_packets(const Mesh& mesh, const std::vector<PreparedRay>& rays, bool coherent_only,
+                   TriangleTest test = TriangleTest::watertight) {
   KdTree tree;
   tree.build(mesh.view());
   std::mt19937 rng(1234);
@@ -266,14 +279,14 @@ void check_packets(const Mesh& mesh, const std::vector<PreparedRay>& rays, bool 
     hits.clear();
     for (int i = 0; i < N; ++i) hits.u[i] = -7.0f; // a marker: untouched lanes keep it
     if constexpr (N == 4)
-      tree.intersect4(packet, hits, active);
+      tree.intersect4(packet, hits, active, test);
     else
-      tree.intersect8(packet, hits, active);
+      tree.intersect8(packet, hits, active, test);
     for (int i = 0; i < N; ++i) {
       ++lanes;
       PreparedRay r = source[(first + std::size_t(i)) % source.size()];
       TriangleHit want;
-      if (active[i]) tree.intersect(r, want);
+      if (active[i]) tree.intersect(r, want, test);
       TriangleHit got;
       got.prim = hits.prim[i];
       got.t = hits.t[i];
@@ -323,12 +336,12 @@ TEST(KdTree, RaysThroughSplitPlanesAndSharedEdges) {
   for (int y = 0; y <= 32; ++y) {
     for (int x = 0; x <= 32; ++x) {
       const vec3 target(float(x) * 0.5f, float(y) * 0.5f, 0.0f);
-      rays.push_back(PreparedRay::make(vec3(3.3f, 7.1f, 5.0f), target - vec3(3.3f, 7.1f, 5.0f),
-                                       0.0f, kInf));
+      rays.push_back(
+          PreparedRay::make(vec3(3.3f, 7.1f, 5.0f), target - vec3(3.3f, 7.1f, 5.0f), 0.0f, kInf));
       rays.push_back(PreparedRay::make(target + vec3(0, 0, 1), vec3(0, 0, -1), 0.0f, kInf));
       // In the plane of the grid, along its lines: parallel to every triangle, so no hit.
-      rays.push_back(PreparedRay::make(vec3(-1.0f, float(y) * 0.5f, 0.0f), vec3(1, 0, 0), 0.0f,
-                                       kInf));
+      rays.push_back(
+          PreparedRay::make(vec3(-1.0f, float(y) * 0.5f, 0.0f), vec3(1, 0, 0), 0.0f, kInf));
     }
   }
   check_against_brute_force<TriangleTest::watertight>(grid, rays);
@@ -337,9 +350,37 @@ TEST(KdTree, RaysThroughSplitPlanesAndSharedEdges) {
     for (int j = -8; j <= 8; ++j) {
       const vec3 o(float(i) * 0.25f, float(j) * 0.25f, 3.0f);
       cube_rays.push_back(PreparedRay::make(o, vec3(0, 0, -1), 0.0f, kInf));
-      cube_rays.push_back(PreparedRay::make(vec3(0.0f), vec3(float(i), float(j), 4.0f), 0.0f, kInf));
+      cube_rays.push_back(
+          PreparedRay::make(vec3(0.0f), vec3(float(i), float(j), 4.0f), 0.0f, kInf));
     }
   check_against_brute_force<TriangleTest::watertight>(box, cube_rays);
+}
+
+// Vertices and ray origins on a 1/8 lattice, directions with zero components: triangles lie in
+// split planes and rays run inside them, where both children cover the same stretch of the ray
+// and the traversal stack is not sorted by distance.
+TEST(KdTree, RaysLyingInSplitPlanes) {
+  Mesh lattice{"lattice soup", {}, {}};
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+  auto snap = [](const vec3& p) { return glm::round(p * 8.0f) / 8.0f; };
+  for (int i = 0; i < 800; ++i) {
+    const vec3 c(unit(rng), unit(rng), unit(rng));
+    lattice.add(snap(c + 0.15f * vec3(unit(rng), unit(rng), unit(rng))),
+                snap(c + 0.15f * vec3(unit(rng), unit(rng), unit(rng))),
+                snap(c + 0.15f * vec3(unit(rng), unit(rng), unit(rng))));
+  }
+  std::vector<PreparedRay> rays;
+  for (int i = 0; i < 20000; ++i) {
+    const vec3 o = snap(1.2f * vec3(unit(rng), unit(rng), unit(rng)));
+    vec3 d = glm::round(vec3(unit(rng), unit(rng), unit(rng)) * 1.5f); // components in {-1, 0, 1}
+    if (d == vec3(0.0f)) d = vec3(0.0f, -1.0f, 0.0f);
+    if (i % 2 == 1) d[i % 3] = -0.0f; // the sign of zero picks the side that comes first
+    rays.push_back(PreparedRay::make(o, d, 0.0f, kInf));
+  }
+  check_against_brute_force<TriangleTest::watertight>(lattice, rays);
+  check_packets<4>(lattice, rays, false);
+  check_packets<8>(lattice, rays, false);
 }
 
 TEST(KdTree, PacketsMatchSingleRays) {
@@ -352,6 +393,8 @@ TEST(KdTree, PacketsMatchSingleRays) {
     check_packets<4>(mesh, rays, false);
     check_packets<8>(mesh, rays, true);
     check_packets<8>(mesh, rays, false);
+    check_packets<4>(mesh, rays, true, TriangleTest::moller_trumbore);
+    check_packets<8>(mesh, rays, false, TriangleTest::moller_trumbore);
   }
 }
 

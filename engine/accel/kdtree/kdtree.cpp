@@ -244,9 +244,9 @@ private:
 
   [[nodiscard]] float sah(float p_below, float p_above, std::size_t n_below,
                           std::size_t n_above) const {
-    const float cost = options_.traversal_cost +
-                       options_.intersection_cost *
-                           (p_below * float(n_below) + p_above * float(n_above));
+    const float cost =
+        options_.traversal_cost +
+        options_.intersection_cost * (p_below * float(n_below) + p_above * float(n_above));
     return (n_below == 0 || n_above == 0) ? options_.empty_bonus * cost : cost;
   }
 
@@ -376,9 +376,9 @@ private:
       for (int child = 0; child < 2; ++child) {
         const Aabb& box = child == 0 ? below.box : above.box;
         Aabb part;
-        const bool clipped = options_.perfect_splits &&
-                             clipped_bounds(tris_.vertex(prim, 0), tris_.vertex(prim, 1),
-                                            tris_.vertex(prim, 2), box, part);
+        const bool clipped =
+            options_.perfect_splits && clipped_bounds(tris_.vertex(prim, 0), tris_.vertex(prim, 1),
+                                                      tris_.vertex(prim, 2), box, part);
         if (!clipped) {
           // No clipping, or clipping lost the sliver to rounding: the triangle's box cut to the
           // child box, never empty for a triangle that straddles the plane.
@@ -426,8 +426,7 @@ private:
       while (ja < na.size()) out_above[ia++] = na[ja++];
     };
     if (options_.parallel && n >= kParallelAxes) {
-      tbb::parallel_invoke([&] { split_axis(0); }, [&] { split_axis(1); },
-                           [&] { split_axis(2); });
+      tbb::parallel_invoke([&] { split_axis(0); }, [&] { split_axis(1); }, [&] { split_axis(2); });
     } else {
       for (std::size_t a = 0; a < 3; ++a) split_axis(a);
     }
@@ -463,7 +462,8 @@ void KdTree::build(const TriangleView& tris, const KdBuildOptions& options) {
   stats_.skipped_triangles = tris.count - std::uint32_t(root.tris.size());
   const std::size_t n = root.tris.size();
   if (n == 0) {
-    stats_.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    stats_.build_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return;
   }
   for (std::size_t a = 0; a < 3; ++a) root.events[a].reserve(2 * n);
@@ -559,13 +559,15 @@ bool KdTree::traverse(PreparedRay& r, TriangleHit* hit) const {
         if (intersect_closest<Test>(r, tris_, ids[k], *hit)) found = true;
       }
     }
-    // Front to back: once the closest hit lies before a cell's entry, no later cell can do better
-    // (a triangle with a hit point in an earlier cell is referenced by that cell too).
-    if (found && r.tfar < tmax * kDown) return true;
+    // The nearest pending cell that the ray (shortened by its hits) still reaches. A hit found
+    // here beyond the cell's exit is kept, but does not end the traversal: with perfect splits a
+    // closer triangle may lie in a later cell. Each entry is culled on its own entry distance
+    // rather than stopping at the first one beyond the hit: a ray lying in a split plane visits
+    // both children over the same interval, and then the stack is not sorted by distance.
     for (;;) {
       if (sp == 0) return found;
       const Entry& e = stack[--sp];
-      if (found && r.tfar < e.tmin * kDown) return true;
+      if (r.tfar < e.tmin * kDown) continue;
       node = e.node;
       tmin = e.tmin;
       tmax = e.tmax;
@@ -575,8 +577,7 @@ bool KdTree::traverse(PreparedRay& r, TriangleHit* hit) const {
 }
 
 bool KdTree::intersect(PreparedRay& r, TriangleHit& hit, TriangleTest test) const {
-  if (test == TriangleTest::watertight)
-    return traverse<TriangleTest::watertight, false>(r, &hit);
+  if (test == TriangleTest::watertight) return traverse<TriangleTest::watertight, false>(r, &hit);
   return traverse<TriangleTest::moller_trumbore, false>(r, &hit);
 }
 
@@ -597,6 +598,15 @@ struct KdView {
   const std::uint32_t* indices;
   const TriangleView* tris;
 };
+
+/// One leaf's triangles against one lane of a packet, out of line and compiled for the baseline
+/// target, so that its bits are those of the single-ray path whatever the kernel's target.
+template <TriangleTest Test>
+[[gnu::noinline]] void intersect_leaf(PreparedRay& r, const TriangleView& tris,
+                                      const std::uint32_t* ids, std::uint32_t count,
+                                      TriangleHit& hit) {
+  for (std::uint32_t k = 0; k < count; ++k) intersect_closest<Test>(r, tris, ids[k], hit);
+}
 
 } // namespace
 
@@ -620,6 +630,14 @@ inline Vf vlt(Vf a, Vf b) { return _mm_cmplt_ps(a, b); }
 inline Vf vnan(Vf a) { return _mm_cmpunord_ps(a, a); }
 inline Vf vor(Vf a, Vf b) { return _mm_or_ps(a, b); }
 inline unsigned vmask(Vf a) { return unsigned(_mm_movemask_ps(a)); }
+inline Vf vadd(Vf a, Vf b) { return _mm_add_ps(a, b); }
+inline Vf vdiv(Vf a, Vf b) { return _mm_div_ps(a, b); }
+inline Vf vgt(Vf a, Vf b) { return _mm_cmpgt_ps(a, b); }
+inline Vf veq(Vf a, Vf b) { return _mm_cmpeq_ps(a, b); }
+inline Vf vand(Vf a, Vf b) { return _mm_and_ps(a, b); }
+inline Vf vxor(Vf a, Vf b) { return _mm_xor_ps(a, b); }
+inline Vf vzero() { return _mm_setzero_ps(); }
+inline void vstore(float* p, Vf a) { _mm_store_ps(p, a); }
 #include "kdtree_packet.inl"
 #undef SPECULA_KD_TARGET
 } // namespace
@@ -629,7 +647,10 @@ namespace avx2 {
 namespace {
 constexpr int kLanes = 8;
 using Vf = __m256;
-#define SPECULA_KD_TARGET __attribute__((target("avx2,fma")))
+// AVX2 without FMA: GCC contracts a·b + c into an FMA even in ISO C++ mode, which would round the
+// watertight test differently from the scalar path (and from lane to lane of a shared edge); the
+// kernel has no use for FMA.
+#define SPECULA_KD_TARGET __attribute__((target("avx2")))
 SPECULA_KD_TARGET inline Vf vset1(float x) { return _mm256_set1_ps(x); }
 SPECULA_KD_TARGET inline Vf vload(const float* p) { return _mm256_load_ps(p); }
 SPECULA_KD_TARGET inline Vf vsub(Vf a, Vf b) { return _mm256_sub_ps(a, b); }
@@ -642,6 +663,14 @@ SPECULA_KD_TARGET inline Vf vlt(Vf a, Vf b) { return _mm256_cmp_ps(a, b, _CMP_LT
 SPECULA_KD_TARGET inline Vf vnan(Vf a) { return _mm256_cmp_ps(a, a, _CMP_UNORD_Q); }
 SPECULA_KD_TARGET inline Vf vor(Vf a, Vf b) { return _mm256_or_ps(a, b); }
 SPECULA_KD_TARGET inline unsigned vmask(Vf a) { return unsigned(_mm256_movemask_ps(a)); }
+SPECULA_KD_TARGET inline Vf vadd(Vf a, Vf b) { return _mm256_add_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vdiv(Vf a, Vf b) { return _mm256_div_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vgt(Vf a, Vf b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
+SPECULA_KD_TARGET inline Vf veq(Vf a, Vf b) { return _mm256_cmp_ps(a, b, _CMP_EQ_OQ); }
+SPECULA_KD_TARGET inline Vf vand(Vf a, Vf b) { return _mm256_and_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vxor(Vf a, Vf b) { return _mm256_xor_ps(a, b); }
+SPECULA_KD_TARGET inline Vf vzero() { return _mm256_setzero_ps(); }
+SPECULA_KD_TARGET inline void vstore(float* p, Vf a) { _mm256_store_ps(p, a); }
 #include "kdtree_packet.inl"
 #undef SPECULA_KD_TARGET
 } // namespace
@@ -650,7 +679,7 @@ SPECULA_KD_TARGET inline unsigned vmask(Vf a) { return unsigned(_mm256_movemask_
 namespace {
 
 [[nodiscard]] bool cpu_has_avx2() {
-  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  static const bool has = __builtin_cpu_supports("avx2");
   return has;
 }
 
@@ -668,9 +697,9 @@ void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const boo
     tmin[i] = 0.0f;
     tmax[i] = -1.0f;
     if (!active[i]) continue;
-    prepared[i] = PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
-                                    vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i],
-                                    rays.tfar[i]);
+    prepared[i] =
+        PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
+                          vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i], rays.tfar[i]);
     if (!prepared[i].valid()) continue;
     if (!intersect_box(prepared[i], bounds_.min, bounds_.max, tmin[i], tmax[i])) continue;
     mask |= 1u << i;
@@ -696,7 +725,8 @@ void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const boo
     } else {
       sse::traverse_packet<Test>(view, prepared, lane_hits, tmin, tmax, mask, neg);
     }
-    for (unsigned m = mask; m; m &= m - 1) found[std::countr_zero(m)] = lane_hits[std::countr_zero(m)].hit();
+    for (unsigned m = mask; m; m &= m - 1)
+      found[std::countr_zero(m)] = lane_hits[std::countr_zero(m)].hit();
   } else {
     for (unsigned m = mask; m; m &= m - 1) {
       const int i = std::countr_zero(m);

@@ -13,10 +13,10 @@
 /// Layout: gpu::KdNode (shaders/shared/accel_layout.h), one contiguous array in depth-first order
 /// (the child below the split is the next node), plus one array of triangle indices.
 ///
-/// Traversal: front to back with a fixed stack (pbrt's KdTreeAggregate, Havran's TA_rec_B order),
-/// closest hit or any hit; packets of 4 (SSE) or 8 (AVX2, chosen at run time) rays sharing their
-/// direction signs are traversed together (Wald et al., "Interactive Rendering with Coherent Ray
-/// Tracing", 2001), other packets one lane at a time.
+/// Traversal: front to back with a fixed stack (as in pbrt's KdTreeAggregate), its interval
+/// decisions taken with a small relative slack; closest hit or any hit. Packets of 4 (SSE) or 8
+/// (AVX2, chosen at run time) rays sharing their direction signs are traversed together (Wald et
+/// al., "Interactive Rendering with Coherent Ray Tracing", 2001), other packets one lane at a time.
 
 #include "specula/accel/common/ray_query.h"
 #include "specula/shared/accel_layout.h"
