@@ -17,8 +17,6 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <random>
 #include <string>
 #include <vector>
@@ -148,11 +146,6 @@ Comparison compare(const Tracer& reference, const Tracer& tested, const std::vec
         ok = true;
       }
       if (close && !same) {
-        if (c.ties < 5 && std::getenv("SPECULA_DEBUG_TIES"))
-          std::printf("tie ray %zu: o=(%g %g %g) d=(%g %g %g) a t=%g inst=%u prim=%u, b t=%g inst=%u prim=%u\n", i,
-                      rays[i].origin.x, rays[i].origin.y, rays[i].origin.z, rays[i].direction.x,
-                      rays[i].direction.y, rays[i].direction.z, ha.t, ha.instance, ha.primitive,
-                      hb.t, hb.instance, hb.primitive);
         ++c.ties;
       }
     }
@@ -314,15 +307,6 @@ TEST(Differential, TwoLevelStructureAgreesWithEmbreeThroughRefitsAndRestructurin
           bounds.grow(inst.world_bounds_max);
         }
       const std::vector<Ray> rays = make_rays(bounds, vec3(1, 7, 13), seed++);
-      if (std::getenv("SPECULA_DEBUG_TIES")) {
-        const SceneTables& t = layer.tables();
-        std::printf("static instances:");
-        for (auto s : t.static_instances) std::printf(" %u(%u tris)", s, t.meshes[t.instances[s].mesh].triangle_count);
-        std::printf("\nslot 0 mesh %u flags %u tris %u; slot 27 flags %u\n", t.instances[0].mesh, t.instances[0].flags,
-          t.meshes[t.instances[0].mesh].triangle_count, t.instances.size() > 27 ? t.instances[27].flags : 0);
-        const SceneDelta& d = layer.delta();
-        std::printf("delta: static_rebuilt %d relocated %d deformed %zu moved %zu\n", d.static_rebuilt, d.geometry_relocated, d.instances_deformed.size(), d.instances_moved.size());
-      }
       expect_agreement(compare(*scene.reg.resource<ActiveTracer>().tracer, *tested, rays,
                                layer.tables()),
                        std::string(backend) + " at t=" + std::to_string(time));
