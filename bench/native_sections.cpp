@@ -254,6 +254,10 @@ void section_native(const Options& o) {
     embree.update(layer);
     NativeTracer native;
     native.update(layer);
+    NativeOptions bvh_options;
+    bvh_options.static_structure = StaticStructure::bvh;
+    NativeTracer native_bvh(8, bvh_options);
+    native_bvh.update(layer);
     const Camera camera = *active_camera(scene.registry);
     TraceSettings settings;
     settings.mode = TraceMode::Cast;
@@ -263,20 +267,24 @@ void section_native(const Options& o) {
                 level, mesh.triangle_count() + 2, o.size, o.size, o.threads);
     std::printf("Primary rays (generated, traced and resolved to instances by each tracer's "
                 "intersect_camera):\n\n");
-    std::printf("| packet width | Embree (Mrays/s) | native kd-tree (Mrays/s) | native / Embree |\n"
-                "|---:|---:|---:|---:|\n");
+    std::printf("| packet width | Embree (Mrays/s) | native kd-tree (Mrays/s) | kd-tree / Embree | "
+                "native BVH (Mrays/s) | BVH / Embree |\n|---:|---:|---:|---:|---:|---:|\n");
     for (const std::uint32_t w : {1u, 4u, 8u}) {
       embree.set_packet_width(w);
       native.set_packet_width(w);
-      std::vector<double> e_ms, n_ms;
+      native_bvh.set_packet_width(w);
+      std::vector<double> e_ms, n_ms, b_ms;
       (void)trace_primary_frame(embree, camera, o.size, o.size, settings);
       (void)trace_primary_frame(native, camera, o.size, o.size, settings);
+      (void)trace_primary_frame(native_bvh, camera, o.size, o.size, settings);
       for (int r = 0; r < o.repetitions; ++r) {
         e_ms.push_back(time_ms([&] { (void)trace_primary_frame(embree, camera, o.size, o.size, settings); }));
         n_ms.push_back(time_ms([&] { (void)trace_primary_frame(native, camera, o.size, o.size, settings); }));
+        b_ms.push_back(time_ms([&] { (void)trace_primary_frame(native_bvh, camera, o.size, o.size, settings); }));
       }
-      const double e = mrays(rays, median(e_ms)), n = mrays(rays, median(n_ms));
-      std::printf("| %u | %.2f | %.2f | %.2f |\n", w, e, n, n / e);
+      const double e = mrays(rays, median(e_ms)), n = mrays(rays, median(n_ms)),
+                   b = mrays(rays, median(b_ms));
+      std::printf("| %u | %.2f | %.2f | %.2f | %.2f | %.2f |\n", w, e, n, n / e, b, b / e);
       std::fflush(stdout);
     }
     Aabb b;
@@ -285,20 +293,23 @@ void section_native(const Options& o) {
     const SecondaryRays sec = make_secondary(embree, layer, camera, o.size, light);
     std::printf("\nSecondary rays from the primary hits (single rays in batches: Embree's "
                 "rtcOccluded1M/rtcIntersect1M against native single-ray traversal):\n\n");
-    std::printf("| rays | count | Embree (Mrays/s) | native kd-tree (Mrays/s) | native / Embree |\n"
-                "|---|---:|---:|---:|---:|\n");
+    std::printf("| rays | count | Embree (Mrays/s) | native kd-tree (Mrays/s) | kd-tree / Embree | "
+                "native BVH (Mrays/s) | BVH / Embree |\n|---|---:|---:|---:|---:|---:|---:|\n");
     for (const bool shadow : {true, false}) {
       const std::vector<Ray>& rs = shadow ? sec.shadow : sec.reflection;
-      std::vector<double> e_ms, n_ms;
+      std::vector<double> e_ms, n_ms, b_ms;
       (void)batch_ms(o.threads, embree, rs, shadow);
       (void)batch_ms(o.threads, native, rs, shadow);
+      (void)batch_ms(o.threads, native_bvh, rs, shadow);
       for (int r = 0; r < o.repetitions; ++r) {
         e_ms.push_back(batch_ms(o.threads, embree, rs, shadow));
         n_ms.push_back(batch_ms(o.threads, native, rs, shadow));
+        b_ms.push_back(batch_ms(o.threads, native_bvh, rs, shadow));
       }
-      const double e = mrays(rs.size(), median(e_ms)), n = mrays(rs.size(), median(n_ms));
-      std::printf("| %s | %zu | %.2f | %.2f | %.2f |\n", shadow ? "shadow" : "reflection",
-                  rs.size(), e, n, n / e);
+      const double e = mrays(rs.size(), median(e_ms)), n = mrays(rs.size(), median(n_ms)),
+                   b = mrays(rs.size(), median(b_ms));
+      std::printf("| %s | %zu | %.2f | %.2f | %.2f | %.2f | %.2f |\n", shadow ? "shadow" : "reflection",
+                  rs.size(), e, n, n / e, b, b / e);
       std::fflush(stdout);
     }
   }

@@ -95,8 +95,18 @@ struct TriangleHit {
   [[nodiscard]] bool hit() const { return prim != 0xFFFFFFFFu; }
 };
 
+/// The watertight test's fallback when an edge function rounds to exactly 0 in single precision:
+/// all three recomputed in double (the paper's §3.2). Kept out of line so the common path inlines.
+[[gnu::noinline, gnu::cold]] inline void edge_functions_in_double(float ax, float ay, float bx,
+                                                                   float by, float cx, float cy,
+                                                                   float& U, float& V, float& W) {
+  U = float(double(cx) * double(by) - double(cy) * double(bx));
+  V = float(double(ax) * double(cy) - double(ay) * double(cx));
+  W = float(double(bx) * double(ay) - double(by) * double(ax));
+}
+
 /// Woop et al.'s watertight test. On a hit with tnear < t < tmax, writes t, u, v and returns true.
-[[nodiscard]] inline bool intersect_watertight(const PreparedRay& r, const vec3& p0, const vec3& p1,
+[[nodiscard, gnu::always_inline]] inline bool intersect_watertight(const PreparedRay& r, const vec3& p0, const vec3& p1,
                                                const vec3& p2, float tmax, float& t_out,
                                                float& u_out, float& v_out) {
   const vec3 a = p0 - r.org;
@@ -111,12 +121,8 @@ struct TriangleHit {
   float U = cx * by - cy * bx;
   float V = ax * cy - ay * cx;
   float W = bx * ay - by * ax;
-  if (U == 0.0f || V == 0.0f || W == 0.0f) {
-    // Exactly on an edge in single precision: decide in double (the paper's fallback).
-    U = float(double(cx) * double(by) - double(cy) * double(bx));
-    V = float(double(ax) * double(cy) - double(ay) * double(cx));
-    W = float(double(bx) * double(ay) - double(by) * double(ax));
-  }
+  if (U == 0.0f || V == 0.0f || W == 0.0f) [[unlikely]]
+    edge_functions_in_double(ax, ay, bx, by, cx, cy, U, V, W);
   if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f)) return false;
   const float det = U + V + W;
   if (det == 0.0f) return false;
