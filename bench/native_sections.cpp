@@ -307,9 +307,9 @@ void section_native(const Options& o) {
         b_ms.push_back(batch_ms(o.threads, native_bvh, rs, shadow));
       }
       const double e = mrays(rs.size(), median(e_ms)), n = mrays(rs.size(), median(n_ms)),
-                   b = mrays(rs.size(), median(b_ms));
+                   bv = mrays(rs.size(), median(b_ms));
       std::printf("| %s | %zu | %.2f | %.2f | %.2f | %.2f | %.2f |\n", shadow ? "shadow" : "reflection",
-                  rs.size(), e, n, n / e, b, b / e);
+                  rs.size(), e, n, n / e, bv, bv / e);
       std::fflush(stdout);
     }
   }
