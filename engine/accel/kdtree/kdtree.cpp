@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <utility>
 
@@ -62,7 +63,40 @@ static_assert(sizeof(Event) == 8);
   return Event{pos, (type << 30) | local};
 }
 
-using EventLists = std::array<std::vector<Event>, 3>;
+/// A node's event list on one axis: a fixed buffer, sized once and never value-initialised (the
+/// split writes each child's list straight into it, then trims the size).
+class EventList {
+public:
+  void allocate(std::size_t capacity) {
+    data_ = std::make_unique_for_overwrite<Event[]>(capacity);
+    size_ = 0;
+  }
+  void set_size(std::size_t n) { size_ = n; }
+  void push_back(const Event& e) { data_[size_++] = e; }
+  [[nodiscard]] std::size_t size() const { return size_; }
+  [[nodiscard]] Event* data() { return data_.get(); }
+  [[nodiscard]] const Event* data() const { return data_.get(); }
+  [[nodiscard]] Event* begin() { return data_.get(); }
+  [[nodiscard]] Event* end() { return data_.get() + size_; }
+  [[nodiscard]] const Event* begin() const { return data_.get(); }
+  [[nodiscard]] const Event* end() const { return data_.get() + size_; }
+  [[nodiscard]] const Event& operator[](std::size_t i) const { return data_[i]; }
+
+private:
+  std::unique_ptr<Event[]> data_;
+  std::size_t size_ = 0;
+};
+
+using EventLists = std::array<EventList, 3>;
+using NewEventLists = std::array<std::vector<Event>, 3>;
+
+/// Per-task scratch arrays of split_node, reused from node to node (their capacity stays): the
+/// per-node allocations, not the passes, dominate small nodes. A parallel child gets its own.
+struct Scratch {
+  std::vector<std::uint8_t> side;
+  std::vector<std::uint32_t> remap, straddling, above_index;
+  NewEventLists new_below, new_above;
+};
 
 /// A node waiting to be built: its box, its triangles (indices into the view, ascending) and its
 /// three event lists over node-local indices into `tris`.
@@ -105,7 +139,8 @@ struct Subtree {
 /// The bounds of triangle (p0, p1, p2) clipped to `box`: Sutherland–Hodgman against the six
 /// planes, then widened by a few ulp on its non-flat axes (the clipped vertices are rounded) and
 /// cut back to the box. False when nothing is left.
-bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& box, Aabb& out) {
+bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& whole,
+                    const Aabb& box, Aabb& out) {
   std::array<vec3, 9> poly_a, poly_b; // a triangle clipped by six planes has at most 9 vertices
   vec3* in = poly_a.data();
   vec3* cut = poly_b.data();
@@ -116,6 +151,8 @@ bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& 
   for (int axis = 0; axis < 3 && n > 0; ++axis) {
     for (int side = 0; side < 2 && n > 0; ++side) {
       const float plane = side == 0 ? box.min[axis] : box.max[axis];
+      // A plane that every vertex of the triangle lies inside leaves the polygon as it is.
+      if (side == 0 ? whole.min[axis] >= plane : whole.max[axis] <= plane) continue;
       int m = 0;
       for (int i = 0; i < n; ++i) {
         const vec3& a = in[i];
@@ -152,7 +189,8 @@ bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& 
   return true;
 }
 
-void push_events(const Aabb& b, std::uint32_t local, EventLists& lists) {
+template <class Lists>
+void push_events(const Aabb& b, std::uint32_t local, Lists& lists) {
   for (int axis = 0; axis < 3; ++axis) {
     if (b.min[axis] == b.max[axis]) {
       lists[std::size_t(axis)].push_back(make_event(b.min[axis], kPlanar, local));
@@ -176,7 +214,7 @@ public:
       : tris_(tris), options_(options), max_depth_(max_depth) {}
 
   /// Builds `in` at `depth`, appending its subtree (depth first) to `out`.
-  void build(NodeInput&& in, std::uint32_t depth, Subtree& out) const {
+  void build(NodeInput&& in, std::uint32_t depth, Subtree& out, Scratch& scratch) const {
     Counters& c = out.counters;
     c.max_depth = std::max(c.max_depth, depth);
     const std::size_t n = in.tris.size();
@@ -193,22 +231,24 @@ public:
     }
 
     NodeInput below, above;
-    split_node(in, split, below, above, c);
+    split_node(in, split, below, above, c, scratch);
     in = NodeInput{}; // the parent's lists are no longer needed while the children build
     c.sah += double(options_.traversal_cost) * double(area);
 
     std::size_t above_index;
     if (options_.parallel && n >= kParallelChildren) {
-      Subtree sub_below, sub_above;
-      tbb::parallel_invoke([&] { build(std::move(below), depth + 1, sub_below); },
-                           [&] { build(std::move(above), depth + 1, sub_above); });
-      splice(out, sub_below);
+      // The child below comes first in the array, so it appends straight to `out`; only the one
+      // above builds into its own arrays, spliced after.
+      Subtree sub_above;
+      Scratch scratch_above;
+      tbb::parallel_invoke([&] { build(std::move(below), depth + 1, out, scratch); },
+                           [&] { build(std::move(above), depth + 1, sub_above, scratch_above); });
       above_index = out.nodes.size();
       splice(out, sub_above);
     } else {
-      build(std::move(below), depth + 1, out);
+      build(std::move(below), depth + 1, out, scratch);
       above_index = out.nodes.size();
-      build(std::move(above), depth + 1, out);
+      build(std::move(above), depth + 1, out, scratch);
     }
     if (above_index >= kMaxTriangles) throw std::length_error("kd-tree: too many nodes");
     out.nodes[node].bits = (std::uint32_t(above_index) << 2) | std::uint32_t(split.axis);
@@ -242,8 +282,9 @@ private:
     c.sah += double(options_.intersection_cost) * double(n) * double(area);
   }
 
-  [[nodiscard]] float sah(float p_below, float p_above, std::size_t n_below,
-                          std::size_t n_above) const {
+  // Counts are signed 32-bit here: their conversion to float is one instruction.
+  [[nodiscard]] float sah(float p_below, float p_above, std::int32_t n_below,
+                          std::int32_t n_above) const {
     const float cost =
         options_.traversal_cost +
         options_.intersection_cost * (p_below * float(n_below) + p_above * float(n_above));
@@ -261,14 +302,19 @@ private:
     const int u = (axis + 1) % 3, v = (axis + 2) % 3;
     const float cap = extent[u] * extent[v];
     const float perimeter = extent[u] + extent[v];
-    const std::vector<Event>& ev = in.events[std::size_t(axis)];
-    std::size_t n_below = 0, n_above = n;
-    for (std::size_t i = 0; i < ev.size();) {
-      const float p = ev[i].pos;
-      std::size_t ending = 0, planar = 0, starting = 0;
-      while (i < ev.size() && ev[i].pos == p && ev[i].type() == kEnd) ++ending, ++i;
-      while (i < ev.size() && ev[i].pos == p && ev[i].type() == kPlanar) ++planar, ++i;
-      while (i < ev.size() && ev[i].pos == p && ev[i].type() == kStart) ++starting, ++i;
+    const EventList& ev = in.events[std::size_t(axis)];
+    const Event* e = ev.data();
+    const std::size_t m = ev.size();
+    std::int32_t n_below = 0, n_above = std::int32_t(n);
+    for (std::size_t i = 0; i < m;) {
+      // The events at one position, counted by type (the list is sorted end < planar < start).
+      const float p = e[i].pos;
+      std::int32_t count[3] = {0, 0, 0};
+      do {
+        ++count[e[i].type()];
+        ++i;
+      } while (i < m && e[i].pos == p);
+      const std::int32_t ending = count[kEnd], planar = count[kPlanar], starting = count[kStart];
       n_above -= planar + ending;
       if (p > lo && p < hi) {
         const float p_below = (cap + (p - lo) * perimeter) * inv_area;
@@ -302,46 +348,54 @@ private:
   /// Classification, list split and the straddling triangles' new events (Wald & Havran §5.2–5.3),
   /// all linear in the node's events but for the sort of the new events.
   void split_node(const NodeInput& in, const Split& split, NodeInput& below, NodeInput& above,
-                  Counters& c) const {
+                  Counters& c, Scratch& scratch) const {
     const std::size_t n = in.tris.size();
     const auto axis = std::size_t(split.axis);
-    std::vector<std::uint8_t> side(n, kBoth);
-    for (const Event& e : in.events[axis]) {
-      const std::uint32_t type = e.type();
-      if (type == kEnd && e.pos <= split.pos) {
-        side[e.local()] = kBelowOnly;
-      } else if (type == kStart && e.pos >= split.pos) {
-        side[e.local()] = kAboveOnly;
-      } else if (type == kPlanar) {
-        if (e.pos < split.pos || (e.pos == split.pos && split.planar_below))
-          side[e.local()] = kBelowOnly;
-        else
-          side[e.local()] = kAboveOnly;
+    // Classification without branches: a triangle gets at most one of the two flags (an end at or
+    // below the plane means its start lies below it; planar events are one or the other).
+    std::vector<std::uint8_t>& side = scratch.side;
+    side.assign(n, kBoth);
+    {
+      const float sp = split.pos;
+      const bool pb = split.planar_below;
+      for (const Event& e : in.events[axis]) {
+        const std::uint32_t type = e.type();
+        const bool planar_below = e.pos < sp || (e.pos == sp && pb);
+        const bool is_below = (type == kEnd && e.pos <= sp) || (type == kPlanar && planar_below);
+        const bool is_above = (type == kStart && e.pos >= sp) || (type == kPlanar && !planar_below);
+        side[e.local()] |= std::uint8_t(std::uint32_t(is_below) | (std::uint32_t(is_above) << 1));
       }
     }
 
-    // New local indices keep the old order, so the filtered lists stay sorted. Every array is
-    // sized once: the per-node allocations, not the passes, dominate small nodes.
+    // New local indices keep the old order, so the filtered lists stay sorted.
     std::size_t n_below = 0, n_above = 0, n_both = 0;
     for (std::size_t l = 0; l < n; ++l) {
       n_below += side[l] != kAboveOnly;
       n_above += side[l] != kBelowOnly;
       n_both += side[l] == kBoth;
     }
-    std::vector<std::uint32_t> remap(n); // the index in the child it goes to (below if both)
-    std::vector<std::uint32_t> straddling(n_both);
+    std::vector<std::uint32_t>& remap = scratch.remap; // the index in its child (below if both)
+    std::vector<std::uint32_t>& straddling = scratch.straddling;
+    std::vector<std::uint32_t>& above_index = scratch.above_index; // a straddler's index above
+    remap.resize(n);
+    straddling.resize(n_both);
+    above_index.resize(n_both);
     below.tris.resize(n_below);
     above.tris.resize(n_above);
     {
       std::uint32_t b = 0, a = 0, k = 0;
       for (std::uint32_t l = 0; l < n; ++l) {
-        if (side[l] == kBoth) straddling[k++] = l;
-        if (side[l] != kAboveOnly) {
+        const std::uint8_t sd = side[l];
+        if (sd == kBoth) {
+          straddling[k] = l;
+          above_index[k++] = a;
+        }
+        if (sd != kAboveOnly) {
           remap[l] = b;
           below.tris[b++] = in.tris[l];
         }
-        if (side[l] != kBelowOnly) {
-          if (side[l] == kAboveOnly) remap[l] = a;
+        if (sd != kBelowOnly) {
+          if (sd == kAboveOnly) remap[l] = a;
           above.tris[a++] = in.tris[l];
         }
       }
@@ -353,21 +407,11 @@ private:
     above.box.min[split.axis] = split.pos;
 
     // The straddling triangles' events in each child, from their parts inside the child box.
-    // Their indices in the children: remap[l] below, and above the count of triangles above
-    // before it, which the loop keeps as it walks the straddling triangles in order.
-    EventLists new_below, new_above;
+    NewEventLists& new_below = scratch.new_below;
+    NewEventLists& new_above = scratch.new_above;
     for (std::size_t a = 0; a < 3; ++a) {
-      new_below[a].reserve(2 * n_both);
-      new_above[a].reserve(2 * n_both);
-    }
-    std::vector<std::uint32_t> above_index(n_both);
-    {
-      std::uint32_t a = 0;
-      std::size_t k = 0;
-      for (std::uint32_t l = 0; l < n && k < n_both; ++l) {
-        if (side[l] == kBoth) above_index[k++] = a;
-        if (side[l] != kBelowOnly) ++a;
-      }
+      new_below[a].clear();
+      new_above[a].clear();
     }
     for (std::size_t k = 0; k < n_both; ++k) {
       const std::uint32_t l = straddling[k];
@@ -378,7 +422,7 @@ private:
         Aabb part;
         const bool clipped =
             options_.perfect_splits && clipped_bounds(tris_.vertex(prim, 0), tris_.vertex(prim, 1),
-                                                      tris_.vertex(prim, 2), box, part);
+                                                      tris_.vertex(prim, 2), whole, box, part);
         if (!clipped) {
           // No clipping, or clipping lost the sliver to rounding: the triangle's box cut to the
           // child box, never empty for a triangle that straddles the plane.
@@ -391,39 +435,35 @@ private:
     }
     c.events += 6 * n_both;
 
-    // One axis: a counting pass, then the filtered events and the sorted new ones merged straight
-    // into the child's list.
+    // One axis: the kept events filtered straight into each child's list (every event is written
+    // to both, and the write positions advance only on its side), then the sorted new events
+    // merged in from the back.
     auto split_axis = [&](std::size_t a) {
-      const std::vector<Event>& events = in.events[a];
-      std::sort(new_below[a].begin(), new_below[a].end());
-      std::sort(new_above[a].begin(), new_above[a].end());
-      std::size_t kept_below = 0, kept_above = 0;
-      for (const Event& e : events) {
-        const std::uint8_t s = side[e.local()];
-        kept_below += s == kBelowOnly;
-        kept_above += s == kAboveOnly;
-      }
-      std::vector<Event>& out_below = below.events[a];
-      std::vector<Event>& out_above = above.events[a];
-      out_below.resize(kept_below + new_below[a].size());
-      out_above.resize(kept_above + new_above[a].size());
-      std::size_t ib = 0, ia = 0, jb = 0, ja = 0;
-      const std::vector<Event>& nb = new_below[a];
-      const std::vector<Event>& na = new_above[a];
+      const EventList& events = in.events[a];
+      std::vector<Event>& nb = new_below[a];
+      std::vector<Event>& na = new_above[a];
+      std::sort(nb.begin(), nb.end());
+      std::sort(na.begin(), na.end());
+      EventList& out_below = below.events[a];
+      EventList& out_above = above.events[a];
+      out_below.allocate(events.size() + nb.size());
+      out_above.allocate(events.size() + na.size());
+      Event* ob = out_below.data();
+      Event* oa = out_above.data();
+      std::size_t ib = 0, ia = 0;
+      const std::uint8_t* sd = side.data();
+      const std::uint32_t* rm = remap.data();
       for (const Event& e : events) {
         const std::uint32_t l = e.local();
-        if (side[l] == kBelowOnly) {
-          const Event moved = make_event(e.pos, e.type(), remap[l]);
-          while (jb < nb.size() && nb[jb] < moved) out_below[ib++] = nb[jb++];
-          out_below[ib++] = moved;
-        } else if (side[l] == kAboveOnly) {
-          const Event moved = make_event(e.pos, e.type(), remap[l]);
-          while (ja < na.size() && na[ja] < moved) out_above[ia++] = na[ja++];
-          out_above[ia++] = moved;
-        }
+        const std::uint8_t s = sd[l];
+        const Event moved{e.pos, (e.key & ~(kMaxTriangles - 1)) | rm[l]};
+        ob[ib] = moved;
+        oa[ia] = moved;
+        ib += s == kBelowOnly;
+        ia += s == kAboveOnly;
       }
-      while (jb < nb.size()) out_below[ib++] = nb[jb++];
-      while (ja < na.size()) out_above[ia++] = na[ja++];
+      out_below.set_size(merge_back(ob, ib, nb));
+      out_above.set_size(merge_back(oa, ia, na));
     };
     if (options_.parallel && n >= kParallelAxes) {
       tbb::parallel_invoke([&] { split_axis(0); }, [&] { split_axis(1); }, [&] { split_axis(2); });
@@ -433,6 +473,19 @@ private:
     c.events += 2 * (in.events[0].size() + in.events[1].size() + in.events[2].size());
     for (std::size_t a = 0; a < 3; ++a)
       c.sort_work += sort_cost(new_below[a].size()) + sort_cost(new_above[a].size());
+  }
+
+  /// Merges the sorted `extra` into the sorted out[0, kept) in place, from the back (out has room
+  /// for both); returns the merged size. Keys are unique, so there are no ties.
+  static std::size_t merge_back(Event* out, std::size_t kept, const std::vector<Event>& extra) {
+    std::size_t i = kept, j = extra.size(), k = kept + extra.size();
+    while (j > 0) {
+      if (i > 0 && extra[j - 1] < out[i - 1])
+        out[--k] = out[--i];
+      else
+        out[--k] = extra[--j];
+    }
+    return kept + extra.size();
   }
 
   const TriangleView& tris_;
@@ -466,7 +519,7 @@ void KdTree::build(const TriangleView& tris, const KdBuildOptions& options) {
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return;
   }
-  for (std::size_t a = 0; a < 3; ++a) root.events[a].reserve(2 * n);
+  for (std::size_t a = 0; a < 3; ++a) root.events[a].allocate(2 * n);
   for (std::uint32_t l = 0; l < n; ++l) {
     const Aabb b = tris.bounds(root.tris[l]);
     bounds_.grow(b);
@@ -489,7 +542,8 @@ void KdTree::build(const TriangleView& tris, const KdBuildOptions& options) {
   const float root_area = half_area(bounds_.extent());
   Subtree tree;
   tree.counters = sorting;
-  Builder(tris, options, max_depth).build(std::move(root), 0, tree);
+  Scratch scratch;
+  Builder(tris, options, max_depth).build(std::move(root), 0, tree, scratch);
   nodes_ = std::move(tree.nodes);
   indices_ = std::move(tree.indices);
 
