@@ -439,6 +439,27 @@ TEST_P(Conformance, ADeformingMeshIsRefittedNotRebuiltAndTheHitFollows) {
   EXPECT_NEAR(10.0f - hit.t, 1.75f, 0.01f);
 }
 
+TEST_P(Conformance, ADeformingMeshThatGrowsPastItsOldBoundsIsHitThere) {
+  // The top level must learn the refitted mesh's new bounds (the Embree backend once kept the
+  // old ones, and rays missed whatever had grown outside them).
+  UpdateWorld w(backend());
+  Animation anim;
+  const auto& base = w.reg.get<Mesh>(w.blob).geometry->positions;
+  std::vector<vec3> grown = base;
+  for (vec3& p : grown) p = vec3(p.x * 6.0f, p.y, p.z * 6.0f); // radius 0.5 → 3 across x and z
+  anim.vertices.times = {0.0f, 1.0f};
+  anim.vertices.values = {base, grown};
+  anim.loop = false; // stay grown at t = 1
+  w.reg.emplace<Animation>(w.blob, anim);
+  Schedule schedule;
+  schedule.tick(w.reg, 0.0);
+  EXPECT_NE(w.tables().entity(w.below(0, 6.5f).instance), w.blob); // beyond the blob at rest
+  schedule.tick(w.reg, 1.0);
+  const Hit hit = w.below(0, 6.5f); // the blob's centre is at z = 4: now 2.5 inside its rim
+  ASSERT_TRUE(hit.hit());
+  EXPECT_EQ(w.tables().entity(hit.instance), w.blob);
+}
+
 TEST_P(Conformance, DestroyedEntitiesLeaveTheStructure) {
   UpdateWorld w(backend());
   Schedule schedule;
