@@ -72,10 +72,16 @@ SceneKind scene_kind(ecs::Registry& registry) {
 }
 
 std::vector<std::string_view> cpu_preference(SceneKind kind) {
-  // Measured with specula_bench (docs/PERFORMANCE.md, "Choosing between CPU backends").
+  // Measured with specula_bench (docs/PERFORMANCE.md §6): Embree is the fastest CPU backend on
+  // static scenes (primary, shadow and reflection rays) and on both animated scenes, rigid and
+  // deforming; of the native configurations the BVH over the static set beats the kd-tree on
+  // each of them. Kept per kind so that a measurement that turns one around changes one line.
   switch (kind) {
+  case SceneKind::static_only:
+  case SceneKind::rigid_dynamic:
+  case SceneKind::deforming:
   default:
-    return {"embree", "native"};
+    return {"embree", "native-bvh", "native"};
   }
 }
 
