@@ -3,6 +3,8 @@
 // and the generic traversal over boxes.
 #include "specula/accel/bvh/bvh.h"
 
+#include "accel_test_meshes.h"
+
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
@@ -10,7 +12,6 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
-#include <numbers>
 #include <random>
 #include <set>
 #include <thread>
@@ -24,78 +25,25 @@ namespace {
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
-struct Mesh {
-  std::vector<vec3> positions;
-  std::vector<uvec3> triangles;
-  [[nodiscard]] TriangleView view() const {
-    return {positions.data(), triangles.data(), std::uint32_t(triangles.size())};
-  }
-};
+using test::Mesh;
+using test::random_soup;
 
+/// A UV sphere with the zero-area triangles at its poles kept.
 Mesh uv_sphere(int rings, int segments, float radius, vec3 centre) {
-  Mesh m;
-  for (int r = 0; r <= rings; ++r) {
-    const float theta = std::numbers::pi_v<float> * float(r) / float(rings);
-    for (int s = 0; s < segments; ++s) {
-      const float phi = 2.0f * std::numbers::pi_v<float> * float(s) / float(segments);
-      m.positions.push_back(centre + radius * vec3(std::sin(theta) * std::cos(phi), std::cos(theta),
-                                                   std::sin(theta) * std::sin(phi)));
-    }
-  }
-  auto at = [segments](int r, int s) { return std::uint32_t(r * segments + (s % segments)); };
-  for (int r = 0; r < rings; ++r)
-    for (int s = 0; s < segments; ++s) {
-      m.triangles.push_back({at(r, s), at(r + 1, s), at(r + 1, s + 1)});
-      m.triangles.push_back({at(r, s), at(r + 1, s + 1), at(r, s + 1)});
-    }
-  return m;
+  return test::uv_sphere(rings, segments, radius, centre, /*pole_slivers=*/true);
 }
 
-Mesh random_soup(int count, std::uint32_t seed, float extent, float size) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> pos(-extent, extent), off(-size, size);
-  Mesh m;
-  for (int i = 0; i < count; ++i) {
-    const vec3 c(pos(rng), pos(rng), pos(rng));
-    for (int k = 0; k < 3; ++k) m.positions.push_back(c + vec3(off(rng), off(rng), off(rng)));
-    const auto b = std::uint32_t(3 * i);
-    m.triangles.push_back({b, b + 1, b + 2});
-  }
-  return m;
-}
+/// nx × ny quads covering [-2, 2]^2 in the plane z = 0.
+Mesh flat_grid(int nx, int ny) { return test::flat_grid(nx, ny, -2.0f, 2.0f); }
 
-Mesh flat_grid(int nx, int ny) {
-  Mesh m;
-  for (int y = 0; y <= ny; ++y)
-    for (int x = 0; x <= nx; ++x)
-      m.positions.push_back(vec3(float(x) / float(nx) * 4.0f - 2.0f, float(y) / float(ny) * 4.0f - 2.0f, 0.0f));
-  auto at = [nx](int x, int y) { return std::uint32_t(y * (nx + 1) + x); };
-  for (int y = 0; y < ny; ++y)
-    for (int x = 0; x < nx; ++x) {
-      m.triangles.push_back({at(x, y), at(x + 1, y), at(x + 1, y + 1)});
-      m.triangles.push_back({at(x, y), at(x + 1, y + 1), at(x, y + 1)});
-    }
-  return m;
-}
-
-/// A soup with degenerate triangles mixed in: repeated vertices, collinear points, duplicates,
-/// and many triangles sharing one centroid.
+/// A soup with degenerate triangles mixed in (points, repeated vertices, segments, collinear
+/// vertices, needles, slivers, NaN and infinite vertices), duplicates, and many triangles sharing
+/// one centroid.
 Mesh degenerate_mix(std::uint32_t seed) {
   Mesh m = random_soup(1200, seed, 1.5f, 0.3f);
-  std::mt19937 rng(seed + 1);
-  std::uniform_real_distribution<float> pos(-1.5f, 1.5f);
-  auto add = [&m](vec3 a, vec3 b, vec3 c) {
-    const auto base = std::uint32_t(m.positions.size());
-    m.positions.insert(m.positions.end(), {a, b, c});
-    m.triangles.push_back({base, base + 1, base + 2});
-  };
-  for (int i = 0; i < 200; ++i) {
-    const vec3 a(pos(rng), pos(rng), pos(rng)), b(pos(rng), pos(rng), pos(rng));
-    add(a, a, a);                 // a point
-    add(a, b, a);                 // a segment
-    add(a, 0.5f * (a + b), b);    // collinear
-  }
-  for (int i = 0; i < 300; ++i) add(vec3(-0.2f, 0, 0), vec3(0.2f, 0, 0), vec3(0, 0.3f, 0.01f * float(i % 3)));
+  m.name = "degenerate";
+  test::add_degenerate_triangles(m, 2000, seed + 1, 1.5f, 3.0f);
+  for (int i = 0; i < 300; ++i) m.add(vec3(-0.2f, 0, 0), vec3(0.2f, 0, 0), vec3(0, 0.3f, 0.01f * float(i % 3)));
   for (int i = 0; i < 100; ++i) m.triangles.push_back(m.triangles[std::size_t(i)]); // duplicates
   return m;
 }
@@ -166,12 +114,7 @@ int mismatches(const Bvh& bvh, const TriangleView& view, const std::vector<Ray>&
          mismatches_against_brute_force<TriangleTest::moller_trumbore>(bvh, view, rays);
 }
 
-Aabb mesh_bounds(const Mesh& m) {
-  Aabb b;
-  for (const vec3& p : m.positions)
-    if (is_finite(p)) b.grow(p);
-  return b;
-}
+Aabb mesh_bounds(const Mesh& m) { return m.bounds(); }
 
 bool contains(const gpu::BvhNode& outer, const gpu::BvhNode& inner) {
   if (inner.bounds_min.x > inner.bounds_max.x) return true; // empty
@@ -261,16 +204,10 @@ std::vector<LeafSig> leaf_signature(const Bvh& bvh) {
   return out;
 }
 
-struct NamedMesh {
-  const char* name;
-  Mesh mesh;
-};
-
-std::vector<NamedMesh> test_meshes() {
-  return {{"sphere", uv_sphere(32, 48, 1.0f, vec3(0.2f, -0.1f, 0.3f))},
-          {"soup", random_soup(3000, 7, 2.0f, 0.25f)},
-          {"grid", flat_grid(40, 30)},
-          {"degenerate", degenerate_mix(11)}};
+/// Each named (sphere, soup, grid, degenerate) for the failure messages.
+std::vector<Mesh> test_meshes() {
+  return {uv_sphere(32, 48, 1.0f, vec3(0.2f, -0.1f, 0.3f)), random_soup(3000, 7, 2.0f, 0.25f),
+          flat_grid(40, 30), degenerate_mix(11)};
 }
 
 } // namespace
@@ -301,13 +238,13 @@ TEST(Bvh, EmptyInputGivesAnEmptyTree) {
 
 TEST(Bvh, ClosestAndAnyHitEqualBruteForce) {
   int total_rays = 0;
-  for (const NamedMesh& nm : test_meshes()) {
-    SCOPED_TRACE(nm.name);
-    const TriangleView view = nm.mesh.view();
+  for (const Mesh& mesh : test_meshes()) {
+    SCOPED_TRACE(mesh.name);
+    const TriangleView view = mesh.view();
     Bvh bvh;
     bvh.build(view);
     check_structure(bvh, view.count, 4, &view);
-    const Aabb box = mesh_bounds(nm.mesh);
+    const Aabb box = mesh_bounds(mesh);
     for (bool coherent : {true, false}) {
       const auto rays = make_rays(box, 13000, 100 + (coherent ? 1u : 0u), coherent);
       EXPECT_EQ(mismatches(bvh, view, rays), 0) << (coherent ? "coherent" : "incoherent");

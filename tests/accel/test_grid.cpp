@@ -3,6 +3,8 @@
 // conservative elsewhere, and the resolution heuristic gives what it promises.
 #include "specula/accel/grid/grid.h"
 
+#include "accel_test_meshes.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -21,102 +23,28 @@ namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-constexpr float kPi = 3.14159265f;
 
-struct Mesh {
-  std::vector<vec3> positions;
-  std::vector<uvec3> triangles;
-
-  [[nodiscard]] TriangleView view() const {
-    return {positions.data(), triangles.data(), std::uint32_t(triangles.size())};
-  }
-  void add(const vec3& a, const vec3& b, const vec3& c) {
-    const auto base = std::uint32_t(positions.size());
-    positions.insert(positions.end(), {a, b, c});
-    triangles.emplace_back(base, base + 1, base + 2);
-  }
-  [[nodiscard]] Aabb bounds() const {
-    Aabb box;
-    for (const vec3& p : positions)
-      if (is_finite(p)) box.grow(p);
-    return box;
-  }
-  void translate(const vec3& by) {
-    for (vec3& p : positions) p += by;
-  }
-};
-
-Mesh uv_sphere(const vec3& centre, float radius, int rings, int segments) {
-  Mesh m;
-  for (int i = 0; i <= rings; ++i) {
-    const float theta = kPi * float(i) / float(rings);
-    for (int j = 0; j < segments; ++j) {
-      const float phi = 2.0f * kPi * float(j) / float(segments);
-      m.positions.push_back(centre + radius * vec3(std::sin(theta) * std::cos(phi), std::cos(theta),
-                                                   std::sin(theta) * std::sin(phi)));
-    }
-  }
-  for (int i = 0; i < rings; ++i) {
-    for (int j = 0; j < segments; ++j) {
-      const auto a = std::uint32_t(i * segments + j);
-      const auto b = std::uint32_t(i * segments + (j + 1) % segments);
-      const auto c = a + std::uint32_t(segments), d = b + std::uint32_t(segments);
-      if (i != 0) m.triangles.emplace_back(a, b, c);
-      if (i != rings - 1) m.triangles.emplace_back(b, d, c);
-    }
-  }
-  return m;
-}
-
-Mesh cube() {
-  Mesh m;
-  for (int i = 0; i < 8; ++i)
-    m.positions.emplace_back(i & 1 ? 1.0f : -1.0f, i & 2 ? 1.0f : -1.0f, i & 4 ? 1.0f : -1.0f);
-  const std::uint32_t quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
-                                     {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-  for (const auto& q : quads) {
-    m.triangles.emplace_back(q[0], q[1], q[2]);
-    m.triangles.emplace_back(q[0], q[2], q[3]);
-  }
-  return m;
-}
+using test::cube;
+using test::Mesh;
+using test::uv_sphere;
 
 /// Triangles of every size in [-5, 5]^3: most small, some spanning the whole scene.
 Mesh random_soup(std::uint32_t seed, int count) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
-  Mesh m;
-  for (int i = 0; i < count; ++i) {
-    const vec3 centre(unit(rng) * 5.0f, unit(rng) * 5.0f, unit(rng) * 5.0f);
-    const float size = i % 10 == 0 ? 4.0f : (i % 3 == 0 ? 0.5f : 0.05f);
-    m.add(centre + size * vec3(unit(rng), unit(rng), unit(rng)),
-          centre + size * vec3(unit(rng), unit(rng), unit(rng)),
-          centre + size * vec3(unit(rng), unit(rng), unit(rng)));
-  }
-  return m;
+  return test::random_soup(count, seed, 5.0f,
+                           [](int i) { return i % 10 == 0 ? 4.0f : (i % 3 == 0 ? 0.5f : 0.05f); });
 }
 
 /// n × n quads in the plane z = height, [-4, 4]^2.
-Mesh flat_grid(int n, float height) {
-  Mesh m;
-  for (int y = 0; y <= n; ++y)
-    for (int x = 0; x <= n; ++x)
-      m.positions.emplace_back(-4.0f + 8.0f * float(x) / float(n),
-                               -4.0f + 8.0f * float(y) / float(n), height);
-  for (int y = 0; y < n; ++y)
-    for (int x = 0; x < n; ++x) {
-      const auto a = std::uint32_t(y * (n + 1) + x), b = a + 1, c = a + std::uint32_t(n + 1),
-                 d = c + 1;
-      m.triangles.emplace_back(a, b, d);
-      m.triangles.emplace_back(a, d, c);
-    }
-  return m;
-}
+Mesh flat_grid(int n, float height) { return test::flat_grid(n, n, -4.0f, 4.0f, height); }
 
 /// A soup with degenerate triangles mixed in: repeated vertices, collinear vertices, points, and a
 /// few with NaN or infinite vertices (left out of the grid, never hit by brute force either).
+/// Kept local rather than test::add_degenerate_triangles: with that generator's midpoint-collinear
+/// triangles, CellListsAreCompleteAndNoWiderThanTriangleBoxes finds a zero-area triangle missing
+/// from its own vertex's cell (a grid-build issue to be fixed in engine/accel/grid, not here).
 Mesh degenerate_soup(std::uint32_t seed) {
   Mesh m = random_soup(seed, 600);
+  m.name = "degenerate";
   std::mt19937 rng(seed + 1);
   std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
   for (int i = 0; i < 300; ++i) {
@@ -309,7 +237,7 @@ void check_mesh(const Mesh& mesh, const char* name, std::uint32_t seed) {
 // 124 000 ray queries), each also asked for occlusion of the full ray and of a segment.
 
 TEST(UniformGrid, UvSphereMatchesBruteForce) {
-  check_mesh(uv_sphere(vec3(0.3f, -0.2f, 0.1f), 2.0f, 24, 48), "uv sphere", 1);
+  check_mesh(uv_sphere(24, 48, 2.0f, vec3(0.3f, -0.2f, 0.1f)), "uv sphere", 1);
 }
 TEST(UniformGrid, CubeMatchesBruteForce) { check_mesh(cube(), "cube", 2); }
 TEST(UniformGrid, RandomSoupMatchesBruteForce) { check_mesh(random_soup(3, 1500), "soup", 3); }
@@ -341,7 +269,7 @@ TEST(UniformGrid, RaysStartingInsideTheGrid) {
 
 TEST(UniformGrid, AxisParallelRays) {
   for (const Mesh& mesh :
-       {random_soup(21, 1000), uv_sphere(vec3(0.0f), 3.0f, 16, 32), flat_grid(16, 0.0f)}) {
+       {random_soup(21, 1000), uv_sphere(16, 32, 3.0f, vec3(0.0f)), flat_grid(16, 0.0f)}) {
     UniformGrid grid;
     grid.build(mesh.view());
     std::mt19937 rng(22);
@@ -388,7 +316,7 @@ TEST(UniformGrid, RaysAlongCellBoundaries) {
 }
 
 TEST(UniformGrid, FarAwayOrigins) {
-  const Mesh mesh = uv_sphere(vec3(0.0f), 2.0f, 32, 64);
+  const Mesh mesh = uv_sphere(32, 64, 2.0f, vec3(0.0f));
   UniformGrid grid;
   grid.build(mesh.view());
   std::mt19937 rng(41);
@@ -407,7 +335,7 @@ TEST(UniformGrid, FarAwayOrigins) {
 
 TEST(UniformGrid, MeshesFarFromTheOrigin) {
   for (const float offset : {1e5f, 1e6f}) {
-    Mesh mesh = uv_sphere(vec3(0.0f), 200.0f, 24, 48);
+    Mesh mesh = uv_sphere(24, 48, 200.0f, vec3(0.0f));
     const Mesh soup = random_soup(51, 500);
     for (const uvec3& t : soup.triangles)
       mesh.add(soup.positions[t.x] * 30.0f, soup.positions[t.y] * 30.0f,
@@ -525,7 +453,7 @@ TEST(UniformGrid, ResolutionGivesCubicalCellsNearTheTargetCount) {
     Mesh mesh;
     const char* name;
   };
-  const Case cases[] = {{uv_sphere(vec3(0.0f), 2.0f, 32, 64), "sphere"},
+  const Case cases[] = {{uv_sphere(32, 64, 2.0f, vec3(0.0f)), "sphere"},
                         {random_soup(91, 3000), "soup"},
                         {flat_grid(40, 0.0f), "flat grid"}};
   for (const Case& c : cases) {
@@ -564,7 +492,7 @@ TEST(UniformGrid, FlatSceneGetsOneCellAcrossItsPlane) {
 }
 
 TEST(UniformGrid, ResolutionIsClamped) {
-  const Mesh sphere = uv_sphere(vec3(0.0f), 2.0f, 32, 64);
+  const Mesh sphere = uv_sphere(32, 64, 2.0f, vec3(0.0f));
   UniformGrid grid;
   grid.build(sphere.view(), GridBuildOptions{4.0f, 1000});
   EXPECT_LE(grid.header().cell_count, 1000u);
@@ -584,7 +512,7 @@ TEST(UniformGrid, ResolutionIsClamped) {
 // -----------------------------------------------------------------------------------
 
 TEST(UniformGrid, InvalidRaysMiss) {
-  const Mesh mesh = uv_sphere(vec3(0.0f), 1.0f, 8, 16);
+  const Mesh mesh = uv_sphere(8, 16, 1.0f, vec3(0.0f));
   UniformGrid grid;
   grid.build(mesh.view());
   const PreparedRay rays[] = {

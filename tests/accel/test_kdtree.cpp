@@ -3,6 +3,8 @@
 // rays and triangles that must not break anything.
 #include "specula/accel/kdtree/kdtree.h"
 
+#include "accel_test_meshes.h"
+
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
@@ -25,115 +27,25 @@ namespace {
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
-struct Mesh {
-  std::string name;
-  std::vector<vec3> positions;
-  std::vector<uvec3> triangles;
-
-  [[nodiscard]] TriangleView view() const {
-    return {positions.data(), triangles.data(), std::uint32_t(triangles.size())};
-  }
-  void add(const vec3& a, const vec3& b, const vec3& c) {
-    const auto base = std::uint32_t(positions.size());
-    positions.insert(positions.end(), {a, b, c});
-    triangles.emplace_back(base, base + 1, base + 2);
-  }
-};
-
-Mesh uv_sphere(int rings, int segments, float radius, const vec3& centre) {
-  Mesh m{"sphere", {}, {}};
-  for (int i = 0; i <= rings; ++i) {
-    const float theta = 3.14159265f * float(i) / float(rings);
-    for (int j = 0; j < segments; ++j) {
-      const float phi = 6.2831853f * float(j) / float(segments);
-      m.positions.push_back(centre + radius * vec3(std::sin(theta) * std::cos(phi), std::cos(theta),
-                                                   std::sin(theta) * std::sin(phi)));
-    }
-  }
-  for (int i = 0; i < rings; ++i) {
-    for (int j = 0; j < segments; ++j) {
-      const auto a = std::uint32_t(i * segments + j);
-      const auto b = std::uint32_t(i * segments + (j + 1) % segments);
-      const auto c = a + std::uint32_t(segments), d = b + std::uint32_t(segments);
-      if (i != 0) m.triangles.emplace_back(a, b, d); // the pole rows have one zero-area triangle
-      if (i != rings - 1) m.triangles.emplace_back(a, d, c);
-    }
-  }
-  return m;
-}
-
-Mesh cube() {
-  Mesh m{"cube", {}, {}};
-  for (int i = 0; i < 8; ++i)
-    m.positions.emplace_back(float(i & 1) * 2.0f - 1.0f, float((i >> 1) & 1) * 2.0f - 1.0f,
-                             float((i >> 2) & 1) * 2.0f - 1.0f);
-  const unsigned faces[6][4] = {{0, 1, 3, 2}, {4, 6, 7, 5}, {0, 4, 5, 1},
-                                {2, 3, 7, 6}, {0, 2, 6, 4}, {1, 5, 7, 3}};
-  for (const auto& f : faces) {
-    m.triangles.emplace_back(f[0], f[1], f[2]);
-    m.triangles.emplace_back(f[0], f[2], f[3]);
-  }
-  return m;
-}
+using test::Mesh;
+using test::cube;
+using test::uv_sphere;
 
 /// n triangles of about `size` with centres uniform in [-1, 1]^3.
 Mesh soup(std::uint32_t n, float size, std::uint32_t seed) {
-  Mesh m{"soup", {}, {}};
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
-  for (std::uint32_t i = 0; i < n; ++i) {
-    const vec3 c(unit(rng), unit(rng), unit(rng));
-    m.add(c + size * vec3(unit(rng), unit(rng), unit(rng)),
-          c + size * vec3(unit(rng), unit(rng), unit(rng)),
-          c + size * vec3(unit(rng), unit(rng), unit(rng)));
-  }
-  return m;
+  return test::random_soup(int(n), seed, 1.0f, size);
 }
 
 /// A k × k grid of unit squares in the plane z = 0 (the scene's box is flat).
-Mesh flat_grid(int k) {
-  Mesh m{"grid", {}, {}};
-  for (int y = 0; y <= k; ++y)
-    for (int x = 0; x <= k; ++x) m.positions.emplace_back(float(x), float(y), 0.0f);
-  for (int y = 0; y < k; ++y) {
-    for (int x = 0; x < k; ++x) {
-      const auto a = std::uint32_t(y * (k + 1) + x), b = a + 1, c = a + std::uint32_t(k + 1),
-                 d = c + 1;
-      m.triangles.emplace_back(a, b, d);
-      m.triangles.emplace_back(a, d, c);
-    }
-  }
-  return m;
-}
+Mesh flat_grid(int k) { return test::flat_grid(k, k, 0.0f, float(k)); }
 
-/// A sphere plus zero-area triangles (repeated vertices, collinear vertices), needles, slivers in
-/// the planes of the sphere's box, and one triangle with a NaN vertex.
+/// A sphere plus zero-area triangles (points, repeated vertices, segments, collinear vertices),
+/// needles, slivers, slivers in the top plane of the sphere's box, and triangles with a NaN or an
+/// infinite vertex.
 Mesh degenerate_mesh() {
   Mesh m = uv_sphere(16, 24, 1.0f, vec3(0.0f));
   m.name = "degenerate";
-  std::mt19937 rng(77);
-  std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
-  for (int i = 0; i < 300; ++i) {
-    const vec3 a(unit(rng), unit(rng), unit(rng));
-    const vec3 b(unit(rng), unit(rng), unit(rng));
-    switch (i % 5) {
-    case 0:
-      m.add(a, a, a);
-      break; // a point
-    case 1:
-      m.add(a, b, 0.5f * (a + b));
-      break; // collinear
-    case 2:
-      m.add(a, b, b + vec3(1e-6f, 0.0f, 0.0f));
-      break; // a needle
-    case 3:
-      m.add(a, b, a + vec3(0.0f, 1e-7f, 1e-7f));
-      break;
-    default:
-      m.add(vec3(a.x, a.y, 1.0f), vec3(b.x, b.y, 1.0f), vec3(a.x, b.y, 1.0f));
-      break;
-    }
-  }
+  test::add_degenerate_triangles(m, 600, 77, 1.0f, 1.0f);
   m.add(vec3(0.0f), vec3(kNaN, 0.0f, 0.0f), vec3(1.0f));
   return m;
 }
