@@ -31,9 +31,14 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
       return false;
   }
   const vec3 edges[3] = {v1 - v0, v2 - v1, v0 - v2};
-  // Triangle normal: the plane against the box's projected radius.
+  // Triangle normal: the plane against the box's projected radius. For a (nearly) collinear
+  // triangle the computed normal is rounding noise pointing anywhere, and its "plane" would cut
+  // cells the segment crosses: skip it then (the edge axes below still separate exactly).
   const vec3 n = glm::cross(edges[0], edges[1]);
-  if (std::abs(glm::dot(n, v0)) > glm::dot(half, glm::abs(n))) return false;
+  const float noise = 64.0f * std::numeric_limits<float>::epsilon() * glm::length(edges[0]) *
+                      glm::length(edges[1]);
+  if (glm::length(n) > noise && std::abs(glm::dot(n, v0)) > glm::dot(half, glm::abs(n)))
+    return false;
   // Edge × box axis.
   for (const vec3& e : edges) {
     for (int a = 0; a < 3; ++a) {
