@@ -44,6 +44,18 @@ struct PrimaryHits {
     return h;
   }
   [[nodiscard]] vec3 direction(std::size_t i) const { return vec3(dir_x[i], dir_y[i], dir_z[i]); }
+  /// Writes entry i from a hit (the direction stays); a miss keeps Hit's own fields (t = +inf,
+  /// instance = kNoInstance, primitive 0).
+  void set(std::size_t i, const Hit& h) {
+    t[i] = h.t;
+    u[i] = h.uv.x;
+    v[i] = h.uv.y;
+    ng_x[i] = h.object_normal.x;
+    ng_y[i] = h.object_normal.y;
+    ng_z[i] = h.object_normal.z;
+    instance[i] = h.instance;
+    primitive[i] = h.primitive;
+  }
 };
 
 /// Work done by one Tracer::update (asserted by tests, reported in the stats file).

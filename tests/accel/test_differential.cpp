@@ -32,6 +32,17 @@ constexpr std::size_t kRaysPerStage = std::size_t(1) << 16;
 
 bool has_embree() { return backend_info("embree").available; }
 
+/// The world bounds of every live instance.
+Aabb world_bounds(const SceneTables& tables) {
+  Aabb bounds;
+  for (std::uint32_t slot = 0; slot < tables.instances.size(); ++slot)
+    if (tables.live(slot)) {
+      bounds.grow(tables.instances[slot].world_bounds_min);
+      bounds.grow(tables.instances[slot].world_bounds_max);
+    }
+  return bounds;
+}
+
 /// Half coherent (from `eye` through a cone around the scene centre), half incoherent.
 std::vector<Ray> make_rays(const Aabb& bounds, const vec3& eye, std::uint32_t seed) {
   std::mt19937 rng(seed);
@@ -214,9 +225,7 @@ TEST(Differential, StaticStructuresAgreeWithEmbree) {
   ecs::Registry reg;
   build_static_scene(reg);
   const test::TracedWorld reference(reg, "embree");
-  Aabb bounds;
-  for (const vec3& p : reference.tables().positions) bounds.grow(p);
-  const std::vector<Ray> rays = make_rays(bounds, vec3(3, 6, 14), 1234);
+  const std::vector<Ray> rays = make_rays(world_bounds(reference.tables()), vec3(3, 6, 14), 1234);
   for (const char* backend : {"native", "native-bvh", "native-grid"}) {
     const test::TracedWorld tested(reg, backend);
     expect_agreement(compare(*reference.tracer, *tested.tracer, rays, reference.tables()), backend);
@@ -228,9 +237,7 @@ TEST(Differential, TheMollerTrumboreOptionAgreesWithEmbreeToo) {
   ecs::Registry reg;
   build_static_scene(reg);
   const test::TracedWorld reference(reg, "embree");
-  Aabb bounds;
-  for (const vec3& p : reference.tables().positions) bounds.grow(p);
-  const std::vector<Ray> rays = make_rays(bounds, vec3(-5, 3, 12), 4321);
+  const std::vector<Ray> rays = make_rays(world_bounds(reference.tables()), vec3(-5, 3, 12), 4321);
   for (const StaticStructure s : {StaticStructure::kdtree, StaticStructure::bvh}) {
     NativeOptions options;
     options.static_structure = s;
@@ -300,13 +307,7 @@ TEST(Differential, TwoLevelStructureAgreesWithEmbreeThroughRefitsAndRestructurin
       tested->update(layer);
       refits += tested->last_update().blas_refits;
       restructures += tested->last_update().blas_restructures;
-      Aabb bounds;
-      for (const gpu::GpuInstance& inst : layer.tables().instances)
-        if (inst.mesh != gpu::kNoIndex) {
-          bounds.grow(inst.world_bounds_min);
-          bounds.grow(inst.world_bounds_max);
-        }
-      const std::vector<Ray> rays = make_rays(bounds, vec3(1, 7, 13), seed++);
+      const std::vector<Ray> rays = make_rays(world_bounds(layer.tables()), vec3(1, 7, 13), seed++);
       expect_agreement(compare(*scene.reg.resource<ActiveTracer>().tracer, *tested, rays,
                                layer.tables()),
                        std::string(backend) + " at t=" + std::to_string(time));

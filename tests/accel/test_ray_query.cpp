@@ -114,3 +114,41 @@ TEST(RayQuery, BoxTestIsConservativeForHitsOnTheBoxFaces) {
   }
   EXPECT_EQ(culled, 0);
 }
+
+TEST(RayQuery, EightRayPacketsRunAsTwoPacketsOfFourLaneForLane) {
+  RayPacket<8> rays;
+  PacketHits<8> hits;
+  hits.clear();
+  bool active[8];
+  for (int i = 0; i < 8; ++i) {
+    rays.ox[i] = float(i);
+    rays.oy[i] = rays.oz[i] = 0.0f;
+    rays.dx[i] = rays.dy[i] = 0.0f;
+    rays.dz[i] = 1.0f;
+    rays.tnear[i] = 0.0f;
+    rays.tfar[i] = 100.0f;
+    active[i] = i % 3 != 0;
+  }
+  int calls = 0;
+  // A stand-in for a 4-wide kernel: each active lane "hits" at t = 10 + its origin's x.
+  as_two_packets_of_4(rays, hits, active, [&](RayPacket<4>& r4, PacketHits<4>& h4, const bool* a4) {
+    ++calls;
+    for (int i = 0; i < 4; ++i) {
+      if (!a4[i]) continue;
+      r4.tfar[i] = 10.0f + r4.ox[i];
+      h4.set(i, TriangleHit{r4.tfar[i], 0.25f, 0.5f, std::uint32_t(r4.ox[i])});
+    }
+  });
+  EXPECT_EQ(calls, 2);
+  for (int i = 0; i < 8; ++i) {
+    if (active[i]) {
+      EXPECT_EQ(hits.prim[i], std::uint32_t(i));
+      EXPECT_FLOAT_EQ(hits.t[i], 10.0f + float(i));
+      EXPECT_FLOAT_EQ(rays.tfar[i], 10.0f + float(i));
+      EXPECT_FLOAT_EQ(hits.v[i], 0.5f);
+    } else {
+      EXPECT_EQ(hits.prim[i], 0xFFFFFFFFu);
+      EXPECT_FLOAT_EQ(rays.tfar[i], 100.0f);
+    }
+  }
+}

@@ -129,38 +129,6 @@ TEST_P(Conformance, HitsASphereInstanceUnderRotationAndScaleWhereTheMathSays) {
 
 // --- Watertightness --------------------------------------------------------------------------
 
-/// An icosphere: an icosahedron subdivided `levels` times, vertices shared by every triangle
-/// around them (so edges and vertices are exactly shared in float).
-TriangleMesh icosphere(int levels) {
-  const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
-  TriangleMesh m;
-  m.positions = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
-                 {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
-  for (vec3& p : m.positions) p = glm::normalize(p);
-  m.triangles = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
-                 {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
-                 {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
-                 {4, 9, 5},  {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
-  for (int l = 0; l < levels; ++l) {
-    std::vector<uvec3> next;
-    std::map<std::pair<std::uint32_t, std::uint32_t>, std::uint32_t> mid;
-    const auto midpoint = [&](std::uint32_t a, std::uint32_t b) {
-      const auto key = std::minmax(a, b);
-      if (const auto it = mid.find(key); it != mid.end()) return it->second;
-      m.positions.push_back(glm::normalize(0.5f * (m.positions[a] + m.positions[b])));
-      return mid[key] = std::uint32_t(m.positions.size() - 1);
-    };
-    for (const uvec3& tri : m.triangles) {
-      const std::uint32_t ab = midpoint(tri.x, tri.y), bc = midpoint(tri.y, tri.z),
-                          ca = midpoint(tri.z, tri.x);
-      next.insert(next.end(), {uvec3(tri.x, ab, ca), uvec3(tri.y, bc, ab), uvec3(tri.z, ca, bc),
-                               uvec3(ab, bc, ca)});
-    }
-    m.triangles = std::move(next);
-  }
-  m.compute_vertex_normals();
-  return m;
-}
 
 struct Leaks {
   int missed = 0;
@@ -208,7 +176,7 @@ void expect_closed(const std::string& backend, const Leaks& l, const char* where
 }
 
 TEST_P(Conformance, RaysAtSharedEdgesAndVerticesOfClosedMeshesDoNotLeak) {
-  const auto mesh = std::make_shared<const TriangleMesh>(icosphere(4)); // 5,120 triangles
+  const auto mesh = std::make_shared<const TriangleMesh>(test::icosphere(4)); // 5,120 triangles
   struct Placement {
     Transform transform;
     Kinematics::Type kinematics;

@@ -10,6 +10,9 @@
 #include "specula/scene/scene.h"
 #include "specula/systems/schedule.h"
 
+#include <algorithm>
+#include <cmath>
+#include <map>
 #include <memory>
 #include <span>
 #include <string>
@@ -69,6 +72,39 @@ inline ecs::Entity add_camera(ecs::Registry& reg, const vec3& position, const ve
   c.vertical_fov = glm::radians(fov_degrees);
   reg.emplace<Camera>(e, c);
   return e;
+}
+
+/// An icosphere: an icosahedron subdivided `levels` times, vertices shared by every triangle
+/// around them (so edges and vertices are exactly shared in float).
+inline TriangleMesh icosphere(int levels) {
+  const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
+  TriangleMesh m;
+  m.positions = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
+                 {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
+  for (vec3& p : m.positions) p = glm::normalize(p);
+  m.triangles = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
+                 {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
+                 {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
+                 {4, 9, 5},  {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
+  for (int l = 0; l < levels; ++l) {
+    std::vector<uvec3> next;
+    std::map<std::pair<std::uint32_t, std::uint32_t>, std::uint32_t> mid;
+    const auto midpoint = [&](std::uint32_t a, std::uint32_t b) {
+      const auto key = std::minmax(a, b);
+      if (const auto it = mid.find(key); it != mid.end()) return it->second;
+      m.positions.push_back(glm::normalize(0.5f * (m.positions[a] + m.positions[b])));
+      return mid[key] = std::uint32_t(m.positions.size() - 1);
+    };
+    for (const uvec3& tri : m.triangles) {
+      const std::uint32_t ab = midpoint(tri.x, tri.y), bc = midpoint(tri.y, tri.z),
+                          ca = midpoint(tri.z, tri.x);
+      next.insert(next.end(), {uvec3(tri.x, ab, ca), uvec3(tri.y, bc, ab), uvec3(tri.z, ca, bc),
+                               uvec3(ab, bc, ca)});
+    }
+    m.triangles = std::move(next);
+  }
+  m.compute_vertex_normals();
+  return m;
 }
 
 /// A registry's scene as the integrators see it: the scene layer synced and a tracer of the named

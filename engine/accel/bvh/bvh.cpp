@@ -401,11 +401,6 @@ struct BoxTestAvx2 {
   }
 };
 
-bool cpu_has_avx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
-
 } // namespace
 
 // ---- Construction -------------------------------------------------------------------------------
@@ -907,10 +902,7 @@ void Bvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool a
   for (int i = 0; i < N; ++i) {
     if (!(found & (1u << i))) continue;
     rays.tfar[i] = lane[i].tfar;
-    hits.t[i] = lane_hit[i].t;
-    hits.u[i] = lane_hit[i].u;
-    hits.v[i] = lane_hit[i].v;
-    hits.prim[i] = lane_hit[i].prim;
+    hits.set(i, lane_hit[i]);
   }
 }
 
@@ -932,25 +924,10 @@ void Bvh::intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[
     return;
   }
   // No AVX2: two 4-packets.
-  for (int half = 0; half < 2; ++half) {
-    RayPacket<4> r4;
-    PacketHits<4> h4;
-    bool a4[4];
-    for (int i = 0; i < 4; ++i) {
-      const int j = 4 * half + i;
-      r4.ox[i] = rays.ox[j], r4.oy[i] = rays.oy[j], r4.oz[i] = rays.oz[j];
-      r4.dx[i] = rays.dx[j], r4.dy[i] = rays.dy[j], r4.dz[i] = rays.dz[j];
-      r4.tnear[i] = rays.tnear[j], r4.tfar[i] = rays.tfar[j];
-      h4.t[i] = hits.t[j], h4.u[i] = hits.u[j], h4.v[i] = hits.v[j], h4.prim[i] = hits.prim[j];
-      a4[i] = active[j];
-    }
-    intersect4(r4, h4, a4, test);
-    for (int i = 0; i < 4; ++i) {
-      const int j = 4 * half + i;
-      rays.tfar[j] = r4.tfar[i];
-      hits.t[j] = h4.t[i], hits.u[j] = h4.u[i], hits.v[j] = h4.v[i], hits.prim[j] = h4.prim[i];
-    }
-  }
+  as_two_packets_of_4(rays, hits, active,
+                      [&](RayPacket<4>& r4, PacketHits<4>& h4, const bool* a4) {
+                        intersect4(r4, h4, a4, test);
+                      });
 }
 
 } // namespace specula::accel

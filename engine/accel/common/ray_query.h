@@ -260,6 +260,42 @@ struct PacketHits {
       prim[i] = 0xFFFFFFFFu;
     }
   }
+  void set(int i, const TriangleHit& h) {
+    t[i] = h.t;
+    u[i] = h.u;
+    v[i] = h.v;
+    prim[i] = h.prim;
+  }
 };
+
+/// Whether this CPU runs the AVX2 packet kernels (asked once).
+[[nodiscard]] inline bool cpu_has_avx2() {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+
+/// An 8-ray packet traced as two packets of 4 by `intersect4(rays, hits, active)` (CPUs without
+/// AVX2): lanes copied out and back, tfar and hits included.
+template <typename Intersect4>
+void as_two_packets_of_4(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[8],
+                         Intersect4&& intersect4) {
+  for (int half = 0; half < 2; ++half) {
+    RayPacket<4> r4;
+    PacketHits<4> h4;
+    for (int i = 0; i < 4; ++i) {
+      const int j = 4 * half + i;
+      r4.ox[i] = rays.ox[j], r4.oy[i] = rays.oy[j], r4.oz[i] = rays.oz[j];
+      r4.dx[i] = rays.dx[j], r4.dy[i] = rays.dy[j], r4.dz[i] = rays.dz[j];
+      r4.tnear[i] = rays.tnear[j], r4.tfar[i] = rays.tfar[j];
+      h4.t[i] = hits.t[j], h4.u[i] = hits.u[j], h4.v[i] = hits.v[j], h4.prim[i] = hits.prim[j];
+    }
+    intersect4(r4, h4, active + 4 * half);
+    for (int i = 0; i < 4; ++i) {
+      const int j = 4 * half + i;
+      rays.tfar[j] = r4.tfar[i];
+      hits.t[j] = h4.t[i], hits.u[j] = h4.u[i], hits.v[j] = h4.v[i], hits.prim[j] = h4.prim[i];
+    }
+  }
+}
 
 } // namespace specula::accel

@@ -409,18 +409,7 @@ void EmbreeTracer::intersect_camera(const CameraRays& camera, const PacketTile& 
       for (std::size_t i = 0; i < count; ++i)
         rays[i] = Ray{camera.origin, 0.0f, hits.direction(first + i), std::numeric_limits<float>::infinity()};
       intersect(std::span<const Ray>(rays, count), std::span<Hit>(out, count));
-      for (std::size_t i = 0; i < count; ++i) {
-        const Hit& hit = out[i];
-        const std::size_t k = first + i;
-        hits.instance[k] = hit.instance;
-        hits.primitive[k] = hit.primitive;
-        hits.t[k] = hit.t;
-        hits.u[k] = hit.uv.x;
-        hits.v[k] = hit.uv.y;
-        hits.ng_x[k] = hit.object_normal.x;
-        hits.ng_y[k] = hit.object_normal.y;
-        hits.ng_z[k] = hit.object_normal.z;
-      }
+      for (std::size_t i = 0; i < count; ++i) hits.set(first + i, out[i]);
     }
   }
   }

@@ -732,11 +732,6 @@ SPECULA_KD_TARGET inline void vstore(float* p, Vf a) { _mm256_store_ps(p, a); }
 
 namespace {
 
-[[nodiscard]] bool cpu_has_avx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-}
-
 } // namespace
 
 template <int N, TriangleTest Test>
@@ -790,10 +785,7 @@ void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const boo
   for (int i = 0; i < N; ++i) {
     if (!found[i]) continue;
     rays.tfar[i] = prepared[i].tfar;
-    hits.t[i] = lane_hits[i].t;
-    hits.u[i] = lane_hits[i].u;
-    hits.v[i] = lane_hits[i].v;
-    hits.prim[i] = lane_hits[i].prim;
+    hits.set(i, lane_hits[i]);
   }
 }
 
@@ -815,23 +807,10 @@ void KdTree::intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool acti
     return;
   }
   // No AVX2: two packets of four.
-  for (int half = 0; half < 2; ++half) {
-    RayPacket<4> r4;
-    PacketHits<4> h4;
-    for (int i = 0; i < 4; ++i) {
-      const int j = 4 * half + i;
-      r4.ox[i] = rays.ox[j], r4.oy[i] = rays.oy[j], r4.oz[i] = rays.oz[j];
-      r4.dx[i] = rays.dx[j], r4.dy[i] = rays.dy[j], r4.dz[i] = rays.dz[j];
-      r4.tnear[i] = rays.tnear[j], r4.tfar[i] = rays.tfar[j];
-      h4.t[i] = hits.t[j], h4.u[i] = hits.u[j], h4.v[i] = hits.v[j], h4.prim[i] = hits.prim[j];
-    }
-    intersect4(r4, h4, active + 4 * half, test);
-    for (int i = 0; i < 4; ++i) {
-      const int j = 4 * half + i;
-      rays.tfar[j] = r4.tfar[i];
-      hits.t[j] = h4.t[i], hits.u[j] = h4.u[i], hits.v[j] = h4.v[i], hits.prim[j] = h4.prim[i];
-    }
-  }
+  as_two_packets_of_4(rays, hits, active,
+                      [&](RayPacket<4>& r4, PacketHits<4>& h4, const bool* a4) {
+                        intersect4(r4, h4, a4, test);
+                      });
 }
 
 } // namespace specula::accel

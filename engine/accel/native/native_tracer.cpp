@@ -397,15 +397,7 @@ void NativeTracer::intersect_camera_packets(const PacketTile& tile, PrimaryHits&
               intersect_dynamic<TriangleTest::moller_trumbore>(r, hit);
           }
         }
-        const std::size_t k = base + i;
-        hits.t[k] = hit.t;
-        hits.u[k] = hit.uv.x;
-        hits.v[k] = hit.uv.y;
-        hits.ng_x[k] = hit.object_normal.x;
-        hits.ng_y[k] = hit.object_normal.y;
-        hits.ng_z[k] = hit.object_normal.z;
-        hits.instance[k] = hit.instance;
-        hits.primitive[k] = hit.hit() ? hit.primitive : 0u;
+        hits.set(base + i, hit);
       }
     }
     next += lanes;
@@ -433,14 +425,7 @@ void NativeTracer::intersect_camera(const CameraRays& camera, const PacketTile& 
       intersect_one<TriangleTest::watertight>(r, hit);
     else
       intersect_one<TriangleTest::moller_trumbore>(r, hit);
-    hits.t[k] = hit.t;
-    hits.u[k] = hit.uv.x;
-    hits.v[k] = hit.uv.y;
-    hits.ng_x[k] = hit.object_normal.x;
-    hits.ng_y[k] = hit.object_normal.y;
-    hits.ng_z[k] = hit.object_normal.z;
-    hits.instance[k] = hit.instance;
-    hits.primitive[k] = hit.hit() ? hit.primitive : 0u;
+    hits.set(k, hit);
   }
 }
 
