@@ -21,15 +21,41 @@ namespace {
 
 nlohmann::json vec_json(const vec3& v) { return {v.x, v.y, v.z}; }
 
-/// "off" → 0; otherwise a power of two in [1, 4096].
-std::uint32_t parse_cache(const std::string& text) {
-  if (text == "off") return 0;
-  std::uint32_t value = 0;
-  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (ec != std::errc{} || end != text.data() + text.size() || value == 0 || value > 4096 ||
-      (value & (value - 1)) != 0)
-    throw Error("--cache", "expected 'off' or a power of two from 1 to 4096, got '" + text + "'");
-  return value;
+bool power_of_two(std::uint32_t v) { return v >= 1 && v <= 4096 && (v & (v - 1)) == 0; }
+
+/// --cache and its companions → the job's cache settings.
+cache::CacheSettings parse_cache(const RenderOptions& o) {
+  cache::CacheSettings c;
+  if (const auto policy = cache::parse_cache_policy(o.cache)) {
+    c.policy = *policy;
+  } else {
+    std::uint32_t value = 0;
+    const auto [end, ec] = std::from_chars(o.cache.data(), o.cache.data() + o.cache.size(), value);
+    if (ec != std::errc{} || end != o.cache.data() + o.cache.size() || !power_of_two(value))
+      throw Error("--cache", "expected off, on, auto or a power of two from 1 to 4096, got '" +
+                                 o.cache + "'");
+    c.policy = cache::CachePolicy::Auto;
+    c.resolution = value;
+  }
+  const auto lookup = cache::parse_lookup_mode(o.cache_lookup);
+  if (!lookup)
+    throw Error("--cache-lookup", "expected direction, tau or march, got '" + o.cache_lookup + "'");
+  c.lookup = *lookup;
+  if (!(o.cache_tau_deg > 0.0f && o.cache_tau_deg < 90.0f))
+    throw Error("--cache-tau", "must lie in (0, 90) degrees");
+  c.tau_deg = o.cache_tau_deg;
+  if (o.cache_resolution != 0) {
+    if (!power_of_two(o.cache_resolution))
+      throw Error("--cache-resolution", "expected a power of two from 1 to 4096, got " +
+                                            std::to_string(o.cache_resolution));
+    c.resolution = o.cache_resolution;
+  }
+  c.fill_budget = o.cache_fill;
+  c.prefill = o.cache_prefill;
+  if (!(o.max_error_db > 0.0 && o.max_error_db < 200.0))
+    throw Error("--max-error-db", "must lie in (0, 200)");
+  c.max_error_db = o.max_error_db;
+  return c;
 }
 
 } // namespace
@@ -83,7 +109,7 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   using Clock = std::chrono::steady_clock;
   // Validate everything the user gave before reporting what this build lacks, so a bad scene or
   // option is reported as such (exit 1) rather than hidden behind "not available" (exit 2).
-  const std::uint32_t cache_resolution = parse_cache(options.cache);
+  const cache::CacheSettings cache_settings = parse_cache(options);
   const std::optional<TraceMode> mode = parse_trace_mode(options.mode);
   if (!mode) throw Error("--mode", "unknown mode '" + options.mode + "'");
   if (!is_backend_name(options.backend))
@@ -99,16 +125,20 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   const std::uint32_t width = options.width ? options.width : scene.settings.width;
   const std::uint32_t height = options.height ? options.height : scene.settings.height;
   job.image = Framebuffer(width, height);
-  if (cache_resolution != 0)
-    throw UnavailableError("ray-cache cubes (--cache " + options.cache +
-                           ") are not available yet: use --cache off");
+  job.cache = cache_settings;
   prepare_rendering(scene.registry, std::move(job));
   const std::string backend = scene.registry.resource<RenderJob>().backend;
 
   RunStats stats;
   stats.settings = {options.scene,   backend,        options.mode,    width,
                     height,          options.frames, options.threads, scene.settings.max_depth,
-                    cache_resolution};
+                    cache_settings.resolution};
+  stats.settings.cache_policy = cache::cache_policy_name(cache_settings.policy);
+  stats.settings.cache_lookup = cache::lookup_mode_name(cache_settings.lookup);
+  stats.settings.cache_tau_deg = cache_settings.tau_deg;
+  stats.settings.cache_fill_budget = cache_settings.fill_budget;
+  stats.settings.cache_prefill = cache_settings.prefill;
+  stats.settings.max_error_db = cache_settings.max_error_db;
   Schedule schedule;
   const Clock::time_point start = Clock::now();
   bool progress_shown = false;
@@ -152,6 +182,15 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   }
   out << "), " << (trace > 0.0 ? double(last.rays.total()) / (trace * 1e3) : 0.0)
       << " Mrays/s of tracing time\n";
+  if (cache_settings.policy != cache::CachePolicy::Off) {
+    const CacheCounts& c = last.cache;
+    out << "  cache: " << c.lookups << " lookups, " << c.hits << " served ("
+        << (c.lookups > 0 ? 100.0 * double(c.hits) / double(c.lookups) : 0.0) << "%), "
+        << c.valid << "/" << c.texels << " texels valid, " << c.memory_bytes / 1024 << " KiB\n";
+    for (const CubeReport& r : c.cubes)
+      out << "    cube of entity " << r.entity << " (" << r.resolution << "²): " << r.mode << " — "
+          << r.reason << "\n";
+  }
   if (last.rays.dropped > 0)
     out << "  dropped rays: " << last.rays.dropped << " (per-pixel ray budget)\n";
   if (!options.out.empty()) out << "  image: " << options.out << "\n";

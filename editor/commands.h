@@ -22,7 +22,13 @@ struct RenderOptions {
   std::uint32_t height = 0;     ///< 0: the scene's settings
   std::uint32_t frames = 1;
   std::uint32_t threads = 0; ///< 0: every hardware thread
-  std::string cache = "off"; ///< off | face resolution (power of two)
+  std::string cache = "off"; ///< off | on | auto | a face resolution (auto at that resolution)
+  std::string cache_lookup = "direction"; ///< direction | tau | march
+  float cache_tau_deg = 0.5f;
+  std::uint32_t cache_resolution = 0; ///< 0: each entity's own (or the one --cache gave)
+  std::uint32_t cache_fill = 0;       ///< texels written per frame, 0: no limit
+  bool cache_prefill = false;
+  double max_error_db = 40.0;
   std::string out;           ///< PNG path, empty: none
   std::string stats;         ///< stats JSON path, empty: none
   /// Progress is shown once the render has run this long (seconds), on a terminal only.

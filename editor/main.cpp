@@ -66,7 +66,29 @@ int main(int argc, char** argv) {
   render_cmd->add_option("--threads", render.threads, "Worker threads (0: all)")
       ->check(CLI::Range(0u, 1024u))
       ->capture_default_str();
-  render_cmd->add_option("--cache", render.cache, "Ray-cache cubes: off or the face resolution")
+  render_cmd
+      ->add_option("--cache", render.cache,
+                   "Ray-cache cubes: off, on (always, in --cache-lookup mode), auto (only where "
+                   "they save time within --max-error-db), or a face resolution (auto at it)")
+      ->capture_default_str();
+  render_cmd->add_option("--cache-lookup", render.cache_lookup, "How a cached texel is accepted")
+      ->check(CLI::IsMember({"direction", "tau", "march"}))
+      ->capture_default_str();
+  render_cmd
+      ->add_option("--cache-tau", render.cache_tau_deg,
+                   "Acceptance angle (degrees) of the tau and march lookups")
+      ->capture_default_str();
+  render_cmd->add_option("--cache-resolution", render.cache_resolution,
+                         "Face resolution of every cube (default: each entity's ray_cache)");
+  render_cmd
+      ->add_option("--cache-fill", render.cache_fill,
+                   "At most this many texels written per frame (0: no limit)")
+      ->capture_default_str();
+  render_cmd->add_flag("--cache-prefill", render.cache_prefill,
+                       "Trace every outdated texel from its cube's centre before each frame");
+  render_cmd
+      ->add_option("--max-error-db", render.max_error_db,
+                   "--cache auto: the PSNR against uncached tracing it must keep")
       ->capture_default_str();
   render_cmd->add_option("--out", render.out, "Write the last frame as an sRGB PNG");
   render_cmd->add_option("--stats", render.stats, "Write per-frame statistics as JSON");

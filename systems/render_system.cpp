@@ -21,6 +21,7 @@ void render_system(ecs::Registry& registry, const FrameContext& /*ctx*/) {
   stats.trace_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   stats.accel = job->last.accel; // written by the acceleration system this tick
+  if (job->hook) job->hook->report(stats.cache);
   job->last = stats;
   ++job->frames;
 }

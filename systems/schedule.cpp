@@ -3,6 +3,7 @@
 #include "specula/render/render_job.h"
 #include "specula/systems/acceleration_system.h"
 #include "specula/systems/animation_system.h"
+#include "specula/systems/cache_invalidation_system.h"
 #include "specula/systems/render_system.h"
 #include "specula/systems/scene_layer_system.h"
 #include "specula/systems/transform_system.h"
@@ -20,7 +21,7 @@ struct Stage {
 constexpr Stage kStages[] = {
     {"animation", &animation_system},     {"transform", &transform_system},
     {"scene_layer", &scene_layer_system}, {"acceleration", &acceleration_system},
-    {"render", &render_system},
+    {"cache_invalidation", &cache_invalidation_system}, {"render", &render_system},
 };
 
 } // namespace

@@ -22,8 +22,9 @@ struct FrameTimings {
 ///   2. transform_system    (Transform/Parent → WorldTransform, moved flags, TransformChanges)
 ///   3. scene_layer_system  (moved/deformed/added entities → the SceneLayer's tables and delta)
 ///   4. acceleration_system (the delta → the active tracer's structures)
-///   5. render_system       (the frame, on the tracer chosen by prepare_rendering)
-/// Cache invalidation will sit between 4 and 5. Stages 3–5 do nothing until rendering is prepared.
+///   5. cache_invalidation_system (what moved → outdated ray-cache texels; prefill)
+///   6. render_system       (the frame, on the tracer chosen by prepare_rendering)
+/// Stages 3–6 do nothing until rendering is prepared (5 also needs caching on).
 /// After the systems it records FrameTimings, and the whole tick's time in RenderJob::last.ms.
 class Schedule {
 public:

@@ -1,5 +1,6 @@
 #include "specula/render/render_job.h"
 
+#include "specula/cache/ray_cache.h"
 #include "specula/core/error.h"
 #include "specula/render/tracer_factory.h"
 
@@ -19,6 +20,20 @@ void prepare_rendering(ecs::Registry& registry, RenderJob job) {
   std::unique_ptr<Tracer> tracer =
       make_tracer(job.backend, job.packet_width, scene_kind(registry));
   job.backend = std::string(tracer->name());
+  if (job.cache.policy != cache::CachePolicy::Off) {
+    if (job.hook)
+      throw Error("render settings", "ray-cache cubes and another radiance hook cannot share a job");
+    if (job.cache.resolution != 0 &&
+        (job.cache.resolution < 1 || job.cache.resolution > 4096 ||
+         (job.cache.resolution & (job.cache.resolution - 1)) != 0))
+      throw Error("render settings", "cache resolution must be a power of two up to 4096, got " +
+                                         std::to_string(job.cache.resolution));
+    if (!(job.cache.tau_deg > 0.0f && job.cache.tau_deg < 90.0f))
+      throw Error("render settings", "cache tau must lie in (0, 90) degrees");
+    auto store = std::make_shared<cache::RayCacheStore>(job.cache);
+    registry.set_resource<cache::RayCaches>(cache::RayCaches{store});
+    job.hook = store;
+  }
   registry.set_resource<ActiveTracer>(ActiveTracer{std::move(tracer)});
   // A new layer: its first sync hands the new tracer the whole scene.
   registry.set_resource<SceneLayer>();

@@ -4,6 +4,7 @@
 /// systems need (the scene layer, the tracer chosen once at start-up, trace settings, the image)
 /// and what they report (the last frame's stats).
 
+#include "specula/cache/cache_settings.h"
 #include "specula/ecs/registry.h"
 #include "specula/image/framebuffer.h"
 #include "specula/render/scene_layer.h"
@@ -26,6 +27,9 @@ struct RenderJob {
   std::uint32_t packet_width = 16;
   TraceSettings settings;
   Framebuffer image{1, 1};
+  /// Ray-cache cubes: with a policy other than off, prepare_rendering creates the cache store
+  /// (the cache::RayCaches resource) and makes it the hook.
+  cache::CacheSettings cache;
   /// Receives the radiance of every leaving ray (none: integrators skip that bookkeeping).
   std::shared_ptr<RadianceHook> hook;
   /// The latest frame: ms is the whole tick (set by the schedule), trace_ms the render system's.

@@ -26,6 +26,7 @@ struct FrameInputs {
   RadianceHook* hook;
   std::span<vec3> pixels; ///< the image, row-major
   std::uint32_t width;
+  bool lookups = false; ///< hook->wants_lookups() at frame start
 };
 
 /// A ray of a Whitted tree: one per primary hit and one per reflection or refraction ray. Its
@@ -42,6 +43,13 @@ struct WhittedNode {
   std::uint32_t depth;
   std::uint32_t from; ///< instance the ray leaves (kNoInstance for primaries)
   RayKind kind;
+  bool exits;          ///< it leaves `from` outwards (LeavingRadiance::exits)
+  CacheAnswer answer;  ///< how the hook served it
+  vec3 cached;         ///< Verify: the value the hook offered
+  float hit_t;         ///< its first hit (+inf: none)
+  std::uint32_t hit_entity; ///< entity index of its first hit (kNoInstance: none)
+  std::uint32_t seen;       ///< entity_bit of everything its subtree hit
+  std::uint32_t rays;       ///< rays traced for it and its subtree (itself and shadow rays too)
 };
 
 /// Cast mode's wave, one array per component: world position; interpolated vertex normal (then
@@ -77,7 +85,15 @@ struct TileScratch {
   std::vector<std::uint8_t> blocked;
   std::vector<std::uint32_t> rays_of_pixel;
   std::vector<LeavingRadiance> leaving;
+  // Cache lookups of a wave.
+  std::vector<LeavingQuery> queries;
+  std::vector<std::uint32_t> query_node;
+  std::vector<CachedRadiance> answers;
+  std::vector<Ray> confirm_rays;
+  std::vector<std::uint32_t> confirm_node;
+  std::vector<std::uint8_t> confirm_blocked;
 };
+
 
 /// Local shading of every primary hit: emission plus the diffuse term of every light, no shadow
 /// rays, no secondary rays; misses get the background.
@@ -89,5 +105,13 @@ void cast_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& sc
 /// next wave). Leaving rays are delivered to frame.hook after the last wave.
 void whitted_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& scratch,
                   RayCounts& counts);
+
+/// The Whitted radiance along arbitrary rays, each the root of its tree at depth `depth` (1: a
+/// ray leaving a primary hit). Hits on instance `skip` are passed through (a ray-cache cube's
+/// prefill traces from the cube's centre, inside its own object). frame.pixels is not touched
+/// and no hook is called.
+void whitted_rays(const FrameInputs& frame, std::span<const Ray> rays, std::uint32_t depth,
+                  std::uint32_t skip, TileScratch& scratch, RayCounts& counts,
+                  std::span<RadianceSample> out);
 
 } // namespace specula::detail

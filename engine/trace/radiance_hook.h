@@ -20,10 +20,44 @@
 
 namespace specula {
 
+/// How a leaving ray was served, when a hook answered a lookup for it (RadianceHook::lookup).
+enum class CacheAnswer : std::uint8_t {
+  Trace,      ///< traced (no cached value, or the cached value was not accepted)
+  Use,        ///< the cached radiance was used; the ray was not traced
+  UseIfClear, ///< use it if nothing lies within clear_distance (an occlusion ray confirms)
+  Verify,     ///< the cached radiance would be used, but the ray is traced to measure its error
+};
+
+/// A ray about to leave an object, asked about before it is traced.
+struct LeavingQuery {
+  std::uint32_t instance; ///< the scene-layer instance slot it leaves
+  std::uint32_t pixel;
+  std::uint32_t depth;
+  vec3 origin;
+  vec3 direction; ///< unit
+};
+
+struct CachedRadiance {
+  CacheAnswer answer = CacheAnswer::Trace;
+  vec3 radiance{0.0f};
+  float clear_distance = 0.0f;    ///< UseIfClear: the length the occlusion ray checks
+  std::uint32_t seen = 0;         ///< the entity mask of what the cached value saw
+};
+
+/// Bit of an entity in a `seen` mask: a 32-bit Bloom-style summary of the entities a ray's
+/// subtree hit (entity index modulo 32).
+[[nodiscard]] inline std::uint32_t entity_bit(std::uint32_t entity_index) {
+  return 1u << (entity_index & 31u);
+}
+
 struct LeavingRadiance {
   ecs::Entity from;       ///< the entity the ray leaves
   std::uint32_t instance; ///< its scene-layer instance slot
   RayKind kind;           ///< Reflection or Refraction
+  /// The ray goes away from the object (a reflection off its outside, a refraction out of it),
+  /// rather than into or inside it: the rays a ray-cache cube caches.
+  bool exits;
+  CacheAnswer answer;     ///< how it was served (Trace when no lookup was made)
   std::uint32_t depth;    ///< 1 for rays leaving a primary hit
   std::uint32_t pixel;    ///< y · width + x of the pixel it serves
   vec3 origin;            ///< world space
@@ -31,16 +65,40 @@ struct LeavingRadiance {
   vec3 weight;     ///< relative to the ray it was spawned by (its share of that ray's radiance)
   vec3 throughput; ///< relative to the pixel (product of weights along the path)
   vec3 radiance;   ///< what the ray brought back
+  vec3 cached;     ///< Verify: the cached value the hook offered
+  float hit_t;     ///< distance to its first hit (+inf: it left the scene)
+  std::uint32_t hit_entity; ///< entity index of its first hit (kNoInstance: none)
+  std::uint32_t seen;       ///< entity_bit of every entity its subtree hit
+  std::uint32_t rays;       ///< rays traced for it: itself, its shadow rays and its subtree's
 };
 
 class RadianceHook {
 public:
   virtual ~RadianceHook() = default;
+  /// Called by render_frame before the first tile, with the image size.
+  virtual void begin_frame(std::uint32_t /*width*/, std::uint32_t /*height*/) {}
+  /// Whether the integrators should ask lookup() about leaving rays this frame (read once per
+  /// frame, after begin_frame).
+  [[nodiscard]] virtual bool wants_lookups() const { return false; }
+  /// Answers, for each ray about to leave an object (only rays that exit), whether a cached
+  /// value replaces tracing it. Called from worker threads, several tiles at once; must read
+  /// only what was there at frame start (writes wait for end_frame), so frames are
+  /// deterministic.
+  virtual void lookup(std::span<const LeavingQuery> queries,
+                      std::span<CachedRadiance> answers) const {
+    for (CachedRadiance& a : answers) a = CachedRadiance{};
+    (void)queries;
+  }
   /// Receives one tile's leaving rays once the tile's last wave is done, in a deterministic order
   /// (wave by wave, then trace order). Called from worker threads, several tiles at once:
   /// implementations synchronise, and apply what they store at frame end (frames stay
   /// deterministic whatever the thread count).
   virtual void leaving(std::span<const LeavingRadiance> rays) = 0;
+  /// Called by render_frame after the last tile: trace_ms is the frame's tracing time, rays the
+  /// rays it traced (what a traced ray costs, for hooks that weigh lookups against tracing).
+  virtual void end_frame(double /*trace_ms*/, std::uint64_t /*rays*/) {}
+  /// The frame's cache counters, for the stats (hooks that cache nothing leave them zero).
+  virtual void report(CacheCounts& /*out*/) const {}
 };
 
 } // namespace specula

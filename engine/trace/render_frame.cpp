@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <string>
 #include <thread>
 
@@ -101,9 +102,12 @@ FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Cam
   if (settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow)
     throw UnavailableError(std::string("mode '") + trace_mode_name(settings.mode) +
                            "' is not available yet");
+  const auto start = std::chrono::steady_clock::now();
   const CameraRays camera_rays(camera, out.width(), out.height());
+  if (hook != nullptr) hook->begin_frame(out.width(), out.height());
+  const bool lookups = hook != nullptr && settings.mode == TraceMode::Whitted && hook->wants_lookups();
   const detail::FrameInputs frame{tracer, layer.tables(), settings,   camera_rays,
-                                  hook,   out.pixels(),   out.width()};
+                                  hook,   out.pixels(),   out.width(), lookups};
   tbb::combinable<RayCounts> counts;
   const bool whitted = settings.mode == TraceMode::Whitted;
   for_each_tile(out.width(), out.height(), settings.tile_size, settings.threads,
@@ -116,7 +120,42 @@ FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Cam
                 });
   FrameStats stats;
   counts.combine_each([&](const RayCounts& c) { stats.rays += c; });
+  if (hook != nullptr)
+    hook->end_frame(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count(),
+        stats.rays.total());
   return stats;
+}
+
+RayCounts trace_radiance(const Tracer& tracer, const SceneLayer& layer,
+                         const TraceSettings& settings, std::span<const Ray> rays,
+                         std::uint32_t depth, std::uint32_t skip, std::span<RadianceSample> out) {
+  if (out.size() != rays.size()) throw Error("trace_radiance", "out and rays differ in size");
+  const CameraRays camera(Camera{}, 1, 1); // unused: the roots are given
+  const detail::FrameInputs frame{tracer, layer.tables(), settings, camera, nullptr, {}, 0, false};
+  tbb::combinable<RayCounts> counts;
+  tbb::enumerable_thread_specific<detail::TileScratch> scratch;
+  constexpr std::size_t kChunk = 256;
+  const std::size_t chunks = (rays.size() + kChunk - 1) / kChunk;
+  const int workers = settings.threads > 0
+                          ? int(settings.threads)
+                          : int(std::max(1u, std::thread::hardware_concurrency()));
+  tbb::task_arena arena(workers);
+  arena.execute([&] {
+    tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+      const unsigned int saved_csr = _mm_getcsr();
+      _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+      _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+      const std::size_t first = c * kChunk;
+      const std::size_t n = std::min(kChunk, rays.size() - first);
+      detail::whitted_rays(frame, rays.subspan(first, n), depth, skip, scratch.local(),
+                           counts.local(), out.subspan(first, n));
+      _mm_setcsr(saved_csr);
+    });
+  });
+  RayCounts total;
+  counts.combine_each([&](const RayCounts& c) { total += c; });
+  return total;
 }
 
 } // namespace specula

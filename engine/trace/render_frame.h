@@ -18,6 +18,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string_view>
 
 namespace specula {
@@ -52,6 +53,22 @@ inline constexpr std::uint32_t kMaxRaysPerPixel = 4096;
 FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Camera& camera,
                         const TraceSettings& settings, Framebuffer& out,
                         RadianceHook* hook = nullptr);
+
+/// What a ray brought back (trace_radiance).
+struct RadianceSample {
+  vec3 radiance{0.0f};
+  float t = 0.0f;                    ///< its first hit (+inf: none)
+  std::uint32_t entity = kNoInstance; ///< entity index of its first hit
+  std::uint32_t seen = 0;            ///< entity_bit (radiance_hook.h) of all its subtree hit
+  std::uint32_t rays = 0;            ///< rays traced for it: itself, shadow rays, its subtree
+};
+
+/// The Whitted radiance along arbitrary rays, each the root of a tree at depth `depth` (1: like
+/// a ray leaving a primary hit, so max_depth − 1 more bounces), in parallel; hits on instance
+/// `skip` (kNoInstance: none) are passed through. No hook is called. Returns the ray counts.
+RayCounts trace_radiance(const Tracer& tracer, const SceneLayer& layer,
+                         const TraceSettings& settings, std::span<const Ray> rays,
+                         std::uint32_t depth, std::uint32_t skip, std::span<RadianceSample> out);
 
 /// The primary-ray stage of render_frame alone (camera rays, coherent packets, hits resolved to
 /// instances), for measuring the tracer's own overhead against its backend. Returns a checksum.

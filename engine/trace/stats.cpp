@@ -26,6 +26,31 @@ T read(const json& object, const char* key, const std::string& name, const std::
   }
 }
 
+json cache_json(const CacheCounts& c) {
+  json cubes = json::array();
+  for (const CubeReport& r : c.cubes)
+    cubes.push_back({{"entity", r.entity},
+                     {"resolution", r.resolution},
+                     {"mode", r.mode},
+                     {"reason", r.reason},
+                     {"lookups", r.lookups},
+                     {"hits", r.hits},
+                     {"valid", r.valid},
+                     {"estimated_psnr_db", r.estimated_psnr_db},
+                     {"saved_ms", r.saved_ms}});
+  return {{"lookups", c.lookups},     {"hits", c.hits},
+          {"rejected", c.rejected},   {"verified", c.verified},
+          {"written", c.written},     {"prefilled", c.prefilled},
+          {"texels", c.texels},       {"valid", c.valid},
+          {"invalidated", c.invalidated}, {"flush_all", c.flush_all},
+          {"memory_bytes", c.memory_bytes}, {"cubes", cubes}};
+}
+
+template <typename T> void read_optional(const json& o, const char* key, T& value,
+                                         const std::string& name, const std::string& path) {
+  if (o.contains(key)) value = read<T>(o, key, name, path);
+}
+
 } // namespace
 
 const char* ray_kind_name(RayKind kind) {
@@ -71,7 +96,15 @@ std::string stats_to_json(const RunStats& stats) {
                    {"frames", s.frames},
                    {"threads", s.threads},
                    {"max_depth", s.max_depth},
-                   {"cache", s.cache_resolution == 0 ? json("off") : json(s.cache_resolution)}};
+                   {"cache", s.cache_policy == "off"
+                                 ? json("off")
+                                 : json{{"policy", s.cache_policy},
+                                        {"lookup", s.cache_lookup},
+                                        {"tau_deg", s.cache_tau_deg},
+                                        {"resolution", s.cache_resolution},
+                                        {"fill_budget", s.cache_fill_budget},
+                                        {"prefill", s.cache_prefill},
+                                        {"max_error_db", s.max_error_db}}}};
   json frames = json::array();
   double total_ms = 0.0;
   double total_trace_ms = 0.0;
@@ -90,7 +123,7 @@ std::string stats_to_json(const RunStats& stats) {
                       {"rays", rays},
                       {"dropped_rays", f.rays.dropped},
                       {"mrays_per_s", rates},
-                      {"cache", {{"lookups", f.cache.lookups}, {"hits", f.cache.hits}}},
+                      {"cache", cache_json(f.cache)},
                       {"accel",
                        {{"ms", f.accel.ms},
                         {"static_build_ms", f.accel.static_build_ms},
@@ -142,8 +175,20 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
   s.threads = read<std::uint32_t>(settings, "threads", name, "settings");
   s.max_depth = read<std::uint32_t>(settings, "max_depth", name, "settings");
   const json cache = read<json>(settings, "cache", name, "settings");
-  s.cache_resolution =
-      cache.is_string() ? 0u : read<std::uint32_t>(settings, "cache", name, "settings");
+  if (cache.is_object()) {
+    const std::string at = "settings.cache";
+    s.cache_policy = read<std::string>(cache, "policy", name, at);
+    s.cache_lookup = read<std::string>(cache, "lookup", name, at);
+    s.cache_tau_deg = read<float>(cache, "tau_deg", name, at);
+    s.cache_resolution = read<std::uint32_t>(cache, "resolution", name, at);
+    s.cache_fill_budget = read<std::uint32_t>(cache, "fill_budget", name, at);
+    s.cache_prefill = read<bool>(cache, "prefill", name, at);
+    s.max_error_db = read<double>(cache, "max_error_db", name, at);
+  } else if (!cache.is_string()) {
+    // Files from before the cubes landed gave a bare resolution.
+    s.cache_resolution = read<std::uint32_t>(settings, "cache", name, "settings");
+    s.cache_policy = s.cache_resolution == 0 ? "off" : "auto";
+  }
   const json frames = read<json>(root, "frames", name, "");
   if (!frames.is_array()) throw Error(name, "frames", "must be an array");
   for (std::size_t i = 0; i < frames.size(); ++i) {
@@ -158,6 +203,35 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
     const json c = read<json>(frames[i], "cache", name, at);
     f.cache.lookups = read<std::uint64_t>(c, "lookups", name, at + ".cache");
     f.cache.hits = read<std::uint64_t>(c, "hits", name, at + ".cache");
+    // The rest arrived with the ray-cache cubes: files written before them have none.
+    const std::string ca = at + ".cache";
+    read_optional(c, "rejected", f.cache.rejected, name, ca);
+    read_optional(c, "verified", f.cache.verified, name, ca);
+    read_optional(c, "written", f.cache.written, name, ca);
+    read_optional(c, "prefilled", f.cache.prefilled, name, ca);
+    read_optional(c, "texels", f.cache.texels, name, ca);
+    read_optional(c, "valid", f.cache.valid, name, ca);
+    read_optional(c, "invalidated", f.cache.invalidated, name, ca);
+    read_optional(c, "flush_all", f.cache.flush_all, name, ca);
+    read_optional(c, "memory_bytes", f.cache.memory_bytes, name, ca);
+    if (c.contains("cubes")) {
+      const json cubes = read<json>(c, "cubes", name, ca);
+      if (!cubes.is_array()) throw Error(name, ca + ".cubes", "must be an array");
+      for (std::size_t k = 0; k < cubes.size(); ++k) {
+        const std::string w = ca + ".cubes[" + std::to_string(k) + "]";
+        CubeReport r;
+        r.entity = read<std::uint32_t>(cubes[k], "entity", name, w);
+        r.resolution = read<std::uint32_t>(cubes[k], "resolution", name, w);
+        r.mode = read<std::string>(cubes[k], "mode", name, w);
+        r.reason = read<std::string>(cubes[k], "reason", name, w);
+        r.lookups = read<std::uint64_t>(cubes[k], "lookups", name, w);
+        r.hits = read<std::uint64_t>(cubes[k], "hits", name, w);
+        r.valid = read<std::uint64_t>(cubes[k], "valid", name, w);
+        r.estimated_psnr_db = read<double>(cubes[k], "estimated_psnr_db", name, w);
+        r.saved_ms = read<double>(cubes[k], "saved_ms", name, w);
+        f.cache.cubes.push_back(r);
+      }
+    }
     // "accel" arrived with the native backend: files written before it have none.
     if (frames[i].contains("accel")) {
       const json a = read<json>(frames[i], "accel", name, at);

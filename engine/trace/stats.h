@@ -27,9 +27,34 @@ struct RayCounts {
   friend bool operator==(const RayCounts&, const RayCounts&) = default;
 };
 
+/// One ray-cache cube's frame: its lookup mode and the auto policy's latest decision.
+struct CubeReport {
+  std::uint32_t entity = 0; ///< entity index of its owner
+  std::uint32_t resolution = 0;
+  std::string mode;   ///< lookup mode in use ("direction", "tau", "march"), or "off"
+  std::string reason; ///< why (the policy's latest decision, in words)
+  std::uint64_t lookups = 0;
+  std::uint64_t hits = 0;      ///< served from the cube (not traced)
+  std::uint64_t valid = 0;     ///< valid texels at frame end
+  double estimated_psnr_db = 0.0; ///< from verification rays (auto; 0: not measured yet)
+  double saved_ms = 0.0;          ///< estimated tracing time the cube saved this frame
+  friend bool operator==(const CubeReport&, const CubeReport&) = default;
+};
+
+/// Ray-cache cubes in a frame (all zero when caching is off).
 struct CacheCounts {
   std::uint64_t lookups = 0;
-  std::uint64_t hits = 0;
+  std::uint64_t hits = 0;        ///< served from a cube, not traced
+  std::uint64_t rejected = 0;    ///< valid texel, refused by the tau/march test or a blocked confirm
+  std::uint64_t verified = 0;    ///< accepted, but traced to measure the error (auto)
+  std::uint64_t written = 0;     ///< texels written at frame end from the frame's rays
+  std::uint64_t prefilled = 0;   ///< texels traced from the cube centre (--cache-prefill)
+  std::uint64_t texels = 0;      ///< in every cube
+  std::uint64_t valid = 0;       ///< valid at frame end
+  std::uint64_t invalidated = 0; ///< outdated by this frame's invalidation
+  std::uint64_t flush_all = 0;   ///< what flushing every cube would have outdated instead
+  std::uint64_t memory_bytes = 0;
+  std::vector<CubeReport> cubes;
   friend bool operator==(const CacheCounts&, const CacheCounts&) = default;
 };
 
@@ -68,7 +93,13 @@ struct RunSettings {
   std::uint32_t frames = 1;
   std::uint32_t threads = 0;
   std::uint32_t max_depth = 5;
-  std::uint32_t cache_resolution = 0; ///< 0: cache off
+  std::uint32_t cache_resolution = 0; ///< cube face resolution for every cube (0: each its own)
+  std::string cache_policy = "off";   ///< off | on | auto
+  std::string cache_lookup = "direction";
+  float cache_tau_deg = 0.5f;
+  std::uint32_t cache_fill_budget = 0;
+  bool cache_prefill = false;
+  double max_error_db = 40.0;
   friend bool operator==(const RunSettings&, const RunSettings&) = default;
 };
 

@@ -22,26 +22,13 @@ public:
   void run(const PacketTile& tile) {
     const PrimaryHits& primary = s_.primary;
     const std::size_t n = primary.size();
-    s_.nodes.resize(n);
-    s_.next_wave.clear();
-    s_.shadow_rays.clear();
-    s_.shadow_node.clear();
-    s_.shadow_value.clear();
-    s_.rays_of_pixel.assign(n, 0);
+    begin(n);
     std::size_t i = 0;
     tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
       WhittedNode& node = s_.nodes[i];
-      node.radiance = vec3(0.0f);
-      node.weight = vec3(1.0f);
-      node.throughput = vec3(1.0f);
-      node.ray = Ray{frame_.camera.origin, 0.0f, primary.direction(i),
-                     std::numeric_limits<float>::infinity()};
-      node.parent = kNoInstance;
-      node.pixel = y * frame_.width + x;
-      node.tile_pixel = std::uint32_t(i);
-      node.depth = 0;
-      node.from = kNoInstance;
-      node.kind = RayKind::Primary;
+      node = root(Ray{frame_.camera.origin, 0.0f, primary.direction(i),
+                      std::numeric_limits<float>::infinity()},
+                  y * frame_.width + x, std::uint32_t(i), 0, RayKind::Primary);
       ++i;
     });
     counts_[RayKind::Primary] += n;
@@ -49,10 +36,99 @@ public:
     // Wave 0: the primary hits, as the backend traced them.
     for (std::uint32_t k = 0; k < n; ++k) shade(k, primary.hit(k));
     trace_shadows();
-    // Later waves: the reflection and refraction rays the previous wave spawned.
+    trace_waves();
+    fold(n);
+    if (frame_.hook != nullptr && s_.nodes.size() > n) deliver_leaving(n);
+    for (std::size_t k = 0; k < n; ++k) frame_.pixels[s_.nodes[k].pixel] = s_.nodes[k].radiance;
+  }
+
+  /// Trees rooted at arbitrary rays (whitted_rays).
+  void run_rays(std::span<const Ray> rays, std::uint32_t depth, std::uint32_t skip,
+                std::span<RadianceSample> out) {
+    const std::size_t n = rays.size();
+    begin(n);
+    s_.rays.assign(rays.begin(), rays.end());
+    s_.hits.resize(n);
+    for (std::size_t k = 0; k < n; ++k) {
+      s_.nodes[k] = root(rays[k], std::uint32_t(k), std::uint32_t(k), depth, RayKind::Reflection);
+      s_.nodes[k].from = skip;
+      ++counts_[RayKind::Reflection];
+    }
+    frame_.tracer.intersect(s_.rays, s_.hits);
+    // Pass through the skipped instance: at most a few surfaces of it lie on any ray.
+    for (int pass = 0; pass < 8; ++pass) {
+      s_.wave.clear();
+      for (std::uint32_t k = 0; k < n; ++k)
+        if (s_.hits[k].hit() && s_.hits[k].instance == skip) s_.wave.push_back(k);
+      if (s_.wave.empty()) break;
+      s_.shadow_rays.clear();
+      for (const std::uint32_t k : s_.wave) {
+        Ray r = rays[k];
+        r.tnear = s_.hits[k].t;
+        s_.shadow_rays.push_back(r);
+      }
+      s_.blocked.clear();
+      std::vector<Hit> again(s_.wave.size());
+      frame_.tracer.intersect(s_.shadow_rays, again);
+      for (std::size_t j = 0; j < s_.wave.size(); ++j) {
+        Hit h = again[j];
+        if (pass == 7 && h.hit() && h.instance == skip) h = Hit{};
+        s_.hits[s_.wave[j]] = h;
+      }
+      s_.shadow_rays.clear();
+    }
+    s_.wave.clear();
+    for (std::uint32_t k = 0; k < n; ++k) shade(k, s_.hits[k]);
+    trace_shadows();
+    trace_waves();
+    fold(n);
+    for (std::size_t k = 0; k < n; ++k) {
+      const WhittedNode& node = s_.nodes[k];
+      out[k] = RadianceSample{node.radiance, node.hit_t, node.hit_entity, node.seen, node.rays};
+    }
+  }
+
+private:
+  void begin(std::size_t n) {
+    s_.nodes.resize(n);
+    s_.next_wave.clear();
+    s_.shadow_rays.clear();
+    s_.shadow_node.clear();
+    s_.shadow_value.clear();
+    s_.rays_of_pixel.assign(n, 0);
+  }
+
+  static WhittedNode root(const Ray& ray, std::uint32_t pixel, std::uint32_t tile_pixel,
+                          std::uint32_t depth, RayKind kind) {
+    WhittedNode node;
+    node.radiance = vec3(0.0f);
+    node.weight = vec3(1.0f);
+    node.throughput = vec3(1.0f);
+    node.ray = ray;
+    node.parent = kNoInstance;
+    node.pixel = pixel;
+    node.tile_pixel = tile_pixel;
+    node.depth = depth;
+    node.from = kNoInstance;
+    node.kind = kind;
+    node.exits = false;
+    node.answer = CacheAnswer::Trace;
+    node.cached = vec3(0.0f);
+    node.hit_t = std::numeric_limits<float>::infinity();
+    node.hit_entity = kNoInstance;
+    node.seen = 0;
+    node.rays = kind == RayKind::Primary ? 0u : 1u;
+    return node;
+  }
+
+  /// The reflection and refraction rays the previous wave spawned, wave after wave, until none
+  /// is left; rays leaving a cached object are first offered to the hook.
+  void trace_waves() {
     while (!s_.next_wave.empty()) {
       s_.wave.swap(s_.next_wave);
       s_.next_wave.clear();
+      if (frame_.lookups) serve_from_cache();
+      if (s_.wave.empty()) continue;
       s_.rays.resize(s_.wave.size());
       s_.hits.resize(s_.wave.size());
       for (std::size_t k = 0; k < s_.wave.size(); ++k) {
@@ -64,18 +140,78 @@ public:
       for (std::size_t k = 0; k < s_.wave.size(); ++k) shade(s_.wave[k], s_.hits[k]);
       trace_shadows();
     }
-
-    // Children were created after their parents: walking backwards folds every subtree into its
-    // root (a pixel's children in a fixed order, so the sum is the same whatever the tile).
-    for (std::size_t k = s_.nodes.size(); k-- > n;) {
-      const WhittedNode& node = s_.nodes[k];
-      s_.nodes[node.parent].radiance += node.weight * node.radiance;
-    }
-    if (frame_.hook != nullptr && s_.nodes.size() > n) deliver_leaving(n);
-    for (std::size_t k = 0; k < n; ++k) frame_.pixels[s_.nodes[k].pixel] = s_.nodes[k].radiance;
   }
 
-private:
+  /// Asks the hook about the wave's rays that exit an object; those it serves leave the wave
+  /// with their radiance set (UseIfClear after an occlusion ray confirms nothing is in the way).
+  void serve_from_cache() {
+    s_.queries.clear();
+    s_.query_node.clear();
+    for (const std::uint32_t k : s_.wave) {
+      const WhittedNode& node = s_.nodes[k];
+      if (!node.exits) continue;
+      s_.queries.push_back(
+          LeavingQuery{node.from, node.pixel, node.depth, node.ray.origin, node.ray.direction});
+      s_.query_node.push_back(k);
+    }
+    if (s_.queries.empty()) return;
+    s_.answers.resize(s_.queries.size());
+    frame_.hook->lookup(s_.queries, s_.answers);
+    s_.confirm_rays.clear();
+    s_.confirm_node.clear();
+    for (std::size_t q = 0; q < s_.queries.size(); ++q) {
+      WhittedNode& node = s_.nodes[s_.query_node[q]];
+      const CachedRadiance& a = s_.answers[q];
+      node.answer = a.answer;
+      if (a.answer == CacheAnswer::Use) {
+        node.radiance = a.radiance;
+        node.seen = a.seen;
+        node.rays = 0;
+      } else if (a.answer == CacheAnswer::Verify) {
+        node.cached = a.radiance;
+      } else if (a.answer == CacheAnswer::UseIfClear) {
+        node.radiance = a.radiance;
+        node.seen = a.seen;
+        s_.confirm_rays.push_back(Ray{node.ray.origin, 0.0f, node.ray.direction, a.clear_distance});
+        s_.confirm_node.push_back(s_.query_node[q]);
+      }
+    }
+    if (!s_.confirm_rays.empty()) {
+      s_.confirm_blocked.resize(s_.confirm_rays.size());
+      counts_[RayKind::Shadow] += s_.confirm_rays.size();
+      frame_.tracer.occluded(s_.confirm_rays, s_.confirm_blocked);
+      for (std::size_t c = 0; c < s_.confirm_rays.size(); ++c) {
+        WhittedNode& node = s_.nodes[s_.confirm_node[c]];
+        node.rays = 1; // the confirming ray
+        if (s_.confirm_blocked[c] != 0) {
+          node.rays = 2; // and the ray itself
+          node.answer = CacheAnswer::Trace;
+          node.radiance = vec3(0.0f);
+          node.seen = 0;
+        } else {
+          node.answer = CacheAnswer::Use;
+        }
+      }
+    }
+    // The wave keeps what must still be traced, in order.
+    std::size_t kept = 0;
+    for (const std::uint32_t k : s_.wave)
+      if (s_.nodes[k].answer != CacheAnswer::Use) s_.wave[kept++] = k;
+    s_.wave.resize(kept);
+  }
+
+  /// Children were created after their parents: walking backwards folds every subtree into its
+  /// root (a pixel's children in a fixed order, so the sum is the same whatever the tile).
+  void fold(std::size_t roots) {
+    for (std::size_t k = s_.nodes.size(); k-- > roots;) {
+      const WhittedNode& node = s_.nodes[k];
+      WhittedNode& parent = s_.nodes[node.parent];
+      parent.radiance += node.weight * node.radiance;
+      parent.seen |= node.seen;
+      parent.rays += node.rays;
+    }
+  }
+
   /// Local shading at a hit: emission, and a shadow ray towards every light that can light the
   /// diffuse part; then, below the depth limit, the reflection and refraction rays it spawns.
   void shade(std::uint32_t index, const Hit& hit) {
@@ -86,6 +222,9 @@ private:
       s_.nodes[index].radiance = settings_.background;
       return;
     }
+    s_.nodes[index].hit_t = hit.t;
+    s_.nodes[index].hit_entity = tables_.instances[hit.instance].entity_index;
+    s_.nodes[index].seen = entity_bit(s_.nodes[index].hit_entity);
     const gpu::GpuMaterial& m = tables_.materials[tables_.instances[hit.instance].material];
     const vec3 d = node.ray.direction;
     const ShadingPoint sp = shading_point(tables_, hit, d, true);
@@ -115,15 +254,15 @@ private:
     if (split.reflect_weight > 0.0f)
       spawn(node, index, hit.instance,
             offset_ray_origin(sp.position, sp.position_error, sp.geometric_normal),
-            split.reflect_direction, split.reflect_weight, RayKind::Reflection);
+            split.reflect_direction, split.reflect_weight, RayKind::Reflection, sp.front_face);
     if (split.refract_weight > 0.0f)
       spawn(node, index, hit.instance,
             offset_ray_origin(sp.position, sp.position_error, -sp.geometric_normal),
-            split.refract_direction, split.refract_weight, RayKind::Refraction);
+            split.refract_direction, split.refract_weight, RayKind::Refraction, !sp.front_face);
   }
 
   void spawn(const WhittedNode& parent, std::uint32_t parent_index, std::uint32_t instance,
-             const vec3& origin, const vec3& direction, float weight, RayKind kind) {
+             const vec3& origin, const vec3& direction, float weight, RayKind kind, bool exits) {
     const vec3 throughput = parent.throughput * weight;
     if (max_component(throughput) < settings_.min_weight) return;
     std::uint32_t& budget = s_.rays_of_pixel[parent.tile_pixel];
@@ -132,17 +271,14 @@ private:
       return;
     }
     ++budget;
-    WhittedNode child;
-    child.radiance = vec3(0.0f);
+    WhittedNode child =
+        root(Ray{origin, 0.0f, direction, std::numeric_limits<float>::infinity()}, parent.pixel,
+             parent.tile_pixel, parent.depth + 1, kind);
     child.weight = vec3(weight);
     child.throughput = throughput;
-    child.ray = Ray{origin, 0.0f, direction, std::numeric_limits<float>::infinity()};
     child.parent = parent_index;
-    child.pixel = parent.pixel;
-    child.tile_pixel = parent.tile_pixel;
-    child.depth = parent.depth + 1;
     child.from = instance;
-    child.kind = kind;
+    child.exits = exits;
     s_.next_wave.push_back(std::uint32_t(s_.nodes.size()));
     s_.nodes.push_back(child);
   }
@@ -153,6 +289,7 @@ private:
     if (settings_.shadows) {
       counts_[RayKind::Shadow] += s_.shadow_rays.size();
       frame_.tracer.occluded(s_.shadow_rays, s_.blocked);
+      for (const std::uint32_t node : s_.shadow_node) ++s_.nodes[node].rays;
     } else {
       std::fill(s_.blocked.begin(), s_.blocked.end(), std::uint8_t{0});
     }
@@ -172,6 +309,8 @@ private:
       r.from = tables_.entity(node.from);
       r.instance = node.from;
       r.kind = node.kind;
+      r.exits = node.exits;
+      r.answer = node.answer;
       r.depth = node.depth;
       r.pixel = node.pixel;
       r.origin = node.ray.origin;
@@ -179,6 +318,11 @@ private:
       r.weight = node.weight;
       r.throughput = node.throughput;
       r.radiance = node.radiance;
+      r.cached = node.cached;
+      r.hit_t = node.hit_t;
+      r.hit_entity = node.hit_entity;
+      r.seen = node.seen;
+      r.rays = node.rays;
       s_.leaving.push_back(r);
     }
     frame_.hook->leaving(s_.leaving);
@@ -196,6 +340,15 @@ private:
 void whitted_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& scratch,
                   RayCounts& counts) {
   WhittedTile(frame, scratch, counts).run(tile);
+}
+
+void whitted_rays(const FrameInputs& frame, std::span<const Ray> rays, std::uint32_t depth,
+                  std::uint32_t skip, TileScratch& scratch, RayCounts& counts,
+                  std::span<RadianceSample> out) {
+  FrameInputs inputs = frame;
+  inputs.hook = nullptr;
+  inputs.lookups = false;
+  WhittedTile(inputs, scratch, counts).run_rays(rays, depth, skip, out);
 }
 
 } // namespace specula::detail

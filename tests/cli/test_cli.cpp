@@ -136,6 +136,12 @@ TEST(Cli, BadOptionsExitOne) {
                                              {"render", scene, "--frames", "0"},
                                              {"render", scene, "--cache", "100"},
                                              {"render", scene, "--cache", "-4"},
+                                             {"render", scene, "--cache", "sometimes"},
+                                             {"render", scene, "--cache", "on", "--cache-lookup", "guess"},
+                                             {"render", scene, "--cache", "on", "--cache-tau", "0"},
+                                             {"render", scene, "--cache", "on", "--cache-tau", "nan"},
+                                             {"render", scene, "--cache", "on", "--cache-resolution", "48"},
+                                             {"render", scene, "--cache", "auto", "--max-error-db", "-3"},
                                              {"render", scene, "--width", "abc"},
                                              {"render"},
                                              {"frobnicate"},
@@ -197,13 +203,12 @@ TEST(Cli, RenderWritesTheImageAndStatsOnEveryCpuBackend) {
   fs::remove_all(dir);
 }
 
-TEST(Cli, BackendsModesAndCachesNotBuiltYetExitTwo) {
+TEST(Cli, BackendsAndModesNotBuiltYetExitTwo) {
   const std::string scene =
       (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
   std::vector<std::vector<std::string>> unavailable = {{"--backend", "vulkan"},
                                                              {"--mode", "path"},
-                                                             {"--mode", "shadow"},
-                                                             {"--cache", "64"}};
+                                                             {"--mode", "shadow"}};
   if (!specula::backend_info("embree").available) unavailable.push_back({"--backend", "embree"});
   for (const auto& extra : unavailable) {
     std::vector<std::string> args = {"render", scene, "--width", "16", "--height", "16"};

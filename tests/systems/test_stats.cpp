@@ -10,6 +10,11 @@ namespace {
 RunStats sample_stats() {
   RunStats s;
   s.settings = {"samples/scenes/cornell_box.json", "embree", "whitted", 512, 400, 3, 2, 5, 64};
+  s.settings.cache_policy = "auto";
+  s.settings.cache_lookup = "tau";
+  s.settings.cache_tau_deg = 0.25f;
+  s.settings.cache_fill_budget = 1000;
+  s.settings.max_error_db = 35.0;
   for (int i = 0; i < 3; ++i) {
     FrameStats f;
     f.ms = 10.0 + i;
@@ -18,7 +23,24 @@ RunStats sample_stats() {
     f.rays[RayKind::Shadow] = 1000u + unsigned(i);
     f.rays[RayKind::Reflection] = 77;
     f.rays[RayKind::Refraction] = 5;
-    f.cache = {100, 40};
+    f.cache.lookups = 100;
+    f.cache.hits = 40;
+    f.cache.rejected = 7;
+    f.cache.written = 12u + unsigned(i);
+    f.cache.texels = 6 * 64 * 64;
+    f.cache.valid = 300;
+    f.cache.memory_bytes = 6 * 64 * 64 * 16;
+    CubeReport cube;
+    cube.entity = 3;
+    cube.resolution = 64;
+    cube.mode = "tau";
+    cube.reason = "estimated 41.5 dB, within the 40.0 dB bound: tau mode kept";
+    cube.lookups = 100;
+    cube.hits = 40;
+    cube.valid = 300;
+    cube.estimated_psnr_db = 41.5;
+    cube.saved_ms = 0.25;
+    f.cache.cubes.push_back(cube);
     s.frames.push_back(f);
   }
   return s;
@@ -38,7 +60,22 @@ TEST(Stats, UsesThePublishedFieldNames) {
   EXPECT_TRUE(f.contains("trace_ms"));
   EXPECT_TRUE(f.at("cache").contains("lookups"));
   EXPECT_TRUE(f.at("cache").contains("hits"));
-  EXPECT_EQ(j.at("settings").at("cache"), 64);
+  EXPECT_EQ(j.at("settings").at("cache").at("resolution"), 64);
+  EXPECT_EQ(j.at("settings").at("cache").at("policy"), "auto");
+  EXPECT_EQ(f.at("cache").at("cubes").at(0).at("mode"), "tau");
+}
+
+TEST(Stats, ReadsFilesFromBeforeTheCacheFields) {
+  // A file as the first releases wrote it: "cache" a bare resolution, the frame's cache counts
+  // only lookups and hits.
+  auto j = nlohmann::json::parse(stats_to_json(sample_stats()));
+  j["settings"]["cache"] = 128;
+  for (auto& f : j["frames"]) f["cache"] = {{"lookups", 5}, {"hits", 2}};
+  const RunStats s = stats_from_json(j.dump(), "old.json");
+  EXPECT_EQ(s.settings.cache_resolution, 128u);
+  EXPECT_EQ(s.settings.cache_policy, "auto");
+  EXPECT_EQ(s.frames[0].cache.lookups, 5u);
+  EXPECT_TRUE(s.frames[0].cache.cubes.empty());
 }
 
 TEST(Stats, DerivedRatesFollowFromCountsAndTime) {

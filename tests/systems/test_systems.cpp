@@ -316,14 +316,15 @@ TEST(Systems, CameraFollowsItsPath) {
   EXPECT_NEAR(reg.get<Camera>(e).position.x, 10.0f, 1e-5f);
 }
 
-TEST(Systems, ScheduleRunsAnimationTransformSceneLayerAccelerationRenderInThatOrder) {
+TEST(Systems, ScheduleRunsAnimationTransformSceneLayerAccelerationCachesRenderInThatOrder) {
   const auto names = Schedule::system_names();
-  ASSERT_EQ(names.size(), 5u);
+  ASSERT_EQ(names.size(), 6u);
   EXPECT_EQ(names[0], "animation");
   EXPECT_EQ(names[1], "transform");
   EXPECT_EQ(names[2], "scene_layer");
   EXPECT_EQ(names[3], "acceleration");
-  EXPECT_EQ(names[4], "render");
+  EXPECT_EQ(names[4], "cache_invalidation");
+  EXPECT_EQ(names[5], "render");
   // The order matters: an animated entity's world transform reflects this tick's animation.
   ecs::Registry reg;
   const ecs::Entity e = reg.create();

@@ -1,0 +1,872 @@
+#include "specula/cache/ray_cache.h"
+
+#include "specula/cache/cube_map.h"
+#include "specula/core/error.h"
+#include "specula/scene/components/material.h"
+#include "specula/scene/components/ray_cache_cube.h"
+#include "specula/trace/lights.h"
+
+#include <glm/gtc/packing.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/combinable.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <numbers>
+#include <limits>
+#include <map>
+
+namespace specula::cache {
+
+// ---------------------------------------------------------------------------------------------
+// Settings names
+
+std::optional<LookupMode> parse_lookup_mode(std::string_view name) {
+  if (name == "direction") return LookupMode::Direction;
+  if (name == "tau") return LookupMode::Tau;
+  if (name == "march") return LookupMode::March;
+  return std::nullopt;
+}
+
+const char* lookup_mode_name(LookupMode mode) {
+  switch (mode) {
+  case LookupMode::Direction: return "direction";
+  case LookupMode::Tau: return "tau";
+  case LookupMode::March: return "march";
+  }
+  return "unknown";
+}
+
+std::optional<CachePolicy> parse_cache_policy(std::string_view name) {
+  if (name == "off") return CachePolicy::Off;
+  if (name == "on") return CachePolicy::On;
+  if (name == "auto") return CachePolicy::Auto;
+  return std::nullopt;
+}
+
+const char* cache_policy_name(CachePolicy policy) {
+  switch (policy) {
+  case CachePolicy::Off: return "off";
+  case CachePolicy::On: return "on";
+  case CachePolicy::Auto: return "auto";
+  }
+  return "unknown";
+}
+
+// ---------------------------------------------------------------------------------------------
+// Texels
+
+Texel make_texel(const vec3& radiance, float distance, std::uint32_t hit_entity,
+                 std::uint32_t seen, std::uint32_t rays) {
+  Texel t;
+  // Half floats overflow at 65504: larger radiance (or distance) saturates rather than turning
+  // into infinity; a miss keeps +inf.
+  const vec3 c = glm::clamp(radiance, vec3(0.0f), vec3(65504.0f));
+  t.rgb[0] = glm::packHalf1x16(c.x);
+  t.rgb[1] = glm::packHalf1x16(c.y);
+  t.rgb[2] = glm::packHalf1x16(c.z);
+  t.distance = std::isfinite(distance) ? glm::packHalf1x16(std::min(distance, 65504.0f))
+                                       : std::uint16_t(0x7c00);
+  t.hit = hit_entity;
+  t.seen = fold_seen(seen);
+  t.rays = std::uint8_t(std::min(rays, 255u));
+  t.state = kValid;
+  return t;
+}
+
+vec3 texel_radiance(const Texel& t) {
+  return vec3(glm::unpackHalf1x16(t.rgb[0]), glm::unpackHalf1x16(t.rgb[1]),
+              glm::unpackHalf1x16(t.rgb[2]));
+}
+
+float texel_distance(const Texel& t) { return glm::unpackHalf1x16(t.distance); }
+
+// ---------------------------------------------------------------------------------------------
+// Cubes
+
+namespace {
+
+/// What a lookup costs against tracing one ray, for the auto policy's count-based accounting
+/// (measured by `specula_bench --section cache-costs` on the mirror-spheres scene; see
+/// docs/design/ray-cache.md). Counts, not clocks, decide, so decisions and images are the same
+/// from run to run.
+constexpr double kLookupRayCost = 0.05;    // one texel fetch and its acceptance test
+constexpr double kMarchStepRayCost = 0.02; // one step of the distance march
+constexpr std::uint32_t kMaxMarchSteps = 96;
+constexpr std::uint32_t kRefineSteps = 6;
+constexpr std::uint64_t kMinErrorSamples = 64;
+constexpr std::uint32_t kEvaluationVerifyEvery = 4;
+
+std::uint32_t mix_hash(std::uint64_t x) {
+  x ^= x >> 33;
+  x *= 0xff51afd7ed558ccdULL;
+  x ^= x >> 33;
+  x *= 0xc4ceb9fe1a85ec53ULL;
+  x ^= x >> 33;
+  return std::uint32_t(x);
+}
+
+/// The ladder auto walks down when the error bound is not kept: fastest first.
+struct Rung {
+  LookupMode mode;
+  float tau_deg;
+};
+constexpr Rung kLadder[] = {{LookupMode::Direction, 0.0f},
+                            {LookupMode::March, 0.5f},
+                            {LookupMode::Tau, 1.0f},
+                            {LookupMode::Tau, 0.25f}};
+constexpr int kLadderSize = int(std::size(kLadder));
+
+std::string format(const char* fmt, double a, double b = 0.0, double c = 0.0) {
+  char buf[256];
+  std::snprintf(buf, sizeof buf, fmt, a, b, c);
+  return buf;
+}
+
+Sphere instance_sphere(const gpu::GpuInstance& inst) {
+  const vec3 lo = inst.world_bounds_min, hi = inst.world_bounds_max;
+  return Sphere{0.5f * (lo + hi), 0.5f * glm::length(hi - lo)};
+}
+
+/// Whether the segment from p (length `length` along unit d; +inf: a ray) passes through s.
+bool segment_meets_sphere(const vec3& p, const vec3& d, float length, const Sphere& s) {
+  const vec3 m = s.centre - p;
+  const float along = glm::clamp(glm::dot(m, d), 0.0f, length);
+  const vec3 closest = p + d * along;
+  return glm::dot(closest - s.centre, closest - s.centre) <= s.radius * s.radius;
+}
+
+} // namespace
+
+struct RayCacheStore::Cube {
+  ecs::Entity owner;
+  std::uint32_t instance = 0;
+  std::uint32_t resolution = 64;
+  vec3 centre{0.0f};
+  std::vector<Texel> texels;
+  std::vector<std::uint32_t> edges; ///< by entity index: valid texels whose first hit it is
+  std::uint64_t valid = 0;
+  // Policy.
+  int rung = 0;
+  LookupMode mode = LookupMode::Direction;
+  float tau_deg = 0.5f;
+  float cos_tau = 1.0f;
+  bool enabled = true;
+  bool evaluating = true; ///< auto: verify often until the error of this mode is known
+  std::string reason;
+  double err_sum = 0.0;           ///< Σ |throughput·(cached − traced)|² over verified rays
+  std::uint64_t err_samples = 0;  ///< since the mode was chosen
+  double estimated_psnr = 0.0;
+  std::uint32_t frames_in_mode = 0;
+  double saved_ms = 0.0;
+  // This frame, from lookups (several threads).
+  std::atomic<std::uint64_t> lookups{0}, outdated{0}, rejected{0}, march_steps{0};
+  std::atomic<std::uint64_t> offered_rays{0}; ///< what the served texels cost when traced
+  // This frame, from leaving rays (under the store's mutex).
+  std::uint64_t used = 0, used_rays = 0, traced = 0, traced_rays = 0, verified = 0;
+
+  void set_rung(int r) {
+    rung = r;
+    mode = kLadder[r].mode;
+    tau_deg = kLadder[r].tau_deg;
+    cos_tau = std::cos(glm::radians(tau_deg));
+    err_sum = 0.0;
+    err_samples = 0;
+    evaluating = true;
+    frames_in_mode = 0;
+  }
+  void set_mode(LookupMode m, float tau) {
+    mode = m;
+    tau_deg = tau;
+    cos_tau = std::cos(glm::radians(tau));
+  }
+  void outdate(std::uint32_t i) {
+    Texel& t = texels[i];
+    if (!t.valid()) return;
+    t.state &= std::uint8_t(~kValid);
+    --valid;
+    if (t.hit < edges.size()) --edges[t.hit];
+  }
+  void store(std::uint32_t i, const Texel& value) {
+    outdate(i);
+    texels[i] = value;
+    ++valid;
+    if (value.hit != kNoInstance) {
+      if (value.hit >= edges.size()) edges.resize(value.hit + 1, 0);
+      ++edges[value.hit];
+    }
+  }
+  std::uint64_t flush() {
+    const std::uint64_t was = valid;
+    for (Texel& t : texels) t.state &= std::uint8_t(~kValid);
+    std::fill(edges.begin(), edges.end(), 0u);
+    valid = 0;
+    return was;
+  }
+};
+
+struct RayCacheStore::Candidate {
+  std::uint32_t cube;
+  std::uint32_t texel;
+  std::uint32_t pixel;
+  std::uint32_t order; ///< depth, kind
+  std::uint64_t tie;   ///< direction bits: a total order among a pixel's rays
+  Texel value;
+};
+
+RayCacheStore::RayCacheStore(CacheSettings settings) : settings_(settings) {
+  if (settings_.verify_every == 0) settings_.verify_every = 1;
+}
+
+RayCacheStore::~RayCacheStore() = default;
+
+std::size_t RayCacheStore::cube_count() const { return cubes_.size(); }
+
+CubeView RayCacheStore::cube(std::size_t i) const {
+  const Cube& c = *cubes_.at(i);
+  return CubeView{c.owner, c.instance, c.resolution, c.centre, c.texels, c.mode, c.enabled};
+}
+
+std::optional<std::size_t> RayCacheStore::cube_of(ecs::Entity owner) const {
+  for (std::size_t i = 0; i < cubes_.size(); ++i)
+    if (cubes_[i]->owner == owner) return i;
+  return std::nullopt;
+}
+
+std::vector<std::pair<std::uint32_t, std::uint32_t>> RayCacheStore::edges(std::size_t i) const {
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> out;
+  const Cube& c = *cubes_.at(i);
+  for (std::uint32_t e = 0; e < c.edges.size(); ++e)
+    if (c.edges[e] > 0) out.emplace_back(e, c.edges[e]);
+  return out;
+}
+
+std::uint64_t RayCacheStore::flush() {
+  std::uint64_t n = 0;
+  for (auto& c : cubes_) n += c->flush();
+  return n;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Invalidation
+
+InvalidationStats RayCacheStore::invalidate(const ecs::Registry& const_registry,
+                                            const SceneLayer& layer) {
+  auto& registry = const_cast<ecs::Registry&>(const_registry); // views are non-const; read only
+  const SceneTables& tables = layer.tables();
+  const SceneDelta& delta = layer.delta();
+  InvalidationStats stats;
+  for (const auto& c : cubes_) stats.flush_all += c->valid;
+
+  // 1. The set of cubes: entities with a RayCacheCube, a reflective or refractive material and
+  // an instance in the layer.
+  std::vector<std::unique_ptr<Cube>> kept;
+  std::vector<ecs::Entity> owners;
+  registry.view<RayCacheCube>().each([&](ecs::Entity e, RayCacheCube& request) {
+    const Material* m = registry.try_get<Material>(e);
+    if (m == nullptr || !(m->is_reflective() || m->is_refractive())) return;
+    const std::optional<std::uint32_t> slot = layer.instance_of(e);
+    if (!slot) return;
+    const std::uint32_t resolution =
+        settings_.resolution != 0 ? settings_.resolution : request.resolution;
+    std::unique_ptr<Cube> cube;
+    for (auto& c : cubes_)
+      if (c && c->owner == e && c->resolution == resolution) cube = std::move(c);
+    if (!cube) {
+      cube = std::make_unique<Cube>();
+      cube->owner = e;
+      cube->resolution = resolution;
+      cube->texels.assign(std::size_t(kFaceCount) * resolution * resolution, Texel{});
+      if (settings_.policy == CachePolicy::Auto) {
+        int start = 0;
+        for (int r = 0; r < kLadderSize; ++r)
+          if (kLadder[r].mode == settings_.lookup) {
+            start = r;
+            break;
+          }
+        cube->set_rung(start);
+        cube->reason = std::string("starting in ") + lookup_mode_name(cube->mode) + " mode";
+      } else {
+        cube->set_mode(settings_.lookup, settings_.tau_deg);
+        cube->evaluating = false;
+        cube->reason = std::string("--cache on: ") + lookup_mode_name(cube->mode) + " mode";
+      }
+      cube->instance = *slot;
+      cube->centre = instance_sphere(tables.instances[*slot]).centre;
+    }
+    cube->instance = *slot;
+    kept.push_back(std::move(cube));
+  });
+  // A fixed order (by owner), whatever order the view walks in.
+  std::sort(kept.begin(), kept.end(), [](const auto& a, const auto& b) {
+    return a->owner.index < b->owner.index;
+  });
+  cubes_ = std::move(kept);
+  cube_of_instance_.assign(tables.instances.size(), -1);
+  for (std::size_t i = 0; i < cubes_.size(); ++i) cube_of_instance_[cubes_[i]->instance] = int(i);
+
+  // 2. What changed, as entities with their old and new bounds.
+  auto grow = [&](std::uint32_t index) {
+    if (index >= bounds_.size()) {
+      bounds_.resize(index + 1);
+      has_bounds_.resize(index + 1, 0);
+    }
+  };
+  struct Change {
+    std::uint32_t entity;
+    std::optional<Sphere> before, after;
+  };
+  std::vector<Change> changes;
+  auto changed = [&](std::uint32_t slot, bool removed) {
+    if (!removed && !tables.live(slot)) return;
+    const gpu::GpuInstance& inst = tables.instances[slot];
+    const std::uint32_t e = inst.entity_index;
+    grow(e);
+    Change ch{e, std::nullopt, std::nullopt};
+    if (has_bounds_[e] != 0) ch.before = bounds_[e];
+    if (!removed) {
+      ch.after = instance_sphere(inst);
+      bounds_[e] = *ch.after;
+      has_bounds_[e] = 1;
+    } else {
+      has_bounds_[e] = 0;
+    }
+    changes.push_back(ch);
+  };
+  bool flush_everything = delta.static_rebuilt;
+  bool flush_surfaces = delta.lights_changed || delta.materials_changed;
+  for (const std::uint32_t s : delta.instances_removed) {
+    // The slot is freed: its entity index is still in the table entry.
+    if (s < tables.instances.size()) changed(s, true);
+  }
+  for (const std::uint32_t s : delta.instances_added) changed(s, false);
+  for (const std::uint32_t s : delta.instances_moved) changed(s, false);
+  for (const std::uint32_t s : delta.instances_deformed) changed(s, false);
+  if (delta.static_rebuilt)
+    for (std::uint32_t s = 0; s < tables.instances.size(); ++s)
+      if (tables.live(s)) {
+        const std::uint32_t e = tables.instances[s].entity_index;
+        grow(e);
+        bounds_[e] = instance_sphere(tables.instances[s]);
+        has_bounds_[e] = 1;
+      }
+
+  // 3. Apply to every cube.
+  for (auto& cp : cubes_) {
+    Cube& c = *cp;
+    const Sphere own = instance_sphere(tables.instances[c.instance]);
+    const bool owner_moved = glm::any(glm::notEqual(own.centre, c.centre)) ||
+                             std::any_of(changes.begin(), changes.end(), [&](const Change& ch) {
+                               return ch.entity == c.owner.index;
+                             });
+    if (flush_everything || owner_moved) {
+      stats.outdated += c.flush();
+      stats.owners_moved += owner_moved ? 1 : 0;
+      c.centre = own.centre;
+      continue;
+    }
+    if (changes.empty() && !flush_surfaces) continue;
+    const std::uint32_t res = c.resolution;
+    const float texel_angle = texel_half_angle(res);
+    struct Test {
+      std::uint32_t entity;
+      std::uint16_t bit;
+      bool cone = false; // the new bounds, seen from the centre
+      vec3 axis{0.0f};
+      float cos_cone = 1.0f;
+      std::vector<Sphere> shadows; // old and new bounds, as occluders of the stored hit points
+    };
+    std::vector<Test> tests;
+    for (const Change& ch : changes) {
+      Test t;
+      t.entity = ch.entity;
+      t.bit = seen_bit16(ch.entity);
+      if (ch.after) {
+        const vec3 to = ch.after->centre - c.centre;
+        const float dist = glm::length(to);
+        if (dist <= ch.after->radius) {
+          t.cone = true; // the centre is inside its bounds: it can be anywhere
+          t.cos_cone = -2.0f;
+          t.axis = vec3(0, 0, 1);
+        } else {
+          t.cone = true;
+          t.axis = to / dist;
+          t.cos_cone = std::cos(std::min(std::numbers::pi_v<float>,
+                                         std::asin(std::min(1.0f, ch.after->radius / dist)) +
+                                             texel_angle));
+        }
+        t.shadows.push_back(*ch.after);
+      }
+      if (ch.before) t.shadows.push_back(*ch.before);
+      tests.push_back(std::move(t));
+    }
+    const std::vector<gpu::GpuLight>& lights = tables.lights;
+    tbb::combinable<std::vector<std::uint32_t>> hits_found;
+    tbb::parallel_for(
+        tbb::blocked_range<std::uint32_t>(0, std::uint32_t(c.texels.size()), 4096),
+        [&](const tbb::blocked_range<std::uint32_t>& range) {
+          std::vector<std::uint32_t>& out = hits_found.local();
+          for (std::uint32_t i = range.begin(); i != range.end(); ++i) {
+            const Texel& tx = c.texels[i];
+            if (!tx.valid()) continue;
+            const float d = texel_distance(tx);
+            const bool finite = std::isfinite(d);
+            if (flush_surfaces && finite) {
+              out.push_back(i);
+              continue;
+            }
+            bool stale = false;
+            vec3 dir(0.0f);
+            bool have_dir = false;
+            for (const Test& t : tests) {
+              if (tx.hit == t.entity || (tx.seen & t.bit) != 0) {
+                stale = true;
+                break;
+              }
+              if (!have_dir) {
+                dir = texel_direction(i, res);
+                have_dir = true;
+              }
+              // It may now see the entity, closer than what it saw.
+              if (t.cone && glm::dot(dir, t.axis) >= t.cos_cone) {
+                stale = true;
+                break;
+              }
+              // Its hit point may now be (or no longer be) in the entity's shadow.
+              if (finite && !t.shadows.empty()) {
+                const vec3 p = c.centre + dir * d;
+                for (const gpu::GpuLight& light : lights) {
+                  const LightSample ls = sample_light(light, p);
+                  for (const Sphere& s : t.shadows)
+                    if (segment_meets_sphere(p, ls.to_light, ls.distance, s)) stale = true;
+                }
+                if (stale) break;
+              }
+            }
+            if (stale) out.push_back(i);
+          }
+        });
+    hits_found.combine_each([&](const std::vector<std::uint32_t>& v) {
+      for (const std::uint32_t i : v) {
+        c.outdate(i);
+        ++stats.outdated;
+      }
+    });
+  }
+  last_invalidation_ = stats;
+  return stats;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Prefill
+
+std::uint64_t RayCacheStore::prefill(const Tracer& tracer, const SceneLayer& layer,
+                                     const TraceSettings& trace) {
+  std::uint64_t filled = 0;
+  for (auto& cp : cubes_) {
+    Cube& c = *cp;
+    if (!c.enabled) continue;
+    std::vector<std::uint32_t> todo;
+    for (std::uint32_t i = 0; i < c.texels.size(); ++i)
+      if (!c.texels[i].valid()) todo.push_back(i);
+    if (todo.empty()) continue;
+    std::vector<Ray> rays(todo.size());
+    for (std::size_t k = 0; k < todo.size(); ++k)
+      rays[k] = Ray{c.centre, 0.0f, texel_direction(todo[k], c.resolution),
+                    std::numeric_limits<float>::infinity()};
+    std::vector<RadianceSample> out(todo.size());
+    (void)trace_radiance(tracer, layer, trace, rays, 1, c.instance, out);
+    for (std::size_t k = 0; k < todo.size(); ++k) {
+      Texel t = make_texel(out[k].radiance, out[k].t, out[k].entity, out[k].seen, out[k].rays);
+      t.state |= kTexelPrefilled;
+      c.store(todo[k], t);
+    }
+    filled += todo.size();
+  }
+  pending_prefilled_ += filled;
+  return filled;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The hook
+
+void RayCacheStore::begin_frame(std::uint32_t width, std::uint32_t height) {
+  width_ = std::max(1u, width);
+  height_ = std::max(1u, height);
+  ++frame_;
+  lookups_ = false;
+  for (auto& c : cubes_) {
+    c->lookups = 0;
+    c->outdated = 0;
+    c->rejected = 0;
+    c->march_steps = 0;
+    c->offered_rays = 0;
+    c->used = c->used_rays = c->traced = c->traced_rays = c->verified = 0;
+    lookups_ = lookups_ || c->enabled;
+  }
+  candidates_.clear();
+  lookup_ns_ = 0;
+  lookup_count_ = 0;
+}
+
+bool RayCacheStore::wants_lookups() const { return lookups_; }
+
+namespace {
+
+struct Answer {
+  CacheAnswer answer = CacheAnswer::Trace;
+  std::uint32_t texel = 0;
+  bool rejected = false;
+  bool outdated = false;
+  std::uint32_t steps = 0;
+};
+
+/// Direction from the shading point p to the cached hit `centre + s·distance` within τ of d.
+bool within_tau(const vec3& centre, const vec3& s, float distance, const vec3& p, const vec3& d,
+                float cos_tau) {
+  const vec3 v = centre + s * distance - p;
+  const float len = glm::length(v);
+  return len > 0.0f && glm::dot(v, d) >= cos_tau * len;
+}
+
+} // namespace
+
+// The march: find where the ray p + t·d first goes beyond the stored surface, |q − c| = D(q − c),
+// stepping about one texel of angle (or the remaining gap to the surface, as |q − c| grows at
+// most as fast as t) at a time, then bisecting; accept the texel found if its stored hit lies
+// within τ of the ray. A ray whose direction from the centre converges on d without crossing
+// anything sees what the texel of d saw: a miss, confirmed by an occlusion ray.
+static Answer march(const std::vector<Texel>& texels, std::uint32_t res, const vec3& centre,
+                    const vec3& p, const vec3& d, float cos_tau) {
+  Answer a;
+  const vec3 pc = p - centre;
+  const float texel_angle = 2.0f / float(res);
+  const float scale = std::max(glm::length(pc), 1e-6f);
+  float t = 0.0f;
+  float t_inside = 0.0f;
+  for (std::uint32_t step = 0; step < kMaxMarchSteps; ++step) {
+    ++a.steps;
+    const vec3 q = pc + t * d;
+    const float r = glm::length(q);
+    const std::uint32_t ti = texel_of(r > 0.0f ? q : d, res);
+    const Texel& tx = texels[ti];
+    if (!tx.valid()) {
+      a.outdated = true;
+      return a;
+    }
+    const float D = texel_distance(tx);
+    if (std::isinf(D)) {
+      // Nothing stored this way. Once q's direction is within a texel of d, it never leaves it.
+      if (r > 0.0f && glm::dot(q, d) >= r * std::cos(0.5f * texel_angle)) {
+        const std::uint32_t td = texel_of(d, res);
+        if (!texels[td].valid()) {
+          a.outdated = true;
+          return a;
+        }
+        if (!std::isinf(texel_distance(texels[td]))) {
+          a.rejected = true;
+          return a;
+        }
+        a.answer = CacheAnswer::UseIfClear;
+        a.texel = td;
+        return a;
+      }
+    } else if (r >= D) {
+      // Crossed between t_inside and t: bisect.
+      float lo = t_inside, hi = t;
+      std::uint32_t found = ti;
+      for (std::uint32_t k = 0; k < kRefineSteps; ++k) {
+        ++a.steps;
+        const float mid = 0.5f * (lo + hi);
+        const vec3 qm = pc + mid * d;
+        const float rm = glm::length(qm);
+        const std::uint32_t tm = texel_of(rm > 0.0f ? qm : d, res);
+        if (!texels[tm].valid()) {
+          a.outdated = true;
+          return a;
+        }
+        const float Dm = texel_distance(texels[tm]);
+        if (!std::isinf(Dm) && rm >= Dm) {
+          hi = mid;
+          found = tm;
+        } else {
+          lo = mid;
+        }
+      }
+      // The stored surface where the ray crossed it: on the ray when the surface is continuous
+      // there, off it at a silhouette (the stored distance jumped), which the τ test rejects.
+      const vec3 q_hit = pc + hi * d;
+      const float r_hit = glm::length(q_hit);
+      const vec3 s = r_hit > 0.0f ? q_hit / r_hit : d;
+      if (within_tau(centre, s, texel_distance(texels[found]), p, d, cos_tau)) {
+        a.answer = CacheAnswer::Use;
+        a.texel = found;
+      } else {
+        a.rejected = true;
+      }
+      return a;
+    }
+    t_inside = t;
+    // Step: about one texel of angle as seen from the centre, and never past the surface when
+    // the stored distance does not change (|q − c| grows at most as fast as t).
+    const float perp = r > 0.0f ? glm::length(glm::cross(d, q)) / r : 0.0f;
+    float dt = perp > 1e-12f ? texel_angle * r * r / perp : std::numeric_limits<float>::infinity();
+    if (!std::isinf(D)) dt = std::min(dt, std::max(D - r, 0.0f) + 1e-4f * scale);
+    t += std::max(dt, 1e-4f * scale);
+    if (!std::isfinite(t)) break;
+  }
+  a.rejected = true; // ran out of steps: trace
+  return a;
+}
+
+void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
+                           std::span<CachedRadiance> answers) const {
+  const auto start = std::chrono::steady_clock::now();
+  // Counters gathered per batch (a batch mostly addresses one cube), added once.
+  struct Local {
+    std::uint64_t lookups = 0, outdated = 0, rejected = 0, steps = 0, offered_rays = 0;
+  };
+  thread_local std::vector<Local> local;
+  local.assign(cubes_.size(), Local{});
+  const bool verify = settings_.policy == CachePolicy::Auto;
+  for (std::size_t k = 0; k < queries.size(); ++k) {
+    const LeavingQuery& q = queries[k];
+    CachedRadiance& out = answers[k];
+    out = CachedRadiance{};
+    const std::int32_t ci =
+        q.instance < cube_of_instance_.size() ? cube_of_instance_[q.instance] : -1;
+    if (ci < 0) continue;
+    const Cube& c = *cubes_[std::size_t(ci)];
+    if (!c.enabled) continue;
+    Local& l = local[std::size_t(ci)];
+    ++l.lookups;
+    Answer a;
+    if (c.mode == LookupMode::March) {
+      a = march(c.texels, c.resolution, c.centre, q.origin, q.direction, c.cos_tau);
+      l.steps += a.steps;
+    } else {
+      a.texel = texel_of(q.direction, c.resolution);
+      const Texel& tx = c.texels[a.texel];
+      if (!tx.valid()) {
+        a.outdated = true;
+      } else if (c.mode == LookupMode::Direction) {
+        a.answer = CacheAnswer::Use;
+      } else {
+        const float D = texel_distance(tx);
+        if (std::isinf(D))
+          a.answer = CacheAnswer::UseIfClear; // a miss: confirm nothing is in the way
+        else if (within_tau(c.centre, q.direction, D, q.origin, q.direction, c.cos_tau))
+          a.answer = CacheAnswer::Use;
+        else
+          a.rejected = true;
+      }
+    }
+    if (a.outdated) ++l.outdated;
+    if (a.rejected) ++l.rejected;
+    if (a.answer == CacheAnswer::Trace) continue;
+    const Texel& tx = c.texels[a.texel];
+    out.answer = a.answer;
+    out.radiance = texel_radiance(tx);
+    out.clear_distance = std::numeric_limits<float>::infinity();
+    out.seen = tx.seen | (tx.hit != kNoInstance ? entity_bit(tx.hit) : 0u);
+    const std::uint64_t cost = tx.rays;
+    if (verify) {
+      const std::uint32_t every = c.evaluating ? kEvaluationVerifyEvery : settings_.verify_every;
+      const std::uint64_t key = (std::uint64_t(q.pixel) << 8) ^ (std::uint64_t(q.depth) << 2) ^
+                                (frame_ << 40) ^ std::uint64_t(ci);
+      if (mix_hash(key) % every == 0) out.answer = CacheAnswer::Verify;
+    }
+    if (out.answer != CacheAnswer::Verify) l.offered_rays += cost;
+  }
+  for (std::size_t i = 0; i < local.size(); ++i) {
+    if (local[i].lookups == 0) continue;
+    Cube& c = *cubes_[i];
+    c.lookups.fetch_add(local[i].lookups, std::memory_order_relaxed);
+    c.outdated.fetch_add(local[i].outdated, std::memory_order_relaxed);
+    c.rejected.fetch_add(local[i].rejected, std::memory_order_relaxed);
+    c.march_steps.fetch_add(local[i].steps, std::memory_order_relaxed);
+    c.offered_rays.fetch_add(local[i].offered_rays, std::memory_order_relaxed);
+  }
+  lookup_count_.fetch_add(queries.size(), std::memory_order_relaxed);
+  lookup_ns_.fetch_add(std::uint64_t(std::chrono::duration<double, std::nano>(
+                                         std::chrono::steady_clock::now() - start)
+                                         .count()),
+                       std::memory_order_relaxed);
+}
+
+void RayCacheStore::leaving(std::span<const LeavingRadiance> rays) {
+  std::vector<Candidate> mine;
+  const std::lock_guard lock(mutex_);
+  for (const LeavingRadiance& r : rays) {
+    if (!r.exits || r.instance >= cube_of_instance_.size()) continue;
+    const std::int32_t ci = cube_of_instance_[r.instance];
+    if (ci < 0) continue;
+    Cube& c = *cubes_[std::size_t(ci)];
+    switch (r.answer) {
+    case CacheAnswer::Use:
+    case CacheAnswer::UseIfClear:
+      ++c.used;
+      c.used_rays += r.rays;
+      continue;
+    case CacheAnswer::Verify: {
+      ++c.verified;
+      ++c.traced;
+      c.traced_rays += r.rays;
+      const vec3 e = r.throughput * (r.cached - r.radiance);
+      c.err_sum += double(glm::dot(e, e));
+      ++c.err_samples;
+      continue;
+    }
+    case CacheAnswer::Trace:
+      break;
+    }
+    ++c.traced;
+    c.traced_rays += r.rays;
+    const std::uint32_t ti = texel_of(r.direction, c.resolution);
+    if (c.texels[ti].valid()) continue; // only outdated texels are written (the paper)
+    const float distance =
+        std::isinf(r.hit_t) ? r.hit_t : glm::length(r.origin + r.direction * r.hit_t - c.centre);
+    Candidate cand;
+    cand.cube = std::uint32_t(ci);
+    cand.texel = ti;
+    cand.pixel = r.pixel;
+    cand.order = (r.depth << 4) | std::uint32_t(r.kind);
+    std::uint32_t bx, by;
+    std::memcpy(&bx, &r.direction.x, 4);
+    std::memcpy(&by, &r.direction.y, 4);
+    cand.tie = (std::uint64_t(bx) << 32) | by;
+    cand.value = make_texel(r.radiance, distance, r.hit_entity, r.seen, r.rays);
+    candidates_.push_back(cand);
+  }
+}
+
+std::uint64_t RayCacheStore::apply_writes() {
+  // The first candidate of each texel in a fixed order: the result does not depend on which
+  // thread traced which tile.
+  auto key_less = [](const Candidate& a, const Candidate& b) {
+    if (a.cube != b.cube) return a.cube < b.cube;
+    if (a.texel != b.texel) return a.texel < b.texel;
+    if (a.pixel != b.pixel) return a.pixel < b.pixel;
+    if (a.order != b.order) return a.order < b.order;
+    return a.tie < b.tie;
+  };
+  std::sort(candidates_.begin(), candidates_.end(), key_less);
+  std::vector<Candidate> unique;
+  for (const Candidate& c : candidates_)
+    if (unique.empty() || unique.back().cube != c.cube || unique.back().texel != c.texel)
+      unique.push_back(c);
+  if (settings_.fill_budget != 0 && unique.size() > settings_.fill_budget) {
+    // Spread the budget over the cubes' faces rather than filling from one corner.
+    std::stable_sort(unique.begin(), unique.end(), [&](const Candidate& a, const Candidate& b) {
+      return mix_hash(((std::uint64_t(a.cube) << 32) | a.texel) ^ frame_) <
+             mix_hash(((std::uint64_t(b.cube) << 32) | b.texel) ^ frame_);
+    });
+    unique.resize(settings_.fill_budget);
+  }
+  for (const Candidate& c : unique) cubes_[c.cube]->store(c.texel, c.value);
+  return unique.size();
+}
+
+void RayCacheStore::report(CacheCounts& out) const { out = counts_; }
+
+void RayCacheStore::decide(Cube& c, double ns_per_ray, double frame_rays) {
+  const std::uint64_t lookups = c.lookups.load();
+  // What the cube saved, in rays: the subtrees it did not trace (what they cost when they were
+  // traced into the texels), less the confirming rays and what the lookups cost.
+  const double saved_rays = double(c.offered_rays.load()) - double(c.used_rays) -
+                            double(lookups) * kLookupRayCost -
+                            double(c.march_steps.load()) * kMarchStepRayCost;
+  c.saved_ms = saved_rays * ns_per_ray * 1e-6;
+  if (settings_.policy != CachePolicy::Auto || !c.enabled) return;
+  ++c.frames_in_mode;
+
+  // Error: the verified rays' squared error, scaled to every accepted ray of the frame, over
+  // the image's 3·N values; the bound is shared by the enabled cubes.
+  const double pixels = double(width_) * double(height_);
+  const std::uint64_t accepted = c.used + c.verified;
+  if (c.err_samples > 0) {
+    const double mse = c.err_sum / double(c.err_samples) * double(accepted) / (3.0 * pixels);
+    c.estimated_psnr = mse > 0.0 ? -10.0 * std::log10(mse) : 200.0;
+  }
+  std::size_t enabled = 0;
+  for (const auto& other : cubes_) enabled += other->enabled ? 1 : 0;
+  const double bound = settings_.max_error_db + 10.0 * std::log10(double(std::max<std::size_t>(1, enabled)));
+  if (c.err_samples >= kMinErrorSamples) {
+    if (c.estimated_psnr < bound) {
+      const std::string was = lookup_mode_name(c.mode);
+      const double psnr = c.estimated_psnr;
+      if (c.rung + 1 < kLadderSize) {
+        c.set_rung(c.rung + 1);
+        c.reason = format("estimated %.1f dB, below the %.1f dB bound: ", psnr, bound) + was +
+                   " → " + lookup_mode_name(c.mode) +
+                   (c.mode == LookupMode::Direction ? "" : format(" (tau %.2f deg)", c.tau_deg));
+      } else {
+        c.enabled = false;
+        c.reason = format("estimated %.1f dB, below the %.1f dB bound in every lookup mode: off",
+                          psnr, bound);
+      }
+      return;
+    }
+    if (c.evaluating) {
+      c.evaluating = false;
+      c.reason = format("estimated %.1f dB, within the %.1f dB bound: ", c.estimated_psnr, bound) +
+                 lookup_mode_name(c.mode) + " mode kept";
+    }
+  }
+  // Speed: once the cube is filled (few lookups find outdated texels), it must save more than
+  // it costs — 1% of the frame's rays — or it goes off and the frame runs at uncached speed.
+  const bool filled = lookups > 0 && double(c.outdated.load()) < 0.05 * double(lookups);
+  if (filled && c.frames_in_mode >= 2 && !c.evaluating) {
+    if (saved_rays < 0.01 * frame_rays) {
+      c.enabled = false;
+      c.reason = format("saves %.0f of %.0f rays a frame (%.2f%%), below 1%%: off", saved_rays,
+                        frame_rays, 100.0 * saved_rays / std::max(1.0, frame_rays));
+    }
+  }
+  if (lookups == 0 && c.frames_in_mode >= 4 && c.valid == 0) {
+    // Nothing leaves it towards anything: it can only cost.
+    c.enabled = false;
+    c.reason = "no leaving rays to serve: off";
+  }
+}
+
+void RayCacheStore::end_frame(double trace_ms, std::uint64_t rays) {
+  const std::uint64_t written = apply_writes();
+  const double ns_per_ray = rays > 0 ? trace_ms * 1e6 / double(rays) : 0.0;
+  CacheCounts& n = counts_;
+  n = CacheCounts{};
+  n.prefilled = pending_prefilled_;
+  pending_prefilled_ = 0;
+  n.written = written;
+  n.invalidated = last_invalidation_.outdated;
+  n.flush_all = last_invalidation_.flush_all;
+  for (auto& cp : cubes_) {
+    Cube& c = *cp;
+    decide(c, ns_per_ray, double(rays));
+    n.lookups += c.lookups.load();
+    n.hits += c.used;
+    n.rejected += c.rejected.load();
+    n.verified += c.verified;
+    n.texels += c.texels.size();
+    n.valid += c.valid;
+    n.memory_bytes += c.texels.size() * sizeof(Texel) + c.edges.size() * sizeof(std::uint32_t);
+    CubeReport r;
+    r.entity = c.owner.index;
+    r.resolution = c.resolution;
+    r.mode = c.enabled ? lookup_mode_name(c.mode) : "off";
+    r.reason = c.reason;
+    r.lookups = c.lookups.load();
+    r.hits = c.used;
+    r.valid = c.valid;
+    r.estimated_psnr_db = c.estimated_psnr;
+    r.saved_ms = c.saved_ms;
+    n.cubes.push_back(r);
+  }
+  last_invalidation_ = InvalidationStats{};
+}
+
+} // namespace specula::cache

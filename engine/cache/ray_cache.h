@@ -1,0 +1,158 @@
+#pragma once
+/// \file
+/// Ray-cache cubes (Ruff, Clua, Fernandes 2013) made to work for moving objects: per reflective
+/// or refractive entity a cube of six faces of texels, each holding the colour a ray leaving the
+/// object in that direction brought back, the distance from the cube centre to what it hit, that
+/// entity, a summary of everything its subtree saw, and a valid flag. The store is the renderer's
+/// leaving-radiance hook (trace/radiance_hook.h): integrators ask it about every ray that exits a
+/// cached object before tracing it, and hand it the radiance of those they traced; writes wait
+/// for the end of the frame (deterministic whatever the thread count). The visibility graph (what
+/// each cube's valid texels saw) drives invalidation when entities move
+/// (cache_invalidation_system); the auto policy measures per cube what lookups save against what
+/// tracing costs and what error they bring, and stops caching where it does not pay.
+/// docs/design/ray-cache.md has the whole account.
+
+#include "specula/cache/cache_settings.h"
+#include "specula/core/math.h"
+#include "specula/ecs/registry.h"
+#include "specula/render/scene_layer.h"
+#include "specula/trace/radiance_hook.h"
+#include "specula/trace/render_frame.h"
+#include "specula/trace/stats.h"
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace specula::cache {
+
+/// One texel, 16 bytes: colour and distance as half floats, the first hit's entity index, a
+/// 16-bit summary of the entities the ray's subtree hit (bit = entity index mod 16), what tracing
+/// it cost in rays (saturating at 255: what a lookup saves), the state.
+struct Texel {
+  std::uint16_t rgb[3] = {0, 0, 0};
+  std::uint16_t distance = 0x7c00; ///< +inf as a half: the ray left the scene
+  std::uint32_t hit = 0xffffffffu; ///< entity index of the first hit (none: 0xffffffff)
+  std::uint16_t seen = 0;
+  std::uint8_t rays = 0;  ///< rays its subtree traced (itself, shadow rays, bounces)
+  std::uint8_t state = 0; ///< kOutdated or kValid, | kTexelPrefilled when traced from the centre
+  [[nodiscard]] bool valid() const { return (state & kValidBit) != 0; }
+  static constexpr std::uint8_t kValidBit = 1;
+};
+static_assert(sizeof(Texel) == 16);
+inline constexpr std::uint8_t kOutdated = 0;
+inline constexpr std::uint8_t kValid = Texel::kValidBit;
+inline constexpr std::uint8_t kTexelPrefilled = 2;
+
+[[nodiscard]] Texel make_texel(const vec3& radiance, float distance, std::uint32_t hit_entity,
+                               std::uint32_t seen, std::uint32_t rays);
+[[nodiscard]] vec3 texel_radiance(const Texel& t);
+[[nodiscard]] float texel_distance(const Texel& t);
+/// The 32-bit entity mask folded to the texel's 16 bits.
+[[nodiscard]] inline std::uint16_t fold_seen(std::uint32_t seen) {
+  return std::uint16_t((seen ^ (seen >> 16)) & 0xffffu);
+}
+[[nodiscard]] inline std::uint16_t seen_bit16(std::uint32_t entity_index) {
+  return std::uint16_t(1u << (entity_index & 15u));
+}
+
+/// A world-space bounding sphere.
+struct Sphere {
+  vec3 centre{0.0f};
+  float radius = 0.0f;
+};
+
+/// The state of one cube, as the tests and the report read it.
+struct CubeView {
+  ecs::Entity owner;
+  std::uint32_t instance;
+  std::uint32_t resolution;
+  vec3 centre;
+  std::span<const Texel> texels;
+  LookupMode mode;
+  bool enabled;
+};
+
+/// What one invalidation did.
+struct InvalidationStats {
+  std::uint64_t outdated = 0;  ///< texels this invalidation outdated
+  std::uint64_t flush_all = 0; ///< valid texels before it (what flushing every cube would cost)
+  std::uint64_t owners_moved = 0;
+};
+
+class RayCacheStore final : public RadianceHook {
+public:
+  explicit RayCacheStore(CacheSettings settings);
+  ~RayCacheStore() override;
+
+  [[nodiscard]] const CacheSettings& settings() const { return settings_; }
+
+  /// Brings the set of cubes up to date with the registry (entities with RayCacheCube whose
+  /// material reflects or transmits, and an instance in the layer) and applies the layer's
+  /// latest delta: texels that saw a moved, deformed, added or removed entity (first hit, or in
+  /// their subtree), that now look at its new bounds, or whose hit point lies in its old or new
+  /// shadow are outdated; an owner that moved outdates its whole cube; light or material changes
+  /// outdate every texel that hit a surface; a rebuilt static set outdates everything.
+  InvalidationStats invalidate(const ecs::Registry& registry, const SceneLayer& layer);
+
+  /// Traces every outdated texel of every enabled cube from the cube's centre (passing through
+  /// its owner) and stores the result: the ideal, fully filled cache (--cache-prefill).
+  std::uint64_t prefill(const Tracer& tracer, const SceneLayer& layer,
+                        const TraceSettings& trace);
+
+  // RadianceHook
+  void begin_frame(std::uint32_t width, std::uint32_t height) override;
+  [[nodiscard]] bool wants_lookups() const override;
+  void lookup(std::span<const LeavingQuery> queries,
+              std::span<CachedRadiance> answers) const override;
+  void leaving(std::span<const LeavingRadiance> rays) override;
+  void end_frame(double trace_ms, std::uint64_t rays) override;
+  void report(CacheCounts& out) const override;
+
+  /// The latest frame's counters (end_frame) and invalidation (invalidate).
+  [[nodiscard]] const CacheCounts& counts() const { return counts_; }
+  [[nodiscard]] std::size_t cube_count() const;
+  [[nodiscard]] CubeView cube(std::size_t i) const;
+  /// The cube of an entity, if it has one.
+  [[nodiscard]] std::optional<std::size_t> cube_of(ecs::Entity owner) const;
+  /// Entities (by index) the valid texels of cube i saw first, with texel counts: the visibility
+  /// graph's edges from that cube.
+  [[nodiscard]] std::vector<std::pair<std::uint32_t, std::uint32_t>> edges(std::size_t i) const;
+  /// Marks every texel of every cube outdated; returns how many were valid.
+  std::uint64_t flush();
+
+  struct Cube;
+
+private:
+  std::uint64_t apply_writes();
+  void decide(Cube& c, double ns_per_ray, double frame_rays);
+
+  CacheSettings settings_;
+  std::vector<std::unique_ptr<Cube>> cubes_;
+  std::vector<std::int32_t> cube_of_instance_; ///< by instance slot, -1: none
+  std::vector<Sphere> bounds_;                 ///< by entity index, as last invalidated
+  std::vector<std::uint8_t> has_bounds_;
+  std::uint32_t width_ = 1, height_ = 1;
+  std::uint64_t frame_ = 0;
+  bool lookups_ = false;
+  CacheCounts counts_;
+  InvalidationStats last_invalidation_;
+  std::uint64_t pending_prefilled_ = 0;
+  struct Candidate;
+  std::mutex mutex_;
+  std::vector<Candidate> candidates_;
+  mutable std::atomic<std::uint64_t> lookup_ns_{0};
+  mutable std::atomic<std::uint64_t> lookup_count_{0};
+};
+
+/// The registry resource holding the store (the render job's hook points at the same object):
+/// cache_invalidation_system reaches it here.
+struct RayCaches {
+  std::shared_ptr<RayCacheStore> store;
+};
+
+} // namespace specula::cache
