@@ -127,9 +127,24 @@ std::string format(const char* fmt, double a, double b = 0.0, double c = 0.0) {
   return buf;
 }
 
-Sphere instance_sphere(const gpu::GpuInstance& inst) {
-  const vec3 lo = inst.world_bounds_min, hi = inst.world_bounds_max;
-  return Sphere{0.5f * (lo + hi), 0.5f * glm::length(hi - lo)};
+/// A bounding sphere of an instance: its mesh's bounds centre, and the farthest vertex from it,
+/// scaled by the transform's largest axis scale (tighter than the world box's half-diagonal: a
+/// sphere mesh gets its own radius, not √3 times it).
+Sphere instance_sphere(const SceneTables& tables, std::uint32_t slot) {
+  const gpu::GpuInstance& inst = tables.instances[slot];
+  const gpu::GpuMesh& mesh = tables.meshes[inst.mesh];
+  const vec3 centre = 0.5f * (mesh.bounds_min + mesh.bounds_max);
+  float r2 = 0.0f;
+  const vec3* p = tables.positions.data() + mesh.first_vertex;
+  for (std::uint32_t i = 0; i < mesh.vertex_count; ++i) {
+    const vec3 d = p[i] - centre;
+    r2 = std::max(r2, glm::dot(d, d));
+  }
+  const mat3 m(inst.world_from_object);
+  const float scale = std::max({glm::length(m[0]), glm::length(m[1]), glm::length(m[2])});
+  // Rounded up a little: the sphere must hold every vertex after the transform's rounding.
+  return Sphere{vec3(inst.world_from_object * vec4(centre, 1.0f)),
+                std::sqrt(r2) * scale * (1.0f + 1e-5f)};
 }
 
 /// Whether the segment from p (length `length` along unit d; +inf: a ray) passes through s.
@@ -147,6 +162,7 @@ struct RayCacheStore::Cube {
   std::uint32_t instance = 0;
   std::uint32_t resolution = 64;
   vec3 centre{0.0f};
+  float radius = 0.0f; ///< the owner's bounding sphere: where leaving rays start
   std::vector<Texel> texels;
   std::vector<std::uint32_t> edges; ///< by entity index: valid texels whose first hit it is
   std::uint64_t valid = 0;
@@ -296,7 +312,9 @@ InvalidationStats RayCacheStore::invalidate(const ecs::Registry& const_registry,
         cube->reason = std::string("--cache on: ") + lookup_mode_name(cube->mode) + " mode";
       }
       cube->instance = *slot;
-      cube->centre = instance_sphere(tables.instances[*slot]).centre;
+      const Sphere own = instance_sphere(tables, *slot);
+      cube->centre = own.centre;
+      cube->radius = own.radius;
     }
     cube->instance = *slot;
     kept.push_back(std::move(cube));
@@ -329,7 +347,7 @@ InvalidationStats RayCacheStore::invalidate(const ecs::Registry& const_registry,
     Change ch{e, std::nullopt, std::nullopt};
     if (has_bounds_[e] != 0) ch.before = bounds_[e];
     if (!removed) {
-      ch.after = instance_sphere(inst);
+      ch.after = instance_sphere(tables, slot);
       bounds_[e] = *ch.after;
       has_bounds_[e] = 1;
     } else {
@@ -351,14 +369,14 @@ InvalidationStats RayCacheStore::invalidate(const ecs::Registry& const_registry,
       if (tables.live(s)) {
         const std::uint32_t e = tables.instances[s].entity_index;
         grow(e);
-        bounds_[e] = instance_sphere(tables.instances[s]);
+        bounds_[e] = instance_sphere(tables, s);
         has_bounds_[e] = 1;
       }
 
   // 3. Apply to every cube.
   for (auto& cp : cubes_) {
     Cube& c = *cp;
-    const Sphere own = instance_sphere(tables.instances[c.instance]);
+    const Sphere own = instance_sphere(tables, c.instance);
     const bool owner_moved = glm::any(glm::notEqual(own.centre, c.centre)) ||
                              std::any_of(changes.begin(), changes.end(), [&](const Change& ch) {
                                return ch.entity == c.owner.index;
@@ -367,6 +385,7 @@ InvalidationStats RayCacheStore::invalidate(const ecs::Registry& const_registry,
       stats.outdated += c.flush();
       stats.owners_moved += owner_moved ? 1 : 0;
       c.centre = own.centre;
+      c.radius = own.radius;
       continue;
     }
     if (changes.empty() && !flush_surfaces) continue;
@@ -386,9 +405,13 @@ InvalidationStats RayCacheStore::invalidate(const ecs::Registry& const_registry,
       t.entity = ch.entity;
       t.bit = seen_bit16(ch.entity);
       if (ch.after) {
+        // Leaving rays start anywhere on the owner, within c.radius of the centre, and a texel
+        // serves all of them: it must go if a ray from any of those points in its direction
+        // could meet the new bounds — the cone of half-angle asin((r + R) / distance).
         const vec3 to = ch.after->centre - c.centre;
         const float dist = glm::length(to);
-        if (dist <= ch.after->radius) {
+        const float reach = ch.after->radius + c.radius;
+        if (dist <= reach) {
           t.cone = true; // the centre is inside its bounds: it can be anywhere
           t.cos_cone = -2.0f;
           t.axis = vec3(0, 0, 1);
@@ -396,7 +419,7 @@ InvalidationStats RayCacheStore::invalidate(const ecs::Registry& const_registry,
           t.cone = true;
           t.axis = to / dist;
           t.cos_cone = std::cos(std::min(std::numbers::pi_v<float>,
-                                         std::asin(std::min(1.0f, ch.after->radius / dist)) +
+                                         std::asin(std::min(1.0f, reach / dist)) +
                                              texel_angle));
         }
         t.shadows.push_back(*ch.after);
@@ -437,12 +460,18 @@ InvalidationStats RayCacheStore::invalidate(const ecs::Registry& const_registry,
                 break;
               }
               // Its hit point may now be (or no longer be) in the entity's shadow.
+              // The stored point is where the ray from the centre would be: the rays the texel
+              // served hit within the owner's radius (and a texel's width) of it, so the
+              // occluder grows by that much.
               if (finite && !t.shadows.empty()) {
                 const vec3 p = c.centre + dir * d;
+                const float widen = c.radius + d * 2.0f * texel_angle;
                 for (const gpu::GpuLight& light : lights) {
                   const LightSample ls = sample_light(light, p);
                   for (const Sphere& s : t.shadows)
-                    if (segment_meets_sphere(p, ls.to_light, ls.distance, s)) stale = true;
+                    if (segment_meets_sphere(p, ls.to_light, ls.distance,
+                                             Sphere{s.centre, s.radius + widen}))
+                      stale = true;
                 }
                 if (stale) break;
               }

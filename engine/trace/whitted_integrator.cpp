@@ -64,7 +64,8 @@ public:
       s_.shadow_rays.clear();
       for (const std::uint32_t k : s_.wave) {
         Ray r = rays[k];
-        r.tnear = s_.hits[k].t;
+        // Just past the skipped surface: backends may report a hit at exactly tnear again.
+        r.tnear = s_.hits[k].t * (1.0f + 1e-5f) + 1e-7f;
         s_.shadow_rays.push_back(r);
       }
       s_.blocked.clear();

@@ -1,0 +1,432 @@
+// Ray-cache cubes through the schedule: what lookups return, what invalidation outdates when
+// entities move, what the auto policy decides, and that frames stay deterministic.
+
+#include "../trace/scene_builder.h"
+#include "specula/cache/cube_map.h"
+#include "specula/cache/ray_cache.h"
+#include "specula/image/metrics.h"
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+#include <numbers>
+
+namespace specula {
+namespace {
+
+using cache::CachePolicy;
+using cache::CacheSettings;
+using cache::LookupMode;
+using cache::RayCacheStore;
+
+cache::RayCacheStore& store_of(ecs::Registry& reg) { return *reg.resource<cache::RayCaches>().store; }
+
+Material mirror_material(float reflectivity = 0.9f) {
+  Material m;
+  m.base_color = vec3(0.9f);
+  m.reflectivity = reflectivity;
+  return m;
+}
+
+Material emissive(const vec3& c) {
+  Material m;
+  m.base_color = vec3(0.0f);
+  m.emission = c;
+  return m;
+}
+
+Material diffuse(const vec3& c) {
+  Material m;
+  m.base_color = c;
+  return m;
+}
+
+/// A world: a mirror sphere of radius 1 at the origin with a cube of `resolution`, the camera at
+/// `eye` looking at it, and whatever `build` adds; rendering prepared with `cache`.
+struct World {
+  ecs::Registry reg;
+  Schedule schedule;
+  ecs::Entity mirror;
+  ecs::Entity camera;
+};
+
+template <typename Build>
+void make_world(World& w, const CacheSettings& cache, std::uint32_t resolution, Build build,
+                std::uint32_t size = 96, vec3 eye = vec3(0.0f, 0.3f, 4.0f), std::uint32_t threads = 2,
+                const Material& mirror = mirror_material()) {
+  w.mirror = test::add_mesh(w.reg, test::primitive("sphere", 1.0f, vec3(1.0f), 48, 24), test::at(vec3(0.0f)),
+                            mirror, Kinematics::Type::Free);
+  w.reg.emplace<RayCacheCube>(w.mirror, RayCacheCube{resolution});
+  w.camera = test::add_camera(w.reg, eye, vec3(0.0f), 40.0f);
+  build(w.reg);
+  RenderJob job;
+  job.settings.mode = TraceMode::Whitted;
+  job.settings.max_depth = 4;
+  job.settings.background = vec3(0.1f, 0.15f, 0.3f);
+  job.settings.threads = threads;
+  job.image = Framebuffer(size, size);
+  job.cache = cache;
+  prepare_rendering(w.reg, std::move(job));
+}
+
+Framebuffer frame(World& w) {
+  w.schedule.tick(w.reg, 1.0 / 60.0);
+  return w.reg.resource<RenderJob>().image;
+}
+
+CacheSettings on(LookupMode mode, bool prefill = false) {
+  CacheSettings s;
+  s.policy = CachePolicy::On;
+  s.lookup = mode;
+  s.prefill = prefill;
+  return s;
+}
+
+void move(ecs::Registry& reg, ecs::Entity e, const vec3& to) {
+  reg.patch<Transform>(e, [&](Transform& t) { t.translation = to; });
+}
+
+void orbit(World& w, float degrees) {
+  w.reg.patch<Camera>(w.camera, [&](Camera& c) {
+    const float a = glm::radians(degrees);
+    const vec3 p = c.position;
+    c.position = vec3(std::cos(a) * p.x + std::sin(a) * p.z, p.y, -std::sin(a) * p.x + std::cos(a) * p.z);
+  });
+}
+
+// ---------------------------------------------------------------------------------------------
+
+/// Far away (2000 radii) emissive spheres and a diffuse ground far below, all around.
+void distant_surroundings(ecs::Registry& reg) {
+  const vec3 colours[] = {vec3(0.9f, 0.2f, 0.1f), vec3(0.1f, 0.8f, 0.3f), vec3(0.2f, 0.3f, 0.9f),
+                          vec3(0.9f, 0.9f, 0.2f), vec3(0.8f, 0.2f, 0.8f), vec3(0.2f, 0.9f, 0.9f)};
+  const vec3 where[] = {vec3(2000, 300, 0),  vec3(-2000, 0, 500), vec3(0, 600, 2000),
+                        vec3(300, -200, -2000), vec3(1400, 900, 1400), vec3(-1400, -300, -1400)};
+  for (int i = 0; i < 6; ++i)
+    test::add_mesh(reg, test::primitive("sphere", 300.0f), test::at(where[i]), emissive(colours[i]));
+}
+
+TEST(RayCache, SurroundingsAtInfinityCachedEqualsUncached) {
+  // Direction-only caching is exact for content at infinity: fill while the camera orbits, then
+  // look from a new place: every lookup answers with what another shading point stored.
+  World cached, reference;
+  make_world(cached, on(LookupMode::Direction), 128, distant_surroundings);
+  make_world(reference, CacheSettings{}, 128, distant_surroundings);
+  for (int k = 0; k < 6; ++k) {
+    (void)frame(cached);
+    orbit(cached, 1.0f);
+    orbit(reference, 1.0f);
+  }
+  const Framebuffer a = frame(cached);
+  const Framebuffer b = frame(reference);
+  const CacheCounts& c = store_of(cached.reg).counts();
+  ASSERT_GT(c.hits, c.lookups / 4) << "a good part of the leaving rays must be served";
+  EXPECT_GE(psnr(a, b), 45.0);
+}
+
+TEST(RayCache, ServedRaysAreNotTraced) {
+  World w;
+  make_world(w, on(LookupMode::Direction), 128, distant_surroundings);
+  (void)frame(w);
+  const FrameStats first = w.reg.resource<RenderJob>().last;
+  (void)frame(w);
+  const FrameStats second = w.reg.resource<RenderJob>().last;
+  EXPECT_GT(first.rays[RayKind::Reflection], 0u);
+  EXPECT_EQ(second.cache.hits, second.cache.lookups) << "static camera: every texel was filled";
+  EXPECT_EQ(second.rays[RayKind::Reflection], 0u) << "the only reflective object is cached";
+  // Memory: 16 bytes a texel, plus the visibility graph's edge counts (one per entity index).
+  EXPECT_GE(second.cache.memory_bytes, 6u * 128u * 128u * 16u);
+  EXPECT_LE(second.cache.memory_bytes, 6u * 128u * 128u * 16u + 64u * sizeof(std::uint32_t));
+}
+
+TEST(RayCache, GlassCachesItsReflectionAndItsExitingRefraction) {
+  Material glass;
+  glass.base_color = vec3(1.0f);
+  glass.reflectivity = 0.05f;
+  glass.transmission = 0.9f;
+  glass.ior = 1.5f;
+  World w;
+  make_world(w, on(LookupMode::Direction), 128, distant_surroundings, 96, vec3(0.0f, 0.3f, 4.0f), 2,
+             glass);
+  (void)frame(w);
+  const FrameStats first = w.reg.resource<RenderJob>().last;
+  (void)frame(w);
+  const FrameStats second = w.reg.resource<RenderJob>().last;
+  ASSERT_GT(second.cache.hits, 0u);
+  // Entering refractions and internal reflections stay traced; exiting ones are served.
+  EXPECT_LT(second.rays[RayKind::Refraction], first.rays[RayKind::Refraction]);
+  EXPECT_GT(second.rays[RayKind::Refraction], 0u);
+  EXPECT_LT(second.rays[RayKind::Reflection], first.rays[RayKind::Reflection]);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Invalidation
+
+/// Two emissive spheres, A at +X and B at −X, 10 away; no lights (no shadows to follow).
+struct TwoSpheres {
+  ecs::Entity a, b;
+  void operator()(ecs::Registry& reg) {
+    a = test::add_mesh(reg, test::primitive("sphere", 1.0f), test::at(vec3(10, 0, 0)),
+                       emissive(vec3(1, 0, 0)), Kinematics::Type::Free);
+    b = test::add_mesh(reg, test::primitive("sphere", 1.0f), test::at(vec3(-10, 0, 0)),
+                       emissive(vec3(0, 1, 0)), Kinematics::Type::Free);
+  }
+};
+
+TEST(RayCacheInvalidation, MovingAnEntityOutdatesExactlyTheTexelsThatSawItOrNowCould) {
+  // The camera looks away, so frames write nothing: the texels show what invalidation did.
+  TwoSpheres two;
+  World w;
+  make_world(w, on(LookupMode::Direction), 32, [&](ecs::Registry& r) { two(r); }, 16,
+             vec3(0.0f, 50.0f, 0.0f));
+  w.reg.patch<Camera>(w.camera, [](Camera& c) { c.look_at = vec3(0.0f, 100.0f, 1.0f); });
+  (void)frame(w);
+  RayCacheStore& store = store_of(w.reg);
+  ASSERT_EQ(store.cube_count(), 1u);
+  store.prefill(*w.reg.resource<ActiveTracer>().tracer, w.reg.resource<SceneLayer>(),
+                w.reg.resource<RenderJob>().settings);
+  const std::vector<cache::Texel> before(store.cube(0).texels.begin(), store.cube(0).texels.end());
+  std::uint32_t saw_a = 0, saw_b = 0;
+  for (const cache::Texel& t : before) {
+    ASSERT_TRUE(t.valid());
+    saw_a += t.hit == two.a.index ? 1 : 0;
+    saw_b += t.hit == two.b.index ? 1 : 0;
+  }
+  ASSERT_GT(saw_a, 0u);
+  ASSERT_GT(saw_b, 0u);
+  // The visibility graph: one edge per entity seen, weighted by texels.
+  const auto edges = store.edges(0);
+  ASSERT_EQ(edges.size(), 2u);
+  for (const auto& [entity, texels] : edges)
+    EXPECT_EQ(texels, entity == two.a.index ? saw_a : saw_b);
+
+  const vec3 new_a(0.0f, 0.0f, 10.0f);
+  move(w.reg, two.a, new_a);
+  (void)frame(w);
+  const std::span<const cache::Texel> after = store.cube(0).texels;
+  const std::uint32_t res = 32;
+  // A's radius plus the mirror's: the directions in which a ray leaving any point of the mirror
+  // could meet A.
+  const float cone = std::asin((1.0f + 1.0f) / 10.0f);
+  const float texel = 2.0f * cache::texel_half_angle(res);
+  std::uint64_t outdated = 0;
+  for (std::uint32_t i = 0; i < after.size(); ++i) {
+    const float angle =
+        std::acos(std::min(1.0f, glm::dot(cache::texel_direction(i, res), glm::normalize(new_a))));
+    if (before[i].hit == two.a.index || angle <= cone) {
+      EXPECT_FALSE(after[i].valid()) << "texel " << i << " saw A or now looks at it";
+    }
+    if (!after[i].valid()) {
+      ++outdated;
+      EXPECT_TRUE(before[i].hit == two.a.index || angle <= cone + texel)
+          << "texel " << i << " neither saw A nor can see it now";
+    } else {
+      EXPECT_EQ(std::memcmp(&after[i], &before[i], sizeof(cache::Texel)), 0) << i;
+    }
+  }
+  EXPECT_EQ(store.counts().invalidated, outdated);
+  EXPECT_EQ(store.counts().flush_all, before.size());
+  // The edge to A is gone; B's is intact.
+  for (const auto& [entity, texels] : store.edges(0)) {
+    EXPECT_NE(entity, two.a.index);
+    EXPECT_EQ(texels, saw_b);
+  }
+  // Refilled, the cube sees A where it now is.
+  store.prefill(*w.reg.resource<ActiveTracer>().tracer, w.reg.resource<SceneLayer>(),
+                w.reg.resource<RenderJob>().settings);
+  EXPECT_EQ(store.cube(0).texels[cache::texel_of(new_a, res)].hit, two.a.index);
+}
+
+TEST(RayCacheInvalidation, AnOwnerThatMovesOutdatesItsWholeCube) {
+  TwoSpheres two;
+  World w;
+  make_world(w, on(LookupMode::Direction, true), 16, [&](ecs::Registry& r) { two(r); }, 32);
+  (void)frame(w);
+  ASSERT_EQ(store_of(w.reg).counts().valid, 6u * 16u * 16u);
+  move(w.reg, w.mirror, vec3(0.0f, 0.5f, 0.0f));
+  (void)frame(w);
+  EXPECT_EQ(store_of(w.reg).counts().invalidated, 6u * 16u * 16u);
+  EXPECT_FLOAT_EQ(store_of(w.reg).cube(0).centre.y, 0.5f);
+}
+
+TEST(RayCacheInvalidation, ALightChangeOutdatesWhatItLightsNotTheSky) {
+  World w;
+  make_world(w, on(LookupMode::Direction, true), 16, [](ecs::Registry& r) {
+    test::add_mesh(r, test::primitive("plane", 1.0f, vec3(40.0f)), test::at(vec3(0, -2, 0)),
+                   diffuse(vec3(0.6f)));
+  });
+  const ecs::Entity light = test::add_point_light(w.reg, vec3(3, 8, 3), 100.0f);
+  (void)frame(w);
+  std::uint64_t surfaces = 0;
+  for (const cache::Texel& t : store_of(w.reg).cube(0).texels)
+    surfaces += std::isfinite(cache::texel_distance(t)) ? 1 : 0;
+  ASSERT_GT(surfaces, 0u);
+  ASSERT_LT(surfaces, 6u * 16u * 16u);
+  w.reg.patch<Light>(light, [](Light& l) { l.intensity = 50.0f; });
+  (void)frame(w);
+  EXPECT_EQ(store_of(w.reg).counts().invalidated, surfaces);
+}
+
+/// A lit ground, the mirror, and a diffuse sphere C that will move into the mirror's view.
+struct MovingIntoView {
+  ecs::Entity c;
+  void operator()(ecs::Registry& reg) {
+    test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(60.0f)), test::at(vec3(0, -1, 0)),
+                   diffuse(vec3(0.55f, 0.55f, 0.5f)));
+    test::add_point_light(reg, vec3(3, 10, 4), 150.0f);
+    c = test::add_mesh(reg, test::primitive("sphere", 0.75f), test::at(vec3(0, 0, -30)),
+                       diffuse(vec3(0.9f, 0.3f, 0.2f)), Kinematics::Type::Free);
+  }
+};
+
+TEST(RayCacheInvalidation, AnEntityMovingIntoViewIsPickedUpAndLeavesNoStaleTexel) {
+  for (const LookupMode mode : {LookupMode::Direction, LookupMode::Tau}) {
+    SCOPED_TRACE(cache::lookup_mode_name(mode));
+    MovingIntoView cached_build, reference_build;
+    World cached, reference;
+    make_world(cached, on(mode), 128, [&](ecs::Registry& r) { cached_build(r); });
+    make_world(reference, CacheSettings{}, 128, [&](ecs::Registry& r) { reference_build(r); });
+    double before = 0.0;
+    for (int k = 0; k < 3; ++k) before = psnr(frame(cached), frame(reference));
+    // Into the reflection, between the mirror and the camera's side, casting a shadow on the
+    // ground the mirror shows.
+    for (World* w : {&cached, &reference})
+      move(w->reg, w == &cached ? cached_build.c : reference_build.c, vec3(1.2f, 0.0f, 2.5f));
+    double after = 0.0;
+    for (int k = 0; k < 3; ++k) after = psnr(frame(cached), frame(reference));
+    EXPECT_GE(after, std::min(before, 60.0) - 0.5) << "before " << before << " dB";
+    EXPECT_GT(store_of(cached.reg).counts().hits, 0u);
+  }
+}
+
+TEST(RayCacheInvalidation, MovingOneHiddenSphereOutdatesUnderFivePercent) {
+  Scene scene = load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) /
+                           "samples/scenes/mirror_spheres_32.json");
+  ecs::Entity hidden = ecs::null_entity;
+  scene.registry.view<Name>().each([&](ecs::Entity e, Name& n) {
+    if (n.value.rfind("hidden sphere", 0) == 0)
+      scene.registry.emplace_or_replace<Kinematics>(e, Kinematics{Kinematics::Type::Free});
+    if (n.value == "hidden sphere 5") hidden = e;
+  });
+  ASSERT_NE(hidden, ecs::null_entity);
+  RenderJob job;
+  job.settings.max_depth = scene.settings.max_depth;
+  job.settings.background = scene.settings.background;
+  job.settings.threads = 2;
+  job.image = Framebuffer(32, 32);
+  job.cache = on(LookupMode::Direction, true);
+  prepare_rendering(scene.registry, std::move(job));
+  Schedule schedule;
+  schedule.tick(scene.registry, 0.0);
+  RayCacheStore& store = store_of(scene.registry);
+  ASSERT_EQ(store.counts().valid, store.counts().texels);
+  scene.registry.patch<Transform>(hidden, [](Transform& t) { t.translation.x += 0.3f; });
+  schedule.tick(scene.registry, 0.0);
+  const CacheCounts& c = store.counts();
+  EXPECT_GT(c.invalidated, 0u);
+  EXPECT_LT(double(c.invalidated), 0.05 * double(c.texels));
+  EXPECT_EQ(c.flush_all, c.texels);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Frames, budgets and the policy
+
+TEST(RayCache, FramesAndTexelsAreTheSameWhateverTheThreadCount) {
+  for (const LookupMode mode : {LookupMode::Direction, LookupMode::Tau, LookupMode::March}) {
+    SCOPED_TRACE(cache::lookup_mode_name(mode));
+    MovingIntoView b1, b2;
+    World one, two;
+    make_world(one, on(mode), 64, [&](ecs::Registry& r) { b1(r); }, 64, vec3(0.0f, 0.3f, 4.0f), 1);
+    make_world(two, on(mode), 64, [&](ecs::Registry& r) { b2(r); }, 64, vec3(0.0f, 0.3f, 4.0f), 2);
+    one.reg.resource<RenderJob>().settings.tile_size = 8;
+    for (int k = 0; k < 3; ++k) {
+      const Framebuffer a = frame(one);
+      const Framebuffer b = frame(two);
+      ASSERT_EQ(rmse(a, b), 0.0) << "frame " << k;
+      orbit(one, 2.0f);
+      orbit(two, 2.0f);
+    }
+    const auto ta = store_of(one.reg).cube(0).texels;
+    const auto tb = store_of(two.reg).cube(0).texels;
+    ASSERT_EQ(ta.size(), tb.size());
+    EXPECT_EQ(std::memcmp(ta.data(), tb.data(), ta.size_bytes()), 0);
+  }
+}
+
+TEST(RayCache, TheFillBudgetBoundsTexelsWrittenPerFrame) {
+  CacheSettings s = on(LookupMode::Direction);
+  s.fill_budget = 100;
+  World w;
+  make_world(w, s, 128, distant_surroundings);
+  std::uint64_t valid = 0;
+  for (int k = 0; k < 4; ++k) {
+    (void)frame(w);
+    const CacheCounts& c = store_of(w.reg).counts();
+    EXPECT_LE(c.written, 100u);
+    EXPECT_EQ(c.valid, valid + c.written);
+    valid = c.valid;
+  }
+  EXPECT_EQ(valid, 400u);
+}
+
+TEST(RayCachePolicy, AutoKeepsCachingWhereItPaysWithinTheBound) {
+  CacheSettings s;
+  s.policy = CachePolicy::Auto;
+  s.max_error_db = 40.0;
+  World cached, reference;
+  make_world(cached, s, 256, distant_surroundings);
+  make_world(reference, CacheSettings{}, 256, distant_surroundings);
+  Framebuffer a{1, 1}, b{1, 1};
+  for (int k = 0; k < 8; ++k) {
+    a = frame(cached);
+    b = frame(reference);
+  }
+  const CacheCounts& c = store_of(cached.reg).counts();
+  ASSERT_EQ(c.cubes.size(), 1u);
+  EXPECT_EQ(c.cubes[0].mode, "direction") << c.cubes[0].reason;
+  EXPECT_GE(c.cubes[0].estimated_psnr_db, 40.0);
+  EXPECT_GT(c.hits, 0u);
+  EXPECT_GE(psnr(a, b), 40.0);
+}
+
+TEST(RayCachePolicy, AutoOnTheMirrorSpheresKeepsTheBoundOrStopsCaching) {
+  Scene scene = load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) /
+                           "samples/scenes/mirror_spheres_32.json");
+  Scene reference = load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) /
+                               "samples/scenes/mirror_spheres_32.json");
+  for (Scene* sc : {&scene, &reference}) {
+    RenderJob job;
+    job.settings.max_depth = sc->settings.max_depth;
+    job.settings.background = sc->settings.background;
+    job.settings.threads = 2;
+    job.image = Framebuffer(96, 96);
+    if (sc == &scene) job.cache.policy = CachePolicy::Auto;
+    prepare_rendering(sc->registry, std::move(job));
+  }
+  Schedule s1, s2;
+  for (int k = 0; k < 12; ++k) {
+    s1.tick(scene.registry, 0.0);
+    s2.tick(reference.registry, 0.0);
+  }
+  const CacheCounts& c = store_of(scene.registry).counts();
+  ASSERT_EQ(c.cubes.size(), 1u);
+  const CubeReport& r = c.cubes[0];
+  EXPECT_FALSE(r.reason.empty());
+  if (r.mode != "off") {
+    EXPECT_GE(r.estimated_psnr_db, 40.0) << r.reason;
+    EXPECT_GT(r.saved_ms, 0.0) << r.reason;
+  } else {
+    EXPECT_EQ(c.lookups, 0u) << "an off cube costs no lookups";
+    EXPECT_EQ(scene.registry.resource<RenderJob>().last.rays,
+              reference.registry.resource<RenderJob>().last.rays)
+        << "off: the frame traces what uncached tracing traces";
+  }
+  EXPECT_GE(psnr(scene.registry.resource<RenderJob>().image,
+                 reference.registry.resource<RenderJob>().image),
+            40.0)
+      << r.mode << ": " << r.reason;
+}
+
+} // namespace
+} // namespace specula
