@@ -846,14 +846,27 @@ void RayCacheStore::decide(Cube& c, double ns_per_ray, double frame_rays) {
                  lookup_mode_name(c.mode) + " mode kept";
     }
   }
-  // Speed: once the cube is filled (few lookups find outdated texels), it must save more than
-  // it costs — 1% of the frame's rays — or it goes off and the frame runs at uncached speed.
+  // Speed: once the cube is filled (few lookups find outdated texels) and the mode has run two
+  // frames — or after four frames in any case: a mode that is still filling then (a march that
+  // keeps meeting outdated texels) will not pay soon — it must save more than it costs, 1% of
+  // the frame's rays, or the cube tries the next mode down the ladder, and at its end goes off:
+  // a scene that gains nothing runs at uncached speed.
   const bool filled = lookups > 0 && double(c.outdated.load()) < 0.05 * double(lookups);
-  if (filled && c.frames_in_mode >= 2 && !c.evaluating) {
+  if ((filled && c.frames_in_mode >= 2 && !c.evaluating) || c.frames_in_mode >= 4) {
     if (saved_rays < 0.01 * frame_rays) {
-      c.enabled = false;
-      c.reason = format("saves %.0f of %.0f rays a frame (%.2f%%), below 1%%: off", saved_rays,
-                        frame_rays, 100.0 * saved_rays / std::max(1.0, frame_rays));
+      const std::string was = lookup_mode_name(c.mode);
+      const std::string why = format("saves %.0f of %.0f rays a frame (%.2f%%), below 1%%",
+                                     saved_rays, frame_rays,
+                                     100.0 * saved_rays / std::max(1.0, frame_rays));
+      if (c.rung + 1 < kLadderSize) {
+        c.set_rung(c.rung + 1);
+        c.reason = why + " in " + was + " mode: trying " + lookup_mode_name(c.mode) +
+                   format(" (tau %.2f deg)", c.tau_deg);
+      } else {
+        c.enabled = false;
+        c.reason = why + " in every lookup mode: off";
+      }
+      return;
     }
   }
   if (lookups == 0 && c.frames_in_mode >= 4 && c.valid == 0) {
