@@ -27,6 +27,9 @@ struct Options {
   std::string out_dir;
   /// Largest ray-cache cube face resolution the cache sections try (smaller runs for smoke tests).
   std::uint32_t cache_max_resolution = 1024;
+  /// The cache sections fill their cubes while the camera orbits this many degrees towards the
+  /// measured view (0: fill from the measured view itself).
+  double cache_fill_pan = 30.0;
   std::string source_dir = SPECULA_SOURCE_DIR;
 };
 

@@ -348,6 +348,10 @@ int main(int argc, char** argv) {
   app.add_option("--cache-max-resolution", o.cache_max_resolution,
                  "Largest cube face resolution the cache sections try")
       ->check(CLI::Range(1u, 4096u));
+  app.add_option("--cache-fill-pan", o.cache_fill_pan,
+                 "Degrees the camera orbits towards the measured view while cubes fill (0: fill "
+                 "from that view)")
+      ->check(CLI::Range(0.0, 90.0));
   app.add_option("--max-build-triangles", o.max_build_triangles,
                  "Largest mesh of the build-scaling section (triangles)")
       ->check(CLI::Range(1000u, 1u << 24));
