@@ -140,7 +140,7 @@ struct Contender {
   CacheSettings settings; ///< policy Off: uncached
   std::shared_ptr<cache::RayCacheStore> store;
   std::shared_ptr<RadianceHook> hook; ///< the store, or a RecordingHook around it
-  std::vector<double> ms, paired_off_ms;
+  std::vector<double> ms, trace_ms, paired_off_ms;
   FrameStats last;
   Framebuffer image{1, 1};
 
@@ -256,8 +256,10 @@ void measure(Bench& bench, Contender& off, std::vector<Contender>& cs, int warmu
     for (Contender& c : cs) {
       const double b = bench.tick(off, last);
       off.ms.push_back(b);
+      off.trace_ms.push_back(off.last.trace_ms);
       c.paired_off_ms.push_back(b);
       c.ms.push_back(bench.tick(c, last));
+      c.trace_ms.push_back(c.last.trace_ms);
     }
   }
 }
@@ -391,18 +393,19 @@ void section_cache(const Options& o) {
     out("\n### %s (first frame with the build: %.0f ms; uncached median %.1f ms, %llu rays)\n\n",
         name.c_str(), bench.build_ms(), median(off.ms),
         static_cast<unsigned long long>(off.last.rays.total()));
-    out("| contender | frame ms | speed-up | PSNR (dB) | mean FLIP | acceptance | rejected | "
+    out("| contender | frame ms | of which tracing | speed-up | PSNR (dB) | mean FLIP | acceptance | rejected | "
         "secondary | rays | valid texels | memory (MiB) |\n"
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
-    out("| uncached | %.1f | 1.00 | | | | | %llu | %llu | | |\n", median(off.ms),
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    out("| uncached | %.1f | %.1f | 1.00 | | | | | %llu | %llu | | |\n", median(off.ms),
+        median(off.trace_ms),
         static_cast<unsigned long long>(secondary(off.last.rays)),
         static_cast<unsigned long long>(off.last.rays.total()));
     for (const Contender& c : cs) {
       const double p = psnr(off.image, c.image);
       const double f = flip(off.image, c.image).mean;
       const CacheCounts& k = c.last.cache;
-      out("| %s | %.1f | %.2f | %s | %.4f | %.3f | %llu | %llu | %llu | %llu / %llu | %s |\n",
-          c.label.c_str(), c.median_ms(), c.speedup(), db(p).c_str(), f, acceptance(k),
+      out("| %s | %.1f | %.1f | %.2f | %s | %.4f | %.3f | %llu | %llu | %llu | %llu / %llu | %s |\n",
+          c.label.c_str(), c.median_ms(), median(c.trace_ms), c.speedup(), db(p).c_str(), f, acceptance(k),
           static_cast<unsigned long long>(k.rejected),
           static_cast<unsigned long long>(secondary(c.last.rays)),
           static_cast<unsigned long long>(c.last.rays.total()),
