@@ -192,7 +192,8 @@ void write_plot_png(const Plot& plot, const std::filesystem::path& path) {
   if (std::isnan(y0)) y0 = 0.0, y1 = 1.0;
   if (x1 <= x0) x0 -= 0.5, x1 += 0.5;
   if (y1 <= y0) y0 -= 0.05, y1 += 0.05;
-  const double xs = nice_step(x1 - x0, 8), ys = nice_step(y1 - y0, 8);
+  const double xs = std::isnan(plot.x_step) ? nice_step(x1 - x0, 8) : plot.x_step;
+  const double ys = std::isnan(plot.y_step) ? nice_step(y1 - y0, 8) : plot.y_step;
   if (!fx0) x0 = std::floor(x0 / xs) * xs;
   if (!fx1) x1 = std::ceil(x1 / xs) * xs;
   if (!fy0) y0 = std::floor(y0 / ys) * ys;

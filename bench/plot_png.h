@@ -46,6 +46,8 @@ struct Plot {
   double y_reference = kNaN;
   /// Fixed axis ranges; NaN: from the data.
   double x_min = kNaN, x_max = kNaN, y_min = kNaN, y_max = kNaN;
+  /// Fixed tick steps; NaN: a 1-2-5 step giving about eight ticks.
+  double x_step = kNaN, y_step = kNaN;
   std::uint32_t width = 960, height = 640;
 };
 
