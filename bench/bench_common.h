@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <set>
 #include <string>
 
 namespace specula::bench {
@@ -19,6 +20,16 @@ struct Options {
   /// Largest mesh of the build-scaling section, in triangles.
   std::uint32_t max_build_triangles = 1u << 20;
   std::string sections = "primary,tiles,whitted,depth,build,refit,native,paper";
+  /// `sections` split at commas (main fills it).
+  std::set<std::string> sections_list;
+  /// Where the cache sections write their Markdown and PNGs (empty: docs/cache-report in
+  /// source_dir).
+  std::string out_dir;
+  /// Largest ray-cache cube face resolution the cache sections try (smaller runs for smoke tests).
+  std::uint32_t cache_max_resolution = 1024;
+  /// The cache sections fill their cubes while the camera orbits this many degrees towards the
+  /// measured view (0: fill from the measured view itself).
+  double cache_fill_pan = 30.0;
   std::string source_dir = SPECULA_SOURCE_DIR;
 };
 
@@ -38,5 +49,9 @@ void section_build(const Options& o);
 void section_refit(const Options& o);
 void section_native(const Options& o);
 void section_paper(const Options& o);
+
+// Ray-cache cubes (cache_sections.cpp): speed against error, and the paper's experiments.
+void section_cache(const Options& o);
+void section_cache_paper(const Options& o);
 
 } // namespace specula::bench

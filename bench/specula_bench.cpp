@@ -11,6 +11,9 @@
 //   whitted  Whitted frame times on the mirror-spheres family and the Cornell box.
 //   depth    speed against error of the depth and weight cut-offs (reference: depth 32, no
 //            cut-off), with RMSE, PSNR and FLIP on the same frames.
+//   cache, cache-paper  ray-cache cubes (cache_sections.cpp; not in the default list): speed
+//            against error per lookup mode and resolution, and the paper's experiments; they
+//            also write Markdown and PNG plots under --out-dir.
 
 #include "bench_common.h"
 #include "specula/accel/embree/embree_tracer.h"
@@ -337,14 +340,32 @@ int main(int argc, char** argv) {
                  "Loop subdivisions of the bunny for the large mesh")
       ->check(CLI::Range(0, 6));
   app.add_option("--sections", o.sections,
-                 "Comma-separated: primary,tiles,whitted,depth,build,refit,native,paper");
+                 "Comma-separated: primary,tiles,whitted,depth,build,refit,native,paper,cache,"
+                 "cache-paper");
+  app.add_option("--out-dir", o.out_dir,
+                 "Where cache and cache-paper write Markdown and PNGs (default: "
+                 "SOURCE_DIR/docs/cache-report)");
+  app.add_option("--cache-max-resolution", o.cache_max_resolution,
+                 "Largest cube face resolution the cache sections try")
+      ->check(CLI::Range(1u, 4096u));
+  app.add_option("--cache-fill-pan", o.cache_fill_pan,
+                 "Degrees the camera orbits towards the measured view while cubes fill (0: fill "
+                 "from that view)")
+      ->check(CLI::Range(0.0, 90.0));
   app.add_option("--max-build-triangles", o.max_build_triangles,
                  "Largest mesh of the build-scaling section (triangles)")
       ->check(CLI::Range(1000u, 1u << 24));
   app.add_option("--source-dir", o.source_dir, "Specula source tree (for samples/)");
   CLI11_PARSE(app, argc, argv);
   try {
-    const auto has = [&](const char* s) { return o.sections.find(s) != std::string::npos; };
+    // Whole names: "paper" is not "cache-paper".
+    for (std::size_t begin = 0; begin <= o.sections.size();) {
+      std::size_t end = o.sections.find(',', begin);
+      if (end == std::string::npos) end = o.sections.size();
+      if (end > begin) o.sections_list.insert(o.sections.substr(begin, end - begin));
+      begin = end + 1;
+    }
+    const auto has = [&](const char* s) { return o.sections_list.count(s) != 0; };
     std::printf(
         "## specula_bench --size %u --threads %u --repetitions %d --frames %d --subdivisions %d\n",
         o.size, o.threads, o.repetitions, o.frames, o.subdivisions);
@@ -363,6 +384,8 @@ int main(int argc, char** argv) {
     if (has("refit")) section_refit(o);
     if (has("native")) section_native(o);
     if (has("paper")) section_paper(o);
+    if (has("cache")) section_cache(o);
+    if (has("cache-paper")) section_cache_paper(o);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "specula_bench: %s\n", e.what());
     return 1;

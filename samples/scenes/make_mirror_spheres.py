@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes samples/scenes/mirror_spheres_{0,1,2,4,8,16,32}.json.
+"""Writes samples/scenes/mirror_spheres_{0,1,2,4,8,16,32}.json and three variants of _32.
 
 The test scenes of Ruff, Clua and Fernandes, "Ray-caching textures" (2013), Fig. 5 and Table I:
 one reflective sphere facing the camera and N more reflective spheres placed behind the camera,
@@ -15,6 +15,17 @@ Layout (all in metres, +Y up, the camera looks down -Z):
     grid, so the sets are nested (the 4 of mirror_spheres_4 are among the 8 of mirror_spheres_8).
 tests/scene/test_json_scene.cpp checks that every hidden sphere lies outside the camera frustum,
 that the front sphere lies inside it, and that no two spheres (or a sphere and the camera) meet.
+
+Variants of mirror_spheres_32 for the ray-cache report (bench/cache_sections.cpp, section
+`cache`; tests/scene/test_json_scene.cpp checks only the mirror_spheres_N files):
+  * mirror_spheres_glass_32: the front sphere is glass (transmission 0.9, ior 1.5, reflectivity
+    0.05), so its cube caches both the reflection off its outside and the refraction leaving it;
+  * mirror_spheres_heavy_32: the hidden spheres tessellated with 180 segments x 90 rings (32,040
+    triangles each; about 1.03 M triangles in all), the same layout otherwise;
+  * mirror_spheres_distant_32: the surroundings at least 20 front-sphere radii away: the ground
+    20 below the front sphere's centre and the 32 hidden spheres (radius 2) on a shell of radius
+    24 around it, where direction-only lookups (the paper's) should be nearly exact; the light is
+    moved out and brightened so that the distant surroundings are lit about as before.
 
 Python 3 standard library only. Run from anywhere:  python3 samples/scenes/make_mirror_spheres.py
 """
@@ -35,6 +46,10 @@ HIDDEN_RADIUS = 0.75
 ROWS, COLUMNS = 4, 8
 ELEVATION_STEP_DEG = 11.0
 AZIMUTH_STEP_DEG = 11.0
+VARIANTS = ["glass", "heavy", "distant"]  # of mirror_spheres_32
+DISTANT_SHELL_RADIUS = 24.0
+DISTANT_HIDDEN_RADIUS = 2.0
+DISTANT_GROUND_DEPTH = 20.0
 
 
 def rounded(v, digits=4):
@@ -43,7 +58,7 @@ def rounded(v, digits=4):
     return 0.0 if r == 0 else r
 
 
-def slots():
+def slots(shell_radius=SHELL_RADIUS):
     """All hidden-sphere slots as (row, column, centre), nearest the grid's middle first."""
     out = []
     for row in range(ROWS):
@@ -51,9 +66,9 @@ def slots():
         for col in range(COLUMNS):
             azimuth = math.radians((col - (COLUMNS - 1) / 2) * AZIMUTH_STEP_DEG)
             center = (
-                FRONT_CENTER[0] + SHELL_RADIUS * math.sin(azimuth) * math.cos(elevation),
-                FRONT_CENTER[1] + SHELL_RADIUS * math.sin(elevation),
-                FRONT_CENTER[2] + SHELL_RADIUS * math.cos(azimuth) * math.cos(elevation),
+                FRONT_CENTER[0] + shell_radius * math.sin(azimuth) * math.cos(elevation),
+                FRONT_CENTER[1] + shell_radius * math.sin(elevation),
+                FRONT_CENTER[2] + shell_radius * math.cos(azimuth) * math.cos(elevation),
             )
             middle_distance = abs(col - (COLUMNS - 1) / 2) + abs(row - (ROWS - 1) / 2)
             out.append((middle_distance, row, col, tuple(rounded(c) for c in center)))
@@ -67,7 +82,26 @@ def hidden_color(row, col):
     return [rounded(c, 3) for c in colorsys.hsv_to_rgb(hue, 0.65, 0.85)]
 
 
-def scene(count, cache_resolution):
+def scene(count, cache_resolution, variant=None):
+    """The scene with `count` hidden spheres; variant None (the paper's), "glass", "heavy" or
+    "distant" (see the module docstring)."""
+    front_material = {"base_color": [0.9, 0.9, 0.9], "reflectivity": 0.9}
+    if variant == "glass":
+        front_material = {"base_color": [0.9, 0.9, 0.9], "reflectivity": 0.05,
+                          "transmission": 0.9, "ior": 1.5}
+    shell_radius, hidden_radius = SHELL_RADIUS, HIDDEN_RADIUS
+    hidden_segments, hidden_rings = 32, 16
+    light = {"translation": [3, 10, 4]}, 150
+    ground = {"mesh": {"primitive": "plane", "size": 60}}
+    if variant == "heavy":
+        hidden_segments, hidden_rings = 180, 90
+    if variant == "distant":
+        shell_radius, hidden_radius = DISTANT_SHELL_RADIUS, DISTANT_HIDDEN_RADIUS
+        light = {"translation": [20, 40, 30]}, 4000
+        ground = {
+            "transform": {"translation": [0, rounded(FRONT_CENTER[1] - DISTANT_GROUND_DEPTH), 0]},
+            "mesh": {"primitive": "plane", "size": 400},
+        }
     entities = [
         {
             "name": "camera",
@@ -79,28 +113,25 @@ def scene(count, cache_resolution):
         },
         {
             "name": "light",
-            "transform": {"translation": [3, 10, 4]},
-            "light": {"type": "point", "color": [1, 1, 1], "intensity": 150},
+            "transform": light[0],
+            "light": {"type": "point", "color": [1, 1, 1], "intensity": light[1]},
         },
+        dict({"name": "ground"}, **ground, material={"base_color": [0.55, 0.55, 0.5]}),
         {
-            "name": "ground",
-            "mesh": {"primitive": "plane", "size": 60},
-            "material": {"base_color": [0.55, 0.55, 0.5]},
-        },
-        {
-            "name": "mirror sphere",
+            "name": "glass sphere" if variant == "glass" else "mirror sphere",
             "transform": {"translation": list(FRONT_CENTER)},
             "mesh": {"primitive": "sphere", "radius": FRONT_RADIUS, "segments": 64, "rings": 32},
-            "material": {"base_color": [0.9, 0.9, 0.9], "reflectivity": 0.9},
+            "material": front_material,
             "ray_cache": {"resolution": cache_resolution},
         },
     ]
-    for i, (row, col, center) in enumerate(slots()[:count]):
+    for i, (row, col, center) in enumerate(slots(shell_radius)[:count]):
         entities.append(
             {
                 "name": "hidden sphere %d" % i,
                 "transform": {"translation": list(center)},
-                "mesh": {"primitive": "sphere", "radius": HIDDEN_RADIUS, "segments": 32, "rings": 16},
+                "mesh": {"primitive": "sphere", "radius": hidden_radius,
+                         "segments": hidden_segments, "rings": hidden_rings},
                 "material": {"base_color": hidden_color(row, col), "reflectivity": 0.5},
             }
         )
@@ -166,6 +197,11 @@ def main():
         path = os.path.join(args.out, "mirror_spheres_%d.json" % count)
         with open(path, "w", encoding="utf-8", newline="\n") as f:
             f.write(dump(scene(count, args.cache_resolution)) + "\n")
+        print(path)
+    for variant in VARIANTS:
+        path = os.path.join(args.out, "mirror_spheres_%s_32.json" % variant)
+        with open(path, "w", encoding="utf-8", newline="\n") as f:
+            f.write(dump(scene(32, args.cache_resolution, variant)) + "\n")
         print(path)
 
 
