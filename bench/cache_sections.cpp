@@ -312,7 +312,7 @@ void table_one(const Options& o, Report& out) {
       "rays traced too). The cube is filled while the camera orbits towards the measured view (see the `cache` section: %d frames from %g° away). The *hybrid* column estimates the paper's Table I setting (primary rays "
       "rasterised) by subtracting the same scene's cast-mode frame (primary rays and local "
       "shading only, measured in the same run) from both: (uncached − cast) / (cached − cast).\n\n",
-      o.frames, o.cache_fill_pan);
+      o.cache_frames, o.cache_fill_pan);
   out("| N | uncached ms (fps) | cached ms (fps) | speed-up | hybrid speed-up | cast ms | rays "
       "uncached | rays cached | acceptance | PSNR (dB) | FLIP |\n"
       "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
@@ -322,7 +322,7 @@ void table_one(const Options& o, Report& out) {
     std::vector<Contender> cs;
     cs.push_back(cached(LookupMode::Direction, res));
     cs.push_back(uncached(TraceMode::Cast));
-    measure(bench, off, cs, o.frames, o.repetitions, o.cache_fill_pan);
+    measure(bench, off, cs, o.cache_frames, o.cache_repetitions, o.cache_fill_pan);
     const Contender& c = cs[0];
     const double cast = cs[1].median_ms();
     const double off_ms = median(c.paired_off_ms), c_ms = c.median_ms();
@@ -345,7 +345,7 @@ void section_cache(const Options& o) {
   const fs::path dir = out_dir(o);
   out("\n## Ray-cache cubes: speed against error (%ux%u, %u threads, %d fill frames, %d "
       "interleaved repetitions)\n\n",
-      o.size, o.size, o.threads, o.frames, o.repetitions);
+      o.size, o.size, o.threads, o.cache_frames, o.cache_repetitions);
   out("Every cached contender is first filled with %d frames while the camera orbits about the "
       "front sphere towards the scene's view (from %g° away, in equal steps, the last one step "
       "short of it: so most texels were written from other viewpoints than the one measured, as "
@@ -357,7 +357,7 @@ void section_cache(const Options& o) {
       "an occlusion ray confirms, which trade a reflection ray for a shadow-type ray). Secondary: "
       "reflection + refraction rays traced in the last frame; rays: all rays. Memory: the cube's "
       "texels.\n",
-      o.frames, o.cache_fill_pan);
+      o.cache_frames, o.cache_fill_pan);
   Plot plot;
   plot.title = "RAY-CACHE CUBES: SPEED-UP AGAINST PSNR (" + std::to_string(o.size) + "X" +
                std::to_string(o.size) + ")";
@@ -391,7 +391,7 @@ void section_cache(const Options& o) {
     cs.push_back(cached(LookupMode::March, clamp_res(o, 512), 1.0f, CachePolicy::On, true));
     cs.back().kind = "march";
     cs.back().label = "march " + std::to_string(clamp_res(o, 512)) + " τ=1° + prefill";
-    measure(bench, off, cs, o.frames, o.repetitions, o.cache_fill_pan);
+    measure(bench, off, cs, o.cache_frames, o.cache_repetitions, o.cache_fill_pan);
     out("\n### %s (first frame with the build: %.0f ms; uncached median %.1f ms, %llu rays)\n\n",
         name.c_str(), bench.build_ms(), median(off.ms),
         static_cast<unsigned long long>(off.last.rays.total()));
@@ -586,7 +586,7 @@ void section_cache_paper(const Options& o) {
       "orbiting towards it from %g° away (texels mostly written from other viewpoints: the "
       "parallax of direction-only lookups shows). Speed-up, acceptance and memory are the pan "
       "fill's.\n\n",
-      o.frames, o.frames, o.cache_fill_pan);
+      o.cache_frames, o.cache_frames, o.cache_fill_pan);
   out("| scene | resolution | frame ms | speed-up | PSNR static fill (dB) | FLIP static | PSNR pan "
       "fill (dB) | FLIP pan | acceptance | memory (MiB) |\n"
       "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
@@ -606,8 +606,8 @@ void section_cache_paper(const Options& o) {
       cs.push_back(cached(LookupMode::Direction, r));
       statics.push_back(cached(LookupMode::Direction, r));
     }
-    measure(bench, off_static, statics, o.frames, 1, 0.0);
-    measure(bench, off, cs, o.frames, o.repetitions, o.cache_fill_pan);
+    measure(bench, off_static, statics, o.cache_frames, 1, 0.0);
+    measure(bench, off, cs, o.cache_frames, o.cache_repetitions, o.cache_fill_pan);
     PlotSeries series, series_static;
     series.colour = series_static.colour = res_colours[s % 4];
     series.marker = kSceneMarkers[s];

@@ -332,9 +332,9 @@ int main(int argc, char** argv) {
                  "Image side for primary rays and mirror spheres (Cornell: size/2 × size·400/1024)")
       ->check(CLI::Range(16u, 8192u));
   app.add_option("--threads", o.threads, "Worker threads")->check(CLI::Range(1u, 256u));
-  app.add_option("--repetitions", o.repetitions, "Interleaved repetitions per comparison")
+  app.add_option("--repetitions", o.repetitions, "Interleaved repetitions per comparison (cache sections: 3 unless given)")
       ->check(CLI::Range(1, 1000));
-  app.add_option("--frames", o.frames, "Frames per Whitted measurement")
+  app.add_option("--frames", o.frames, "Frames per Whitted measurement (cache sections: fill frames, 3 unless given)")
       ->check(CLI::Range(1, 10000));
   app.add_option("--subdivisions", o.subdivisions,
                  "Loop subdivisions of the bunny for the large mesh")
@@ -357,6 +357,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1000u, 1u << 24));
   app.add_option("--source-dir", o.source_dir, "Specula source tree (for samples/)");
   CLI11_PARSE(app, argc, argv);
+  if (app.count("--frames") > 0) o.cache_frames = o.frames;
+  if (app.count("--repetitions") > 0) o.cache_repetitions = o.repetitions;
   try {
     // Whole names: "paper" is not "cache-paper".
     for (std::size_t begin = 0; begin <= o.sections.size();) {
