@@ -430,6 +430,23 @@ void section_cache(const Options& o) {
 
 // --- Section `cache-paper` ---------------------------------------------------------------------
 
+/// The texels a pan addresses at all: a recording pass over steps 0…steps with a direction-mode
+/// cube of its own (1 per texel addressed), and how many.
+template <typename Pan>
+std::pair<std::vector<std::uint8_t>, std::uint64_t> visible_texels(Bench& bench,
+                                                                   std::uint32_t res, int steps,
+                                                                   Pan pan) {
+  Contender probe = cached(LookupMode::Direction, res, 0.5f, CachePolicy::On, false, true);
+  for (int k = 0; k <= steps; ++k) {
+    pan(k);
+    (void)bench.tick(probe);
+  }
+  std::vector<std::uint8_t> visible = static_cast<const RecordingHook&>(*probe.hook).addressed();
+  std::uint64_t count = 0;
+  for (const std::uint8_t v : visible) count += v;
+  return {std::move(visible), count};
+}
+
 void section_cache_paper(const Options& o) {
   Report out;
   const fs::path dir = out_dir(o);
@@ -465,14 +482,7 @@ void section_cache_paper(const Options& o) {
     Bench bench(scene_path(o, "mirror_spheres_32"), o.size, o.threads);
     auto pan = [&](int step) { bench.orbit(step * kStepDeg); };
     // The visible set: a recording pass over the whole pan with a cube of its own.
-    Contender probe = cached(LookupMode::Direction, res, 0.5f, CachePolicy::On, false, true);
-    for (int k = 0; k <= kPanSteps; ++k) {
-      pan(k);
-      (void)bench.tick(probe);
-    }
-    const auto& visible = static_cast<const RecordingHook&>(*probe.hook).addressed();
-    std::uint64_t visible_count = 0;
-    for (const std::uint8_t v : visible) visible_count += v;
+    const auto [visible, visible_count] = visible_texels(bench, res, kPanSteps, pan);
     // The measured pan, with a fresh cube.
     Contender c = cached(LookupMode::Direction, res);
     header += " " + std::to_string(res) + "²: outdated of all | of visible | acceptance |";
@@ -538,14 +548,7 @@ void section_cache_paper(const Options& o) {
       return m <= kPanSteps ? m : period - m;
     };
     auto pan = [&](int step) { bench.orbit(step * kStepDeg); };
-    Contender probe = cached(LookupMode::Direction, res, 0.5f, CachePolicy::On, false, true);
-    for (int k = 0; k <= kPanSteps; ++k) {
-      pan(k);
-      (void)bench.tick(probe);
-    }
-    const auto& visible = static_cast<const RecordingHook&>(*probe.hook).addressed();
-    std::uint64_t visible_count = 0;
-    for (const std::uint8_t v : visible) visible_count += v;
+    const auto [visible, visible_count] = visible_texels(bench, res, kPanSteps, pan);
     const int max_frames = std::max(20, 6 * kPanSteps);
     for (const std::uint32_t budget : {0u, 16384u, 4096u}) {
       Contender c = cached(LookupMode::Direction, res, 0.5f, CachePolicy::On, false, false, budget);

@@ -12,7 +12,6 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -270,9 +269,7 @@ std::uint64_t RayCacheStore::flush() {
 // ---------------------------------------------------------------------------------------------
 // Invalidation
 
-InvalidationStats RayCacheStore::invalidate(const ecs::Registry& const_registry,
-                                            const SceneLayer& layer) {
-  auto& registry = const_cast<ecs::Registry&>(const_registry); // views are non-const; read only
+InvalidationStats RayCacheStore::invalidate(ecs::Registry& registry, const SceneLayer& layer) {
   const SceneTables& tables = layer.tables();
   const SceneDelta& delta = layer.delta();
   InvalidationStats stats;
@@ -383,7 +380,6 @@ InvalidationStats RayCacheStore::invalidate(const ecs::Registry& const_registry,
                              });
     if (flush_everything || owner_moved) {
       stats.outdated += c.flush();
-      stats.owners_moved += owner_moved ? 1 : 0;
       c.centre = own.centre;
       c.radius = own.radius;
       continue;
@@ -538,8 +534,6 @@ void RayCacheStore::begin_frame(std::uint32_t width, std::uint32_t height) {
     lookups_ = lookups_ || c->enabled;
   }
   candidates_.clear();
-  lookup_ns_ = 0;
-  lookup_count_ = 0;
 }
 
 bool RayCacheStore::wants_lookups() const { return lookups_; }
@@ -654,7 +648,6 @@ static Answer march(const std::vector<Texel>& texels, std::uint32_t res, const v
 
 void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
                            std::span<CachedRadiance> answers) const {
-  const auto start = std::chrono::steady_clock::now();
   // Counters gathered per batch (a batch mostly addresses one cube), added once.
   struct Local {
     std::uint64_t lookups = 0, outdated = 0, rejected = 0, steps = 0, offered_rays = 0;
@@ -720,11 +713,6 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
     c.march_steps.fetch_add(local[i].steps, std::memory_order_relaxed);
     c.offered_rays.fetch_add(local[i].offered_rays, std::memory_order_relaxed);
   }
-  lookup_count_.fetch_add(queries.size(), std::memory_order_relaxed);
-  lookup_ns_.fetch_add(std::uint64_t(std::chrono::duration<double, std::nano>(
-                                         std::chrono::steady_clock::now() - start)
-                                         .count()),
-                       std::memory_order_relaxed);
 }
 
 void RayCacheStore::leaving(std::span<const LeavingRadiance> rays) {

@@ -81,7 +81,6 @@ struct CubeView {
 struct InvalidationStats {
   std::uint64_t outdated = 0;  ///< texels this invalidation outdated
   std::uint64_t flush_all = 0; ///< valid texels before it (what flushing every cube would cost)
-  std::uint64_t owners_moved = 0;
 };
 
 class RayCacheStore final : public RadianceHook {
@@ -97,7 +96,8 @@ public:
   /// their subtree), that now look at its new bounds, or whose hit point lies in its old or new
   /// shadow are outdated; an owner that moved outdates its whole cube; light or material changes
   /// outdate every texel that hit a surface; a rebuilt static set outdates everything.
-  InvalidationStats invalidate(const ecs::Registry& registry, const SceneLayer& layer);
+  /// The registry is only read (its views need a non-const one).
+  InvalidationStats invalidate(ecs::Registry& registry, const SceneLayer& layer);
 
   /// Traces every outdated texel of every enabled cube from the cube's centre (passing through
   /// its owner) and stores the result: the ideal, fully filled cache (--cache-prefill).
@@ -145,8 +145,6 @@ private:
   struct Candidate;
   std::mutex mutex_;
   std::vector<Candidate> candidates_;
-  mutable std::atomic<std::uint64_t> lookup_ns_{0};
-  mutable std::atomic<std::uint64_t> lookup_count_{0};
 };
 
 /// The registry resource holding the store (the render job's hook points at the same object):

@@ -21,6 +21,27 @@
 namespace specula {
 namespace {
 
+/// Worker threads for `threads` (0: every hardware thread).
+int worker_count(std::uint32_t threads) {
+  return threads > 0 ? int(threads) : int(std::max(1u, std::thread::hardware_concurrency()));
+}
+
+/// Denormals slow CPU traversal down (and make Embree warn): flushed while tracing, the thread's
+/// (possibly the caller's) own mode given back afterwards.
+class DenormalsFlushed {
+public:
+  DenormalsFlushed() : saved_(_mm_getcsr()) {
+    _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+    _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+  }
+  ~DenormalsFlushed() { _mm_setcsr(saved_); }
+  DenormalsFlushed(const DenormalsFlushed&) = delete;
+  DenormalsFlushed& operator=(const DenormalsFlushed&) = delete;
+
+private:
+  unsigned int saved_;
+};
+
 /// Runs f(scratch, tile) for every tile of a width × height image, tiles handed out dynamically
 /// to `threads` workers (0: all), each worker with its own scratch. TBB's default partitioner
 /// splits the tile range adaptively and idle workers steal halves of busy ones' ranges, so
@@ -32,19 +53,13 @@ void for_each_tile(std::uint32_t width, std::uint32_t height, std::uint32_t tile
   tile = std::max(1u, tile);
   const std::uint32_t tiles_x = (width + tile - 1) / tile;
   const std::uint32_t tiles_y = (height + tile - 1) / tile;
-  const int workers =
-      threads > 0 ? int(threads) : int(std::max(1u, std::thread::hardware_concurrency()));
-  tbb::task_arena arena(workers);
+  tbb::task_arena arena(worker_count(threads));
   tbb::enumerable_thread_specific<detail::TileScratch>
       scratch; // one per worker, reused across tiles
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tiles_x * tiles_y, 1),
                       [&](const tbb::blocked_range<std::uint32_t>& range) {
-                        // Denormals slow CPU traversal down (and make Embree warn): flush them
-                        // while tracing, and give the thread (possibly the caller's) its mode back.
-                        const unsigned int saved_csr = _mm_getcsr();
-                        _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
-                        _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+                        const DenormalsFlushed flushed;
                         detail::TileScratch& local = scratch.local();
                         for (std::uint32_t t = range.begin(); t != range.end(); ++t) {
                           const std::uint32_t x0 = (t % tiles_x) * tile;
@@ -53,7 +68,6 @@ void for_each_tile(std::uint32_t width, std::uint32_t height, std::uint32_t tile
                             PacketTile::for_width(x0, y0, std::min(x0 + tile, width),
                                                   std::min(y0 + tile, height), packet_width));
                         }
-                        _mm_setcsr(saved_csr);
                       });
   });
 }
@@ -137,20 +151,14 @@ RayCounts trace_radiance(const Tracer& tracer, const SceneLayer& layer,
   tbb::enumerable_thread_specific<detail::TileScratch> scratch;
   constexpr std::size_t kChunk = 256;
   const std::size_t chunks = (rays.size() + kChunk - 1) / kChunk;
-  const int workers = settings.threads > 0
-                          ? int(settings.threads)
-                          : int(std::max(1u, std::thread::hardware_concurrency()));
-  tbb::task_arena arena(workers);
+  tbb::task_arena arena(worker_count(settings.threads));
   arena.execute([&] {
     tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
-      const unsigned int saved_csr = _mm_getcsr();
-      _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
-      _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+      const DenormalsFlushed flushed;
       const std::size_t first = c * kChunk;
       const std::size_t n = std::min(kChunk, rays.size() - first);
       detail::whitted_rays(frame, rays.subspan(first, n), depth, skip, scratch.local(),
                            counts.local(), out.subspan(first, n));
-      _mm_setcsr(saved_csr);
     });
   });
   RayCounts total;
