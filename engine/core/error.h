@@ -3,13 +3,26 @@
 /// Runtime errors with context (files, fields, lines). Bugs are caught by SPECULA_ASSERT instead;
 /// expected absences are std::optional (three error tiers, as in Falcor).
 
+#include <cstddef>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 namespace specula {
 
+/// `text` made safe to print inside a one-line message: control and non-ASCII bytes escaped
+/// (\n, \t, \0, \xNN), and anything past `max_bytes` cut with a note of the full length
+/// ("...[1048576 bytes]"). Use it for every piece of user input echoed in a message.
+[[nodiscard]] std::string printable(std::string_view text, std::size_t max_bytes = 96);
+
+/// A multi-line message (a library's report) folded into one line: line breaks become "; ",
+/// other control bytes are escaped and the whole is cut to `max_bytes`.
+[[nodiscard]] std::string one_line(std::string_view text, std::size_t max_bytes = 512);
+
 /// A runtime failure with the place it happened: a file, optionally a line or a field path.
-/// what() reads "FILE:LINE: MESSAGE" or "FILE: FIELD: MESSAGE", ready to print.
+/// what() reads "FILE:LINE: MESSAGE" or "FILE: FIELD: MESSAGE", ready to print. Every part is
+/// passed through printable()/one_line() on construction, so no message carries raw control
+/// bytes, line breaks or megabytes of echoed input, whatever its call site did.
 class Error : public std::runtime_error {
 public:
   explicit Error(const std::string& message);
