@@ -151,25 +151,6 @@ private:
   std::uint64_t position_ = 0;
 };
 
-/// A library message on one line: OpenEXR's messages may span several, and may quote names
-/// from a corrupt file; whitespace runs become one space, other control bytes and non-ASCII
-/// bytes '?'.
-std::string one_line(std::string_view text) {
-  std::string line;
-  bool space = false;
-  for (const char c : text) {
-    const auto byte = static_cast<unsigned char>(c);
-    if (std::isspace(byte) != 0) {
-      space = !line.empty();
-      continue;
-    }
-    if (space) line.push_back(' ');
-    space = false;
-    line.push_back(byte < 0x20 || byte >= 0x7F ? '?' : c);
-  }
-  return line.empty() ? "unknown error" : line;
-}
-
 std::uint32_t le32(std::span<const std::uint8_t> bytes, std::size_t at) {
   return std::uint32_t{bytes[at]} | std::uint32_t{bytes[at + 1]} << 8 |
          std::uint32_t{bytes[at + 2]} << 16 | std::uint32_t{bytes[at + 3]} << 24;
@@ -188,8 +169,8 @@ void check_exr_channel_order(std::span<const std::uint8_t> list,
     const std::string_view name(reinterpret_cast<const char*>(list.data()) + at,
                                 static_cast<std::size_t>(end - list.begin()) - at);
     if (previous && name <= *previous) { // char_traits order: bytes as unsigned, as strcmp
-      fail(path, "corrupt EXR: channel list not sorted by name ('" + one_line(*previous) +
-                     "' before '" + one_line(name) + "')");
+      fail(path, "corrupt EXR: channel list not sorted by name ('" + printable(*previous, 64) +
+                     "' before '" + printable(name, 64) + "')");
     }
     previous = name;
     at += name.size() + 1 + 16; // pixel type, pLinear, reserved, x and y sampling
@@ -219,7 +200,7 @@ std::vector<std::string> exr_attribute_names(std::span<const std::uint8_t> bytes
     const std::uint32_t size = le32(bytes, at);
     at += 4;
     if (size > bytes.size() - at) {
-      fail(path, "truncated or corrupt EXR: header attribute '" + one_line(name->substr(0, 64)) +
+      fail(path, "truncated or corrupt EXR: header attribute '" + printable(*name, 64) +
                      "' declares " + std::to_string(size) + " bytes, more than the " +
                      std::to_string(bytes.size() - at) + " left in the file");
     }
@@ -279,7 +260,7 @@ ExrColourChannels check_exr_header(const Imf::Header& header,
     colour.gray = true;
   } else {
     std::string found;
-    for (auto it = channels.begin(); it != channels.end(); ++it) found += " " + one_line(it.name());
+    for (auto it = channels.begin(); it != channels.end(); ++it) found += " " + printable(it.name(), 64);
     fail(path, "unsupported EXR: no R, G, B channels (nor Y alone); found:" +
                    (found.empty() ? std::string(" none") : found));
   }
