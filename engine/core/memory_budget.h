@@ -1,0 +1,31 @@
+#pragma once
+/// \file
+/// How much memory one command may plan to use, and sizes written for people ("512M", "4 GiB").
+/// Commands estimate what a request needs from its sizes (image headers, width × height) and
+/// refuse it with a clear message before allocating, rather than dying in the middle of it.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+
+namespace specula {
+
+/// Physical memory of this machine in bytes; 0 when the system does not say.
+[[nodiscard]] std::uint64_t physical_memory_bytes();
+
+/// The budget a command gets when the user names none: 3/4 of physical memory (the rest is left
+/// to the system and other programs), and no more than the process's soft address-space or data
+/// limit (`ulimit -v`, `ulimit -d`) where one is set. At least 256 MiB, so a machine that reports
+/// nothing still renders small images.
+[[nodiscard]] std::uint64_t default_memory_budget();
+
+/// A size: a whole or decimal number of bytes with an optional unit K, M, G or T (powers of 1024;
+/// "KiB", "MB", "GiB" and lower case are the same), e.g. "512M", "1.5G", "4096". Empty for
+/// anything else, for 0, and for sizes beyond 2^63 bytes.
+[[nodiscard]] std::optional<std::uint64_t> parse_byte_size(std::string_view text);
+
+/// "12.3 GiB", "512 MiB", "900 bytes": three significant digits, binary units.
+[[nodiscard]] std::string byte_size_text(std::uint64_t bytes);
+
+} // namespace specula
