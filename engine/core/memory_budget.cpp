@@ -1,5 +1,7 @@
 #include "specula/core/memory_budget.h"
 
+#include "specula/core/error.h"
+
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -66,6 +68,25 @@ std::string byte_size_text(std::uint64_t bytes) {
   std::snprintf(text, sizeof text, value < 10.0 ? "%.2f %s" : value < 100.0 ? "%.1f %s" : "%.0f %s",
                 value, units[unit]);
   return text;
+}
+
+MemoryBudget memory_budget(std::string_view option, std::string_view option_name) {
+  if (option.empty()) return {default_memory_budget(),
+          "the default: 3/4 of physical memory, within ulimit -v; --memory-limit sets another"};
+  const std::optional<std::uint64_t> bytes = parse_byte_size(option);
+  if (!bytes) {
+    throw Error(std::string(option_name),
+                "expected a size such as 512M or 4G, got '" + printable(option) + "'");
+  }
+  return {*bytes, std::string(option_name) + " " + printable(option)};
+}
+
+void check_memory(std::uint64_t needed, const MemoryBudget& budget, const std::string& file,
+                  const std::string& what) {
+  if (needed <= budget.bytes) return;
+  throw Error(file, what + " needs about " + byte_size_text(needed) +
+                        ", more than the memory budget of " + byte_size_text(budget.bytes) + " (" +
+                        budget.origin + ")");
 }
 
 } // namespace specula

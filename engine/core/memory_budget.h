@@ -28,4 +28,19 @@ namespace specula {
 /// "12.3 GiB", "512 MiB", "900 bytes": three significant digits, binary units.
 [[nodiscard]] std::string byte_size_text(std::uint64_t bytes);
 
+/// The budget of one command and where it came from, for messages.
+struct MemoryBudget {
+  std::uint64_t bytes = 0;
+  std::string origin; ///< e.g. "--memory-limit 4G", or the default and how to change it
+};
+
+/// The budget `option` names (parse_byte_size), or default_memory_budget() when it is empty.
+/// Throws specula::Error naming `option_name` for a value that is not a size.
+[[nodiscard]] MemoryBudget memory_budget(std::string_view option, std::string_view option_name);
+
+/// Throws specula::Error naming `file` when `needed` bytes exceed the budget: "<what> needs about
+/// N, more than the memory budget of M (origin)". `what` says what was asked, with its sizes.
+void check_memory(std::uint64_t needed, const MemoryBudget& budget, const std::string& file,
+                  const std::string& what);
+
 } // namespace specula

@@ -38,8 +38,6 @@ constexpr int kFormatVersion = 1;
 /// names the JSON field.
 constexpr std::uint32_t kMaxTessellation = 4096;
 constexpr std::uint32_t kMaxRayCacheResolution = 4096;
-/// Recursion depth limit: far beyond any useful image, small enough to be an error, not a hang.
-constexpr std::uint32_t kMaxDepthLimit = 64;
 
 // ---------------------------------------------------------------------------------------------
 // Degrees in the file, radians in components. The writer searches for the shortest decimal that
@@ -118,7 +116,7 @@ RenderSettings read_settings(const Reader& r, const json& j, const std::string& 
   if (const json* v = o.find("height"))
     s.height = read_u32(r, *v, o.path("height"), 1, kMaxImageSide);
   if (const json* v = o.find("max_depth"))
-    s.max_depth = read_u32(r, *v, o.path("max_depth"), 0, kMaxDepthLimit);
+    s.max_depth = read_u32(r, *v, o.path("max_depth"), 0, kMaxTraceDepth);
   if (const json* v = o.find("background")) s.background = read_color(r, *v, o.path("background"));
   return s;
 }
