@@ -13,6 +13,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
@@ -71,6 +72,18 @@ CLI::Validator number() {
       "");
 }
 
+/// One of `names`. CLI11's IsMember echoes the value in full before the list; this cuts it.
+CLI::Validator one_of(std::vector<std::string> names) {
+  std::string list;
+  for (const std::string& name : names) list += (list.empty() ? "" : ", ") + name;
+  return CLI::Validator(
+      [names, list](std::string& text) -> std::string {
+        if (std::find(names.begin(), names.end(), text) != names.end()) return {};
+        return "expected one of " + list + ", got '" + specula::printable(text, 40) + "'";
+      },
+      "{" + list + "}");
+}
+
 /// A path: an empty one is a mistake (of quoting, usually), not "no file".
 CLI::Validator non_empty_path() {
   return CLI::Validator(
@@ -99,7 +112,7 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", "specula 0.1.0");
   // Every parse error in the house style (main's catch below), input escaped and cut.
   app.failure_message([](const CLI::App*, const CLI::Error& e) {
-    return "specula: error: " + one_line(e.what()) + "\nRun with --help for more information.\n";
+    return "specula: error: " + printable(e.what(), 400) + "\nRun with --help for more information.\n";
   });
 
   cli::InfoOptions info;
@@ -121,10 +134,10 @@ int main(int argc, char** argv) {
       ->check(non_empty_path());
   render_cmd
       ->add_option("--backend", render.backend, "Tracing backend (auto: the best one available)")
-      ->check(CLI::IsMember(backend_names()))
+      ->check(one_of(backend_names()))
       ->capture_default_str();
   render_cmd->add_option("--mode", render.mode, "Integrator")
-      ->check(CLI::IsMember({"cast", "whitted", "path", "shadow"}))
+      ->check(one_of({"cast", "whitted", "path", "shadow"}))
       ->capture_default_str();
   render_cmd->add_option("--width", render.width, "Image width (default: the scene's)")
       ->transform(whole_number(1, kMaxImageSide));
@@ -142,7 +155,7 @@ int main(int argc, char** argv) {
                    "they save time within --max-error-db), or a face resolution (auto at it)")
       ->capture_default_str();
   render_cmd->add_option("--cache-lookup", render.cache_lookup, "How a cached texel is accepted")
-      ->check(CLI::IsMember({"direction", "tau", "march"}))
+      ->check(one_of({"direction", "tau", "march"}))
       ->capture_default_str();
   render_cmd
       ->add_option("--cache-tau", render.cache_tau_deg,
