@@ -225,13 +225,13 @@ int main(int argc, char** argv) {
     std::cerr << "specula: error: " << e.what() << "\n";
     return kExitBadInput;
   } catch (const UnavailableError& e) {
-    std::cerr << "specula: not available: " << e.what() << "\n";
+    std::cerr << "specula: not available: " << one_line(e.what()) << "\n";
     return kExitUnavailable;
   } catch (const std::bad_alloc&) {
     std::cerr << "specula: error: out of memory\n";
     return kExitBadInput;
   } catch (const std::exception& e) {
-    std::cerr << "specula: internal error: " << e.what() << "\n";
+    std::cerr << "specula: internal error: " << one_line(e.what()) << "\n";
     return 3;
   }
   return 0;

@@ -480,7 +480,8 @@ namespace {
 /// by commit() once every write, and the close, succeeded: a failed write (a full disk, a file
 /// size limit) never leaves a truncated image under the requested name, and an existing image
 /// stays as it was. A target that exists and is not a regular file (a device such as /dev/full, a
-/// FIFO) cannot be replaced and is written directly. Every failure throws specula::Error naming
+/// FIFO) cannot be replaced and is written directly, and so is an existing file in a folder where
+/// no new file may be created. Every failure throws specula::Error naming
 /// the target; the temporary file is removed unless committed.
 class ImageFileWriter {
 public:
@@ -508,9 +509,15 @@ public:
       // 0666 before the umask, as for any new file; the rename keeps it.
       fd_ = ::open(temp_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
       if (fd_ < 0 && (errno != EEXIST || attempt == 16)) {
-        const std::string reason = errno_message();
+        const int error = errno;
         temp_.clear();
-        fail_write(reason);
+        // A folder that takes no new file, holding a file the user may write: replaced in place,
+        // as the user asked, without the guarantee.
+        if ((error == EACCES || error == EPERM) && std::filesystem::is_regular_file(status)) {
+          fd_ = ::open(target.c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
+          if (fd_ >= 0) return;
+        }
+        fail_write(std::error_code(error, std::generic_category()).message());
       }
     }
     final_ = target;
