@@ -34,6 +34,8 @@ struct Scene {
 /// errors, not allocations).
 inline constexpr std::uint32_t kMaxImageSide = 16384;
 inline constexpr std::uint64_t kMaxTriangles = 100'000'000;
+/// Largest vertex count of one mesh: three distinct vertices per triangle.
+inline constexpr std::uint64_t kMaxVertices = 3 * kMaxTriangles;
 inline constexpr std::uint64_t kMaxEntities = 10'000'000;
 
 /// Reads a scene by extension: .json (Specula), .gltf/.glb (glTF 2.0), .obj/.ply/.off/.stl (one
