@@ -596,8 +596,8 @@ Scene read_document(const Reader& r, const json& root, const fs::path& base_dir)
     r.fail("format", "expected \"" + std::string(kFormatName) + "\", got " + describe(format));
   const json& version = top.require("version");
   if (!version.is_number_integer() || version.get<std::int64_t>() != kFormatVersion)
-    r.fail("version", "unsupported version " + version.dump() + " (this build reads version " +
-                          std::to_string(kFormatVersion) + ")");
+    r.fail("version", "unsupported version " + printable(version.dump()) +
+                          " (this build reads version " + std::to_string(kFormatVersion) + ")");
 
   Scene scene;
   if (const json* v = top.find("settings")) scene.settings = read_settings(r, *v, "settings");
