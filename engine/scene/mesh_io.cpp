@@ -79,6 +79,8 @@ struct ScanResult {
   std::optional<std::uint64_t> declared_faces;
   /// Declared faces that repeat a vertex; OpenMesh drops these as degenerate.
   std::uint64_t faces_with_repeated_vertex = 0;
+  /// Triangles the faces seen so far become (n - 2 for a polygon of n corners).
+  std::uint64_t triangles = 0;
 };
 
 // ---- Text scanning helpers ------------------------------------------------------------------
@@ -203,6 +205,23 @@ void check_mesh_counts(const std::string& file, int line, std::uint64_t vertices
   return std::adjacent_find(indices.begin(), indices.end()) != indices.end();
 }
 
+/// Records a face of the scan (its corners' vertex indices, reordered here): whether it repeats
+/// a vertex, and the triangles it becomes, which must stay within kMaxTriangles however few
+/// faces the header declares (a face of a million corners is a million triangles less two).
+/// `line` 0: a binary file.
+void note_face(const std::string& file, int line, std::vector<std::uint64_t>& corners,
+               ScanResult& result) {
+  if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
+  result.triangles += corners.size() - 2;
+  if (result.triangles > kMaxTriangles) {
+    const std::string message = "the faces become more than the limit of " +
+                                std::to_string(kMaxTriangles) +
+                                " triangles per mesh (docs/limits.md)";
+    if (line > 0) throw Error(file, line, message);
+    throw Error(file, message);
+  }
+}
+
 // ---- OBJ ------------------------------------------------------------------------------------
 
 /// Resolves one OBJ index (1-based, or negative = relative to the end) against `count`
@@ -274,7 +293,7 @@ void check_mesh_counts(const std::string& file, int line, std::uint64_t vertices
           if (!vn.empty()) (void)resolve_obj_index(file, line, vn, normals, "normals");
         }
       }
-      if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
+      note_face(file, line, corners, result);
       check_mesh_counts(file, line, 0, ++*result.declared_faces);
     }
     // Everything else (o, g, s, usemtl, mtllib, l, p, ...) does not change the geometry we read.
@@ -324,7 +343,7 @@ void check_mesh_counts(const std::string& file, int line, std::uint64_t vertices
                               " vertices (indices start at 0)");
       corners.push_back(index);
     }
-    if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
+    note_face(file, 0, corners, result);
   }
   result.declared_faces = faces;
   return result;
@@ -456,7 +475,7 @@ void check_mesh_counts(const std::string& file, int line, std::uint64_t vertices
                         std::to_string(vertices) + " vertices (indices start at 0)");
       corners.push_back(static_cast<std::uint64_t>(*index));
     }
-    if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
+    note_face(file, line_number, corners, result);
   }
   result.declared_faces = faces;
   if (faces == 0) throw Error(file, counts_line, "the file declares no faces");
@@ -602,7 +621,7 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
             throw ply_index_out_of_range(file, line, index, vertices);
           corners.push_back(static_cast<std::uint64_t>(index));
         }
-        if (property.indices && has_repeated(corners)) ++result.faces_with_repeated_vertex;
+        if (property.indices) note_face(file, line, corners, result);
       }
     }
   }
@@ -669,7 +688,7 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
             throw ply_index_out_of_range(file, 0, index, vertices);
           corners.push_back(static_cast<std::uint64_t>(index));
         }
-        if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
+        note_face(file, 0, corners, result);
       }
     }
   }
