@@ -1,9 +1,9 @@
 #include "specula/core/memory_budget.h"
 
 #include "specula/core/error.h"
+#include "specula/core/file_io.h"
 
 #include <sys/resource.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
@@ -12,13 +12,6 @@
 #include <cstdio>
 
 namespace specula {
-
-std::uint64_t physical_memory_bytes() {
-  const long pages = sysconf(_SC_PHYS_PAGES);
-  const long page_size = sysconf(_SC_PAGE_SIZE);
-  if (pages <= 0 || page_size <= 0) return 0;
-  return std::uint64_t(pages) * std::uint64_t(page_size);
-}
 
 std::uint64_t default_memory_budget() {
   constexpr std::uint64_t kFloor = std::uint64_t{256} << 20;

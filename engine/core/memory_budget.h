@@ -11,13 +11,11 @@
 
 namespace specula {
 
-/// Physical memory of this machine in bytes; 0 when the system does not say.
-[[nodiscard]] std::uint64_t physical_memory_bytes();
-
-/// The budget a command gets when the user names none: 3/4 of physical memory (the rest is left
-/// to the system and other programs), and no more than the process's soft address-space or data
-/// limit (`ulimit -v`, `ulimit -d`) where one is set. At least 256 MiB, so a machine that reports
-/// nothing still renders small images.
+/// The budget a command gets when the user names none: 3/4 of physical memory
+/// (physical_memory_bytes(), core/file_io.h; the rest is left to the system and other programs),
+/// and no more than the process's soft address-space or data limit (`ulimit -v`, `ulimit -d`)
+/// where one is set. At least 256 MiB, so a machine that reports nothing still renders small
+/// images.
 [[nodiscard]] std::uint64_t default_memory_budget();
 
 /// A size: a whole or decimal number of bytes with an optional unit K, M, G or T (powers of 1024;

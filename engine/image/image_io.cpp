@@ -1,6 +1,7 @@
 #include "specula/image/image_io.h"
 
 #include "specula/core/error.h"
+#include "specula/core/file_io.h"
 #include "specula/image/srgb.h"
 
 // The implementations live in the system libstb; only the declarations are included here.
@@ -61,23 +62,16 @@ std::string size_text(std::int64_t width, std::int64_t height) {
 }
 
 /// The whole file, with the reasons a file cannot be read told apart (a missing file and an
-/// empty one are different mistakes for the user).
-Bytes read_file_bytes(const std::filesystem::path& path) {
-  std::error_code ec;
-  const auto status = std::filesystem::status(path, ec);
-  if (!std::filesystem::exists(status)) fail(path, "file not found");
-  if (std::filesystem::is_directory(status)) fail(path, "is a directory, not an image file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(path, "cannot open: " + errno_message());
-  in.seekg(0, std::ios::end);
-  const std::streamoff size = in.tellg();
-  if (size < 0) fail(path, "cannot read: " + errno_message());
-  if (size == 0) fail(path, "empty file");
-  in.seekg(0, std::ios::beg);
-  Bytes bytes(static_cast<std::size_t>(size));
-  in.read(reinterpret_cast<char*>(bytes.data()), size);
-  if (in.gcount() != size) fail(path, "cannot read: " + errno_message());
+/// empty one are different mistakes for the user): regular files only, within
+/// kMaxDataFileBytes (docs/limits.md), so a device or FIFO named .png or .exr is refused.
+std::string read_file_bytes(const std::filesystem::path& path, std::string_view what) {
+  std::string bytes = read_file_bounded(path, kMaxDataFileBytes, what);
+  if (bytes.empty()) fail(path, "empty file");
   return bytes;
+}
+
+std::span<const std::uint8_t> as_bytes(const std::string& bytes) {
+  return {reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()};
 }
 
 std::string lowercase_extension(const std::filesystem::path& path) {
@@ -247,7 +241,8 @@ ExrColourChannels check_exr_header(const Imf::Header& header,
     colour.gray = true;
   } else {
     std::string found;
-    for (auto it = channels.begin(); it != channels.end(); ++it) found += " " + printable(it.name(), 64);
+    for (auto it = channels.begin(); it != channels.end(); ++it)
+      found += " " + printable(it.name(), 64);
     fail(path, "unsupported EXR: no R, G, B channels (nor Y alone); found:" +
                    (found.empty() ? std::string(" none") : found));
   }
@@ -432,6 +427,14 @@ Framebuffer decode_exr(std::span<const std::uint8_t> bytes, const std::filesyste
   int header_version = version;
   header.readFrom(stream, header_version);
   const ExrColourChannels colour = check_exr_header(header, attributes, tiled, path);
+  {
+    // The framebuffer the pixels go to, allocated once the chunks passed: known now.
+    const Imath::Box2i& window = header.dataWindow();
+    const auto w = static_cast<std::uint64_t>(std::int64_t{window.max.x} - window.min.x + 1);
+    const auto h = static_cast<std::uint64_t>(std::int64_t{window.max.y} - window.min.y + 1);
+    check_memory_budget(path, w * h * sizeof(vec3),
+                        "reading this " + size_text(std::int64_t(w), std::int64_t(h)) + " EXR");
+  }
   check_exr_chunks(bytes, colour, path);
 
   // The header passed: now the library reads the file from the start, tables and pixels.
@@ -670,7 +673,8 @@ void write_png(const Framebuffer& image, const std::filesystem::path& path) {
 }
 
 Framebuffer read_png(const std::filesystem::path& path) {
-  const Bytes bytes = read_file_bytes(path);
+  const std::string file_bytes = read_file_bytes(path, "PNG image");
+  const std::span<const std::uint8_t> bytes = as_bytes(file_bytes);
   if (bytes.size() < kPngSignature.size() ||
       !std::equal(kPngSignature.begin(), kPngSignature.end(), bytes.begin())) {
     fail(path, "not a PNG file (wrong signature)");
@@ -699,6 +703,34 @@ Framebuffer read_png(const std::filesystem::path& path) {
                              static_cast<std::int64_t>(ihdr_height)) +
                    " is outside [1, " + std::to_string(kMaxFramebufferSide) + "] per side");
   }
+  // What decoding will allocate, known from IHDR before anything is: the inflated scan lines
+  // (a filter byte per row), stb's unfiltered copy and RGB result, and the framebuffer.
+  const std::uint64_t bit_depth = bytes[24];
+  const std::uint8_t colour_type = bytes[25];
+  const std::uint64_t samples = colour_type == 2   ? 3
+                                : colour_type == 4 ? 2
+                                : colour_type == 6 ? 4
+                                                   : 1;
+  const std::uint64_t row_bytes = (ihdr_width * samples * bit_depth + 7) / 8;
+  const std::uint64_t raw_bytes = ihdr_height * (1 + row_bytes);
+  const std::uint64_t pixels_count = ihdr_width * ihdr_height;
+  // Deflate expands its input at most 1032 times (zlib's technical notes): a file too small to
+  // hold the image is truncated or corrupt, whatever its IHDR says, and is refused before any
+  // of the memory its IHDR asks for is allocated.
+  constexpr std::uint64_t kMaxDeflateRatio = 1032;
+  if (raw_bytes > kMaxDeflateRatio * bytes.size()) {
+    fail(path, "corrupt or truncated PNG: a " +
+                   size_text(static_cast<std::int64_t>(ihdr_width),
+                             static_cast<std::int64_t>(ihdr_height)) +
+                   " image needs " + std::to_string(raw_bytes) +
+                   " bytes of scan lines, more than the " + std::to_string(bytes.size()) +
+                   "-byte file can hold compressed");
+  }
+  check_memory_budget(
+      path, 2 * raw_bytes + pixels_count * (6 + sizeof(vec3)),
+      "decoding this " +
+          size_text(static_cast<std::int64_t>(ihdr_width), static_cast<std::int64_t>(ihdr_height)) +
+          " PNG");
 
   int width = 0;
   int height = 0;
@@ -777,7 +809,8 @@ void write_exr(const Framebuffer& image, const std::filesystem::path& path) {
 }
 
 Framebuffer read_exr(const std::filesystem::path& path) {
-  const Bytes bytes = read_file_bytes(path);
+  const std::string file_bytes = read_file_bytes(path, "EXR image");
+  const std::span<const std::uint8_t> bytes = as_bytes(file_bytes);
   if (bytes.size() < 4 || !Imf::isImfMagic(reinterpret_cast<const char*>(bytes.data()))) {
     fail(path, "not an OpenEXR file (wrong magic number)");
   }
