@@ -27,8 +27,8 @@ std::uint64_t default_memory_budget() {
 
 std::optional<std::uint64_t> parse_byte_size(std::string_view text) {
   double value = 0.0;
-  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value,
-                                         std::chars_format::fixed);
+  const auto [end, ec] =
+      std::from_chars(text.data(), text.data() + text.size(), value, std::chars_format::fixed);
   if (ec != std::errc{} || end == text.data()) return std::nullopt;
   std::string unit(end, text.data() + text.size());
   if (!unit.empty() && unit.front() == ' ') unit.erase(0, 1);
@@ -58,14 +58,18 @@ std::string byte_size_text(std::uint64_t bytes) {
     ++unit;
   }
   char text[32];
-  std::snprintf(text, sizeof text, value < 10.0 ? "%.2f %s" : value < 100.0 ? "%.1f %s" : "%.0f %s",
+  std::snprintf(text, sizeof text,
+                value < 10.0    ? "%.2f %s"
+                : value < 100.0 ? "%.1f %s"
+                                : "%.0f %s",
                 value, units[unit]);
   return text;
 }
 
 MemoryBudget memory_budget(std::string_view option, std::string_view option_name) {
-  if (option.empty()) return {default_memory_budget(),
-          "the default: 3/4 of physical memory, within ulimit -v; --memory-limit sets another"};
+  if (option.empty())
+    return {default_memory_budget(),
+            "the default: 3/4 of physical memory, within ulimit -v; --memory-limit sets another"};
   const std::optional<std::uint64_t> bytes = parse_byte_size(option);
   if (!bytes) {
     throw Error(std::string(option_name),

@@ -20,8 +20,7 @@ std::uint32_t le32(const std::uint8_t* p) {
 }
 
 bool valid_size(std::int64_t width, std::int64_t height) {
-  return width >= 1 && height >= 1 && width <= kMaxFramebufferSide &&
-         height <= kMaxFramebufferSide;
+  return width >= 1 && height >= 1 && width <= kMaxFramebufferSide && height <= kMaxFramebufferSide;
 }
 
 /// PNG (ISO 15948): signature, then IHDR with width, height, bit depth and colour type.

@@ -6,11 +6,11 @@
 #include "specula/image/image_io.h"
 #include "test_support.h"
 
+#include <ImfChannelList.h>
+#include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
 #include <ImfOutputFile.h>
 #include <ImfTiledOutputFile.h>
-#include <ImfChannelList.h>
-#include <ImfFrameBuffer.h>
 
 #include <gtest/gtest.h>
 
@@ -57,8 +57,8 @@ void expect_header_matches_reader(const std::filesystem::path& path) {
 
 TEST(ImageHeader, SizesAreTheOnesTheReaderDecodes) {
   test::TempDir dir;
-  for (const auto& [w, h] : std::vector<std::pair<std::uint32_t, std::uint32_t>>{
-           {1, 1}, {37, 5}, {5, 37}, {300, 2}}) {
+  for (const auto& [w, h] :
+       std::vector<std::pair<std::uint32_t, std::uint32_t>>{{1, 1}, {37, 5}, {5, 37}, {300, 2}}) {
     const Framebuffer image = test::random_image(w, h, w * 31 + h);
     const std::string stem = std::to_string(w) + "x" + std::to_string(h);
     write_png(image, dir.file(stem + ".png"));
