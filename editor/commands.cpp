@@ -163,11 +163,11 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   job.settings.threads = options.threads;
   const std::uint32_t width = options.width ? options.width : scene.settings.width;
   const std::uint32_t height = options.height ? options.height : scene.settings.height;
-  check_memory(render_memory_bytes(width, height, options.frames, out_format,
-                                   !options.stats.empty()),
-               budget, options.scene,
-               "rendering " + std::to_string(options.frames) + " frame(s) of " +
-                   std::to_string(width) + "x" + std::to_string(height));
+  check_memory(
+      render_memory_bytes(width, height, options.frames, out_format, !options.stats.empty()),
+      budget, options.scene,
+      "rendering " + std::to_string(options.frames) + " frame(s) of " + std::to_string(width) +
+          "x" + std::to_string(height));
   job.image = Framebuffer(width, height);
   job.cache = cache_settings;
   prepare_rendering(scene.registry, std::move(job));
@@ -213,8 +213,9 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   const double frame_ms = median(ms);
   const double trace = median(trace_ms);
   const FrameStats& last = stats.frames.back();
-  out << shown(options.scene) << ": " << width << "x" << height << " " << options.mode << " on " << backend
-      << (options.backend == "auto" ? " (auto)" : "") << ", " << options.frames << " frame(s)\n"
+  out << shown(options.scene) << ": " << width << "x" << height << " " << options.mode << " on "
+      << backend << (options.backend == "auto" ? " (auto)" : "") << ", " << options.frames
+      << " frame(s)\n"
       << "  frame ms: median " << frame_ms << " (tracing " << trace << "), " << 1000.0 / frame_ms
       << " frames/s\n"
       << "  rays per frame: " << last.rays.total() << " (";

@@ -55,10 +55,10 @@ int run_info(const InfoOptions& options, std::ostream& out);
 
 /// Renders options.frames ticks of the scene. Before loading the scene, checks the options and
 /// the output path (check_image_output_path); before allocating the framebuffer, checks
-/// render_memory_bytes against the memory budget (exit 1 naming the scene when it does not fit). `progress` receives a one-line progress report
-/// (frames done, frames/s, time left), rewritten in place and cleared at the end, once the render
-/// has run longer than options.progress_after_s and when `progress_is_terminal`; pass nullptr for
-/// none.
+/// render_memory_bytes against the memory budget (exit 1 naming the scene when it does not fit).
+/// `progress` receives a one-line progress report (frames done, frames/s, time left), rewritten in
+/// place and cleared at the end, once the render has run longer than options.progress_after_s and
+/// when `progress_is_terminal`; pass nullptr for none.
 int run_render(const RenderOptions& options, std::ostream& out, std::ostream* progress = nullptr,
                bool progress_is_terminal = false);
 

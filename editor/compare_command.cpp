@@ -42,8 +42,8 @@ std::uint64_t compare_memory_bytes(const ImageHeader& a, const ImageHeader& b, b
   const std::uint64_t pixels =
       std::max(std::uint64_t{a.width} * a.height, std::uint64_t{b.width} * b.height);
   const std::uint64_t framebuffer = pixels * sizeof(vec3);
-  const std::uint64_t flip_bytes = flip_working_bytes(std::max(a.width, b.width),
-                                                      std::max(a.height, b.height));
+  const std::uint64_t flip_bytes =
+      flip_working_bytes(std::max(a.width, b.width), std::max(a.height, b.height));
   // The heatmap: magma RGB (3 bytes per pixel), then stb's filtered rows (3), its deflate output
   // (at most 9/8 of that, in a buffer grown by doubling) and the PNG it is copied into.
   const std::uint64_t heatmap_bytes = heatmap ? pixels * 14 : 0;

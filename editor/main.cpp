@@ -112,7 +112,8 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", "specula 0.1.0");
   // Every parse error in the house style (main's catch below), input escaped and cut.
   app.failure_message([](const CLI::App*, const CLI::Error& e) {
-    return "specula: error: " + printable(e.what(), 400) + "\nRun with --help for more information.\n";
+    return "specula: error: " + printable(e.what(), 400) +
+           "\nRun with --help for more information.\n";
   });
 
   cli::InfoOptions info;
@@ -199,8 +200,7 @@ int main(int argc, char** argv) {
   compare_cmd->add_option("b", compare.b, "Test image (.png or .exr)")
       ->required()
       ->check(non_empty_path());
-  compare_cmd
-      ->add_option("--heatmap", compare.heatmap, "Write the FLIP error map as a magma .png")
+  compare_cmd->add_option("--heatmap", compare.heatmap, "Write the FLIP error map as a magma .png")
       ->check(non_empty_path());
   compare_cmd
       ->add_option("--memory-limit", compare.memory_limit,

@@ -326,8 +326,7 @@ Prepared prepare(const Framebuffer& image, const std::array<std::vector<Separabl
   // filtered colour may leave the gamut), and on to Hunt-adjusted L*a*b*.
   const auto filter = [&](std::size_t c) { return apply_filter(ycxcz[c], csf[c], h, first, rows); };
   const std::array<Plane, 3> filtered = {filter(0), filter(1), filter(2)};
-  std::array<Plane, 3> lab = {Plane(w, rows, first), Plane(w, rows, first),
-                              Plane(w, rows, first)};
+  std::array<Plane, 3> lab = {Plane(w, rows, first), Plane(w, rows, first), Plane(w, rows, first)};
   for (std::size_t i = 0; i < lab[0].values.size(); ++i) {
     const vec3 v(filtered[0].values[i], filtered[1].values[i], filtered[2].values[i]);
     vec3 rgb = space.rgb_from_xyz * ycxcz_to_xyz(v, space.white);
@@ -411,9 +410,8 @@ std::uint64_t flip_working_bytes(std::uint32_t width, std::uint32_t height,
                                  const FlipOptions& options) {
   check_options(options);
   const std::uint64_t rows = static_cast<std::uint64_t>(band_rows(options, height));
-  const std::uint64_t halo =
-      static_cast<std::uint64_t>(filter_halo(options.pixels_per_degree,
-                                             make_detectors(options.pixels_per_degree)));
+  const std::uint64_t halo = static_cast<std::uint64_t>(
+      filter_halo(options.pixels_per_degree, make_detectors(options.pixels_per_degree)));
   // At most: the reference's band result (5 planes of the band) while the test's band is
   // prepared, whose peak is 5 input planes and a horizontal pass over the band and its halo,
   // plus the filtered, L*a*b*, detector and feature planes of the band (about 14): 24 planes of
@@ -433,9 +431,9 @@ FlipResult flip(const Framebuffer& reference, const Framebuffer& test, const Fli
 
   const ColorSpace& space = srgb_space();
   const int radius = csf_radius(ppd);
-  const std::array<std::vector<SeparableTerm>, 3> csf = {
-      csf_filter(kCsfAchromatic, radius, ppd), csf_filter(kCsfRedGreen, radius, ppd),
-      csf_filter(kCsfBlueYellow, radius, ppd)};
+  const std::array<std::vector<SeparableTerm>, 3> csf = {csf_filter(kCsfAchromatic, radius, ppd),
+                                                         csf_filter(kCsfRedGreen, radius, ppd),
+                                                         csf_filter(kCsfBlueYellow, radius, ppd)};
   const Detectors detectors = make_detectors(ppd);
   const int halo = filter_halo(ppd, detectors);
   const double cmax = max_color_distance(space);

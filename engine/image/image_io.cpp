@@ -31,9 +31,9 @@
 #include <cerrno>
 #include <climits>
 #include <cmath>
-#include <exception>
 #include <cstdio>
 #include <cstring>
+#include <exception>
 #include <fstream>
 #include <initializer_list>
 #include <memory>
@@ -857,8 +857,8 @@ ImageFormat check_image_output_path(const std::filesystem::path& path,
   const std::filesystem::path folder =
       path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
   if (!std::filesystem::is_directory(folder, ec)) {
-    fail(path, "cannot write there: folder '" + printable(folder.string(), 200) +
-                   "' does not exist");
+    fail(path,
+         "cannot write there: folder '" + printable(folder.string(), 200) + "' does not exist");
   }
   return *format;
 }

@@ -49,7 +49,8 @@ Result run(const std::vector<std::string>& args, const std::string& shell_prefix
   const std::string tag = std::to_string(::getpid()) + "_" + std::to_string(counter++);
   const fs::path out = dir / ("specula_cli_out_" + tag);
   const fs::path err = dir / ("specula_cli_err_" + tag);
-  std::string cmd = shell_prefix.empty() ? quote(SPECULA_EXE) : shell_prefix + "; exec " + quote(SPECULA_EXE);
+  std::string cmd =
+      shell_prefix.empty() ? quote(SPECULA_EXE) : shell_prefix + "; exec " + quote(SPECULA_EXE);
   for (const auto& a : args) cmd += " " + quote(a);
   cmd += " >" + quote(out.string()) + " 2>" + quote(err.string()) + " </dev/null";
   const int status = std::system(cmd.c_str());
@@ -322,7 +323,8 @@ std::string cornell_box() {
 struct TempFolder {
   fs::path path;
   explicit TempFolder(const std::string& name)
-      : path(fs::temp_directory_path() / ("specula_cli_" + name + "_" + std::to_string(::getpid()))) {
+      : path(fs::temp_directory_path() /
+             ("specula_cli_" + name + "_" + std::to_string(::getpid()))) {
     fs::remove_all(path);
     fs::create_directories(path);
   }
@@ -333,7 +335,8 @@ struct TempFolder {
 /// The files in a folder, by name.
 std::set<std::string> names_in(const fs::path& dir) {
   std::set<std::string> names;
-  for (const auto& entry : fs::directory_iterator(dir)) names.insert(entry.path().filename().string());
+  for (const auto& entry : fs::directory_iterator(dir))
+    names.insert(entry.path().filename().string());
   return names;
 }
 
@@ -347,7 +350,8 @@ TEST(CliContract, WritingToAFullDeviceFailsNamingTheFile) {
   if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
   const TempFolder dir("full");
   // A device under a name with the image's extension: the write itself must fail and say so.
-  for (const char* name : {"full.png", "full.exr"}) fs::create_symlink("/dev/full", dir.path / name);
+  for (const char* name : {"full.png", "full.exr"})
+    fs::create_symlink("/dev/full", dir.path / name);
   fs::copy_file(cornell_box(), dir.path / "scene.json");
   for (const char* name : {"full.png", "full.exr"}) {
     const Result r = run({"render", cornell_box(), "--width", "16", "--height", "16", "--mode",
@@ -358,7 +362,8 @@ TEST(CliContract, WritingToAFullDeviceFailsNamingTheFile) {
     EXPECT_EQ(r.out.find("image:"), std::string::npos) << "no path printed as written: " << r.out;
   }
   const std::string png = dir.file("a.png");
-  ASSERT_EQ(run({"render", cornell_box(), "--width", "16", "--height", "16", "--out", png}).code, 0);
+  ASSERT_EQ(run({"render", cornell_box(), "--width", "16", "--height", "16", "--out", png}).code,
+            0);
   const Result r = run({"compare", png, png, "--heatmap", dir.file("full.png")});
   expect_bad_input(r, "compare --heatmap full.png");
   EXPECT_NE(r.err.find("full.png"), std::string::npos) << r.err;
@@ -369,7 +374,8 @@ TEST(CliContract, AFailedWriteLeavesTheOldImageAndNoTemporaryFile) {
   // A file size limit of 1 KiB or less (ulimit -f counts 512-byte blocks in dash, 1024 in bash)
   // makes the write of a 64x64 render fail part-way; SIGXFSZ ignored, it fails with EFBIG.
   const TempFolder dir("partial");
-  for (const char* name : {"old.png", "old.exr"}) std::ofstream(dir.file(name)) << "the previous image";
+  for (const char* name : {"old.png", "old.exr"})
+    std::ofstream(dir.file(name)) << "the previous image";
   for (const char* name : {"old.png", "old.exr"}) {
     const Result r = run({"render", cornell_box(), "--width", "64", "--height", "64", "--mode",
                           "cast", "--out", dir.file(name)},
@@ -413,8 +419,8 @@ TEST(CliContract, UnsupportedOutputExtensionsAreRefusedBeforeTheWork) {
   // --out takes what the writer writes: .png and .exr. Refused before rendering (nothing on
   // stdout), and nothing written.
   for (const char* name : {"x.jpg", "x", "x.png.tmp"}) {
-    const Result r = run({"render", cornell_box(), "--width", "8", "--height", "8", "--out",
-                          dir.file(name)});
+    const Result r =
+        run({"render", cornell_box(), "--width", "8", "--height", "8", "--out", dir.file(name)});
     expect_bad_input(r, name);
     EXPECT_NE(r.err.find("(expected .png or .exr)"), std::string::npos) << r.err;
     EXPECT_TRUE(r.out.empty()) << r.out;
@@ -436,15 +442,15 @@ TEST(CliContract, UnsupportedOutputExtensionsAreRefusedBeforeTheWork) {
 }
 
 TEST(CliContract, EveryParseErrorHasTheHousePrefix) {
-  for (const std::vector<std::string>& args : std::vector<std::vector<std::string>>{
-           {},
-           {"frobnicate"},
-           {"render"},
-           {"info", cornell_box(), "--bogus"},
-           {"render", cornell_box(), "--mode", "radiosity"},
-           {"render", cornell_box(), "--width"},
-           {"render", cornell_box(), "--frames", "0"},
-           {"compare", "a.png"}}) {
+  for (const std::vector<std::string>& args :
+       std::vector<std::vector<std::string>>{{},
+                                             {"frobnicate"},
+                                             {"render"},
+                                             {"info", cornell_box(), "--bogus"},
+                                             {"render", cornell_box(), "--mode", "radiosity"},
+                                             {"render", cornell_box(), "--width"},
+                                             {"render", cornell_box(), "--frames", "0"},
+                                             {"compare", "a.png"}}) {
     std::string joined;
     for (const auto& a : args) joined += a + " ";
     const Result r = run(args);
@@ -456,10 +462,15 @@ TEST(CliContract, EveryParseErrorHasTheHousePrefix) {
 }
 
 TEST(CliContract, ANonNumberIsNotCalledOutOfRange) {
-  for (const auto& [option, value] : std::vector<std::pair<std::string, std::string>>{
-           {"--width", "abc"}, {"--height", "0x10"}, {"--frames", "two"}, {"--threads", ""},
-           {"--cache-tau", "abc"}, {"--max-error-db", "40dB"}, {"--cache-fill", "many"},
-           {"--cache-resolution", "big"}}) {
+  for (const auto& [option, value] :
+       std::vector<std::pair<std::string, std::string>>{{"--width", "abc"},
+                                                        {"--height", "0x10"},
+                                                        {"--frames", "two"},
+                                                        {"--threads", ""},
+                                                        {"--cache-tau", "abc"},
+                                                        {"--max-error-db", "40dB"},
+                                                        {"--cache-fill", "many"},
+                                                        {"--cache-resolution", "big"}}) {
     const Result r = run({"render", cornell_box(), option, value});
     expect_bad_input(r, option + " " + value);
     EXPECT_NE(r.err.find(option + ": expected a number"), std::string::npos) << r.err;
@@ -559,7 +570,8 @@ TEST(CliContract, CompareRefusesImagesBeyondTheMemoryBudgetFromTheirHeaders) {
   EXPECT_NE(sizes.err.find("image size 16384x8192 differs"), std::string::npos) << sizes.err;
   // Real images within the budget compare; the same under a budget too small do not.
   const std::string png = dir.file("a.png");
-  ASSERT_EQ(run({"render", cornell_box(), "--width", "64", "--height", "64", "--out", png}).code, 0);
+  ASSERT_EQ(run({"render", cornell_box(), "--width", "64", "--height", "64", "--out", png}).code,
+            0);
   EXPECT_EQ(run({"compare", png, png, "--memory-limit", "100M"}).code, 0);
   const Result tight = run({"compare", png, png, "--memory-limit", "1M"});
   expect_bad_input(tight, "1M");
@@ -578,10 +590,10 @@ TEST(CliContract, RenderRefusesAFramebufferBeyondTheMemoryBudgetBeforeAllocating
       << r.err;
   EXPECT_NE(r.err.find("memory budget of 1.00 GiB"), std::string::npos) << r.err;
   EXPECT_TRUE(r.out.empty());
-  EXPECT_EQ(run({"render", cornell_box(), "--width", "16", "--height", "16", "--memory-limit",
-                 "1G"})
-                .code,
-            0);
+  EXPECT_EQ(
+      run({"render", cornell_box(), "--width", "16", "--height", "16", "--memory-limit", "1G"})
+          .code,
+      0);
 }
 
 TEST(CliContract, InfoJsonSurvivesAPathThatIsNotUtf8) {
