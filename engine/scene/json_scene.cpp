@@ -83,9 +83,10 @@ dvec3 read_position(const Reader& r, const json& j, const std::string& path) {
 
 /// A primitive's length (radius, height, edge): > 0 and at most kMaxCoordinate.
 float check_length(const Reader& r, float v, const std::string& path) {
-  r.check(in_range(double(v)), path,
-          "length " + format_double(v) + " is outside " + kCoordinateRangeText);
-  return v;
+  if (in_range(double(v))) return v;
+  char text[32];
+  const auto shortest = std::to_chars(text, text + sizeof text, v);
+  r.fail(path, "length " + std::string(text, shortest.ptr) + " is outside " + kCoordinateRangeText);
 }
 
 /// Unit quaternions pass through untouched and others are normalized, so a written rotation

@@ -295,11 +295,12 @@ TEST(SceneLayer, CompactionKeepsEveryRecordPointingAtItsOwnData) {
     const gpu::GpuMesh& record = t.meshes[inst.mesh];
     ASSERT_EQ(record.vertex_count, source.positions.size());
     ASSERT_EQ(record.triangle_count, source.triangles.size());
-    const mat4 m = (inst.flags & gpu::kInstanceIdentity)
-                       ? w.reg.get<WorldTransform>(e).world_from_object
-                       : mat4(1.0f);
+    // Baked in double (world space), written in float (render space: the origin here).
+    const dmat4 m = (inst.flags & gpu::kInstanceIdentity)
+                        ? w.reg.get<WorldTransform>(e).world_from_object
+                        : dmat4(1.0);
     for (std::size_t i = 0; i < source.positions.size(); i += 7)
-      EXPECT_EQ(t.positions[record.first_vertex + i], vec3(m * vec4(source.positions[i], 1.0f)));
+      EXPECT_EQ(t.positions[record.first_vertex + i], vec3(m * dvec4(source.positions[i], 1.0)));
     for (std::size_t i = 0; i < source.triangles.size(); i += 5)
       EXPECT_EQ(t.triangles[record.first_triangle + i], source.triangles[i]);
   }
