@@ -154,8 +154,8 @@ bool SceneLayer::update_render_origin(ecs::Registry& registry) {
   const std::optional<Camera> camera = active_camera(registry);
   if (!camera) return false; // no camera: the origin stays where it is
   if (!in_range(camera->position) || !in_range(camera->look_at))
-    throw Error("scene", "the camera is at " + format_position(camera->position) +
-                             " looking at " + format_position(camera->look_at) + ", outside " +
+    throw Error("scene", "the camera is at " + format_position(camera->position) + " looking at " +
+                             format_position(camera->look_at) + ", outside " +
                              kCoordinateRangeText);
   if (glm::length(camera->position - render_origin_) <= kRebaseDistance) return false;
   render_origin_ = camera->position;
@@ -178,7 +178,8 @@ void SceneLayer::rebase_instances(ecs::Registry& registry) {
       continue;
     }
     if (done[slot]) continue;
-    write_transform(registry, slot, registry.get<WorldTransform>(slots_[slot].entity).world_from_object);
+    write_transform(registry, slot,
+                    registry.get<WorldTransform>(slots_[slot].entity).world_from_object);
     delta_.instances_moved.push_back(slot);
     ++stats_.instances_moved;
   }

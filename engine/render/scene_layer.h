@@ -32,8 +32,9 @@ inline constexpr double kRebaseDistance = 4096.0;
 
 /// The flat tables, in render space: world space translated by −SceneLayer::render_origin() and
 /// rounded to float (GpuInstance::world_from_object and world_bounds_*, baked static positions,
-/// light positions are all render-space). Instance slots are stable while their entity stays an instance of the same
-/// kind; freed slots (GpuInstance::mesh == gpu::kNoIndex) are reused. Mesh records likewise.
+/// light positions are all render-space). Instance slots are stable while their entity stays an
+/// instance of the same kind; freed slots (GpuInstance::mesh == gpu::kNoIndex) are reused. Mesh
+/// records likewise.
 struct SceneTables {
   std::vector<gpu::GpuInstance> instances;
   std::vector<gpu::GpuMaterial> materials; ///< one per instance slot (GpuInstance::material)

@@ -877,8 +877,8 @@ std::optional<Camera> map_camera(const Context& ctx, int index, const dmat4& wor
   Camera camera;
   camera.position = dvec3(world_from_node[3]);
   if (!in_range(camera.position))
-    ctx.fail(node_field, std::string("the camera's world position is outside ") +
-                             kCoordinateRangeText);
+    ctx.fail(node_field,
+             std::string("the camera's world position is outside ") + kCoordinateRangeText);
   const mat3 basis{dmat3(world_from_node)};
   const vec3 forward = basis * vec3(0.0f, 0.0f, -1.0f);
   const vec3 up = basis * vec3(0.0f, 1.0f, 0.0f);

@@ -400,8 +400,7 @@ Camera read_camera(const Reader& r, const json& j, const std::string& path,
     c.up = read_vec<3>(r, *v, o.path("up"));
     r.check(glm::length(c.up) > 0.0f, o.path("up"), "up vector has zero length");
   }
-  r.check(glm::length(glm::cross(forward, glm::normalize(c.up))) > 1e-4f,
-          o.path("up"),
+  r.check(glm::length(glm::cross(forward, glm::normalize(c.up))) > 1e-4f, o.path("up"),
           "up vector is parallel to the view direction, so the camera roll is undefined");
   if (const json* v = o.find("vertical_fov_deg")) {
     const double degrees = read_number(r, *v, o.path("vertical_fov_deg"));

@@ -11,8 +11,8 @@
 #include <algorithm>
 #include <cctype>
 #include <set>
-#include <unordered_map>
 #include <system_error>
+#include <unordered_map>
 
 namespace specula {
 namespace {
@@ -129,8 +129,7 @@ void add_defaults(Scene& scene) {
   const float fov = std::min(camera.vertical_fov, camera.vertical_fov * aspect);
   const float distance = radius / std::sin(0.5f * fov);
   const float elevation = glm::radians(20.0f);
-  camera.position =
-      center + dvec3(distance * vec3(0.0f, std::sin(elevation), std::cos(elevation)));
+  camera.position = center + dvec3(distance * vec3(0.0f, std::sin(elevation), std::cos(elevation)));
 
   if (!has_camera) {
     const ecs::Entity e = reg.create();

@@ -160,14 +160,13 @@ TEST_P(LargeWorld, InstancesAt1e9RenderLikeAtTheOrigin) {
   EXPECT_EQ(acne_pixels(reference.image, moved.image), 0) << backend;
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Backends, LargeWorld,
-    ::testing::Combine(::testing::ValuesIn(test::available_backends()),
-                       ::testing::Values(TraceMode::Whitted, TraceMode::Cast)),
-    [](const auto& param_info) {
-      return test::test_name(std::get<0>(param_info.param)) + "_" +
-             trace_mode_name(std::get<1>(param_info.param));
-    });
+INSTANTIATE_TEST_SUITE_P(Backends, LargeWorld,
+                         ::testing::Combine(::testing::ValuesIn(test::available_backends()),
+                                            ::testing::Values(TraceMode::Whitted, TraceMode::Cast)),
+                         [](const auto& param_info) {
+                           return test::test_name(std::get<0>(param_info.param)) + "_" +
+                                  trace_mode_name(std::get<1>(param_info.param));
+                         });
 
 // --- The representable range ------------------------------------------------------------------
 
@@ -235,8 +234,9 @@ TEST_P(CoordinateRange, AnimationLeavingTheRangeIsAnErrorNamingTheEntity) {
   grow.scale.values = {vec3(1.0f), vec3(1e8f)};
   grow.loop = false;
   reg.emplace<Animation>(parent, grow);
-  const ecs::Entity child = test::add_mesh(reg, test::primitive("sphere"), test::at(vec3(0, 0, 1e5f)),
-                                           Material{}, Kinematics::Type::Hierarchical);
+  const ecs::Entity child =
+      test::add_mesh(reg, test::primitive("sphere"), test::at(vec3(0, 0, 1e5f)), Material{},
+                     Kinematics::Type::Hierarchical);
   reg.emplace<Name>(child, "child");
   reg.emplace<Parent>(child, Parent{parent});
   test::add_camera(reg, vec3(0, 0, 10), vec3(0.0f));
@@ -285,8 +285,7 @@ TEST_P(CoordinateRange, ScaledExtentLeavingTheRangeIsAnErrorNamingTheEntity) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, CoordinateRange,
-                         ::testing::ValuesIn(test::available_backends()),
+INSTANTIATE_TEST_SUITE_P(Backends, CoordinateRange, ::testing::ValuesIn(test::available_backends()),
                          [](const auto& param_info) { return test::test_name(param_info.param); });
 
 } // namespace

@@ -159,8 +159,8 @@ TEST(SceneLayer, TheRenderOriginFollowsTheCameraPastTheRebaseDistance) {
   EXPECT_EQ(fresh.stats().rebases, 0u) << "the first sync's choice is not a rebase";
   const SceneTables& f = fresh.tables();
   ASSERT_EQ(f.static_triangle_count, t.static_triangle_count);
-  EXPECT_TRUE(std::equal(f.positions.begin(), f.positions.begin() + baked.first_vertex +
-                                                  baked.vertex_count,
+  EXPECT_TRUE(std::equal(f.positions.begin(),
+                         f.positions.begin() + baked.first_vertex + baked.vertex_count,
                          t.positions.begin()));
   for (const ecs::Entity e : {w.ball, w.twin, w.blob})
     EXPECT_EQ(f.instances[*fresh.instance_of(e)].world_from_object,

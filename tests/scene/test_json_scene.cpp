@@ -570,8 +570,8 @@ TEST(JsonScene, FloatsSurviveTheTextBitForBit) {
     // Toward the origin, so that look_at stays within the range too.
     const dvec3 toward_origin(c.position.x > 0 ? -1 : 1, c.position.y > 0 ? -1 : 1,
                               c.position.z > 0 ? -1 : 1);
-    c.look_at = c.position + toward_origin * dvec3(random_unit(rng), random_unit(rng),
-                                                   10.0f + random_unit(rng));
+    c.look_at = c.position +
+                toward_origin * dvec3(random_unit(rng), random_unit(rng), 10.0f + random_unit(rng));
     c.vertical_fov = std::max(1e-3f, random_unit(rng) * glm::radians(179.0f));
     c.aspect = 0.1f + random_unit(rng) * 3.0f;
     reg.emplace<Camera>(e, c);

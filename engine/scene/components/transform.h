@@ -11,7 +11,9 @@ struct Transform {
   quat rotation{1.0f, 0.0f, 0.0f, 0.0f}; // w, x, y, z
   vec3 scale{1.0f};
 
-  [[nodiscard]] dmat4 parent_from_local() const { return compose_trs(translation, rotation, scale); }
+  [[nodiscard]] dmat4 parent_from_local() const {
+    return compose_trs(translation, rotation, scale);
+  }
   friend bool operator==(const Transform&, const Transform&) = default;
 };
 
