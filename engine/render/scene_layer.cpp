@@ -502,17 +502,18 @@ void SceneLayer::relayout(ecs::Registry& registry, bool rebake) {
       const WorldTransform& wt = registry.get<WorldTransform>(slots_[slot].entity);
       slots_[slot].moved_tick = wt.moved_tick;
       const TriangleMesh& m = *mesh.geometry;
-      // World positions in double, written relative to the render origin in float.
-      DAabb world;
-      for (const vec3& p : m.positions) {
-        const dvec3 w(wt.world_from_object * dvec4(p, 1.0));
-        world.grow(w);
-        positions.push_back(vec3(w - render_origin_));
-      }
-      check_extent(registry, slots_[slot].entity, world);
+      // The world extent checked in double; the vertices placed in float by the render-space
+      // matrix, whose translation is small (relative to the render origin, taken in double), so
+      // they are as precise as at the world origin — and bit-identical to a world-space float
+      // bake there.
+      check_extent(registry, slots_[slot].entity,
+                   DAabb::transformed(m.bounds(), wt.world_from_object));
+      const mat4 render_from_object = render_from(wt.world_from_object);
+      for (const vec3& p : m.positions)
+        positions.push_back(vec3(render_from_object * vec4(p, 1.0f)));
       if (m.normals.size() == m.positions.size()) {
         baked.first_normal = std::uint32_t(normals.size());
-        const mat3 n_from_o = glm::transpose(glm::inverse(mat3(dmat3(wt.world_from_object))));
+        const mat3 n_from_o = glm::transpose(glm::inverse(mat3(render_from_object)));
         for (const vec3& n : m.normals) normals.push_back(glm::normalize(n_from_o * n));
       }
       triangles.insert(triangles.end(), m.triangles.begin(), m.triangles.end());

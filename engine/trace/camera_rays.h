@@ -26,8 +26,10 @@ struct CameraRays {
 
   CameraRays(const Camera& camera, std::uint32_t width, std::uint32_t height,
              const dvec3& render_origin = dvec3(0.0)) {
+    // Differences in double (exact for the nearby points of a far-away camera), rounded once to
+    // float; the rest in float, as for a camera at the world origin.
     origin = vec3(camera.position - render_origin);
-    forward = vec3(glm::normalize(camera.look_at - camera.position));
+    forward = glm::normalize(vec3(camera.look_at - camera.position));
     vec3 r = glm::cross(forward, camera.up);
     if (glm::length(r) < 1e-6f)
       r = glm::cross(forward, std::abs(forward.y) < 0.9f ? vec3(0, 1, 0) : vec3(1, 0, 0));

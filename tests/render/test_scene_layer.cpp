@@ -144,10 +144,14 @@ TEST(SceneLayer, TheRenderOriginFollowsTheCameraPastTheRebaseDistance) {
   const gpu::GpuInstance& pillar = t.instances[*layer.instance_of(w.pillar)];
   const gpu::GpuMesh& baked = t.meshes[pillar.mesh];
   const TriangleMesh& source = *w.reg.get<Mesh>(w.pillar).geometry;
-  const dmat4& m = w.reg.get<WorldTransform>(w.pillar).world_from_object;
+  // Placed by the render-space matrix: the world matrix with the origin taken off its
+  // translation in double, then rounded to float.
+  dmat4 relative = w.reg.get<WorldTransform>(w.pillar).world_from_object;
+  relative[3] -= dvec4(far, 0.0);
+  const mat4 render_from_object(relative);
   for (std::size_t i = 0; i < source.positions.size(); ++i)
     EXPECT_EQ(t.positions[baked.first_vertex + i],
-              vec3(dvec3(m * dvec4(source.positions[i], 1.0)) - far));
+              vec3(render_from_object * vec4(source.positions[i], 1.0f)));
   const gpu::GpuInstance& twin = t.instances[*layer.instance_of(w.twin)];
   EXPECT_EQ(vec3(twin.world_from_object[3]), vec3(dvec3(5, 1, 0) - far));
   EXPECT_EQ(t.lights[0].position, vec3(dvec3(0, 8, 0) - far));
@@ -359,12 +363,11 @@ TEST(SceneLayer, CompactionKeepsEveryRecordPointingAtItsOwnData) {
     const gpu::GpuMesh& record = t.meshes[inst.mesh];
     ASSERT_EQ(record.vertex_count, source.positions.size());
     ASSERT_EQ(record.triangle_count, source.triangles.size());
-    // Baked in double (world space), written in float (render space: the origin here).
-    const dmat4 m = (inst.flags & gpu::kInstanceIdentity)
-                        ? w.reg.get<WorldTransform>(e).world_from_object
-                        : dmat4(1.0);
+    const mat4 m = (inst.flags & gpu::kInstanceIdentity)
+                       ? mat4(w.reg.get<WorldTransform>(e).world_from_object)
+                       : mat4(1.0f);
     for (std::size_t i = 0; i < source.positions.size(); i += 7)
-      EXPECT_EQ(t.positions[record.first_vertex + i], vec3(m * dvec4(source.positions[i], 1.0)));
+      EXPECT_EQ(t.positions[record.first_vertex + i], vec3(m * vec4(source.positions[i], 1.0f)));
     for (std::size_t i = 0; i < source.triangles.size(); i += 5)
       EXPECT_EQ(t.triangles[record.first_triangle + i], source.triangles[i]);
   }
