@@ -7,6 +7,7 @@
 // turns black, and no pixel stands out from all its neighbours where the origin render is smooth.
 // Before camera-relative rendering, at 1e7 the sphere turned into a block, the ground showed
 // salt-and-pepper acne and a shadow vanished.
+// A rebase (the render origin moving to the camera) leaves no trace in the image.
 // Also the representable range (issue 13, cause 1): scenes just inside ±1e12 render finite
 // pixels on every backend; composition that leaves it at run time is an error naming the entity.
 
@@ -158,6 +159,63 @@ TEST_P(LargeWorld, InstancesAt1e9RenderLikeAtTheOrigin) {
   const double db = psnr(reference.image, moved.image);
   EXPECT_GE(db, kMinPsnr) << backend << ", " << trace_mode_name(mode);
   EXPECT_EQ(acne_pixels(reference.image, moved.image), 0) << backend;
+}
+
+/// A camera path that carries the camera 5000 units away and back in two ticks rebases the render
+/// origin twice, and the frame after it is the frame of the scene rendered fresh (whose origin is
+/// the same camera position): a rebase leaves no trace in the image. The spheres are instances,
+/// the ground static, so both kinds are rewritten.
+TEST_P(LargeWorld, ARebaseRendersLikeAFreshStart) {
+  const auto& [backend, mode] = GetParam();
+  const dvec3 offset(1e7, 0.0, -1e7), step(5000.0, 0.0, 0.0);
+  const auto make = [&] {
+    Scene scene = load_sample("mirror_spheres_1");
+    scene.registry.view<Mesh, Name>().each([&](ecs::Entity e, const Mesh&, const Name& n) {
+      if (n.value != "ground")
+        scene.registry.emplace_or_replace<Kinematics>(e,
+                                                      Kinematics{Kinematics::Type::Hierarchical});
+    });
+    translate_world(scene.registry, offset);
+    return scene;
+  };
+  Scene flying = make();
+  const ecs::Entity cam = flying.registry.view<Camera>().entities().front();
+  const Camera start = flying.registry.get<Camera>(cam);
+  CameraPath path;
+  path.loop = false;
+  path.keys = {{0.0f, start.position, start.look_at},
+               {1.0f, start.position + step, start.look_at + step},
+               {2.0f, start.position, start.look_at}};
+  flying.registry.emplace<CameraPath>(cam, path);
+
+  RenderJob job;
+  job.backend = backend;
+  job.settings.mode = mode;
+  job.settings.max_depth = flying.settings.max_depth;
+  job.settings.background = flying.settings.background;
+  job.settings.threads = 2;
+  job.image = Framebuffer(kSize, kSize);
+  prepare_rendering(flying.registry, std::move(job));
+  Schedule schedule;
+  schedule.tick(flying.registry, 0.0); // at the start: the first sync puts the origin there
+  schedule.tick(flying.registry, 1.0); // 5000 away: past kRebaseDistance
+  schedule.tick(flying.registry, 1.0); // and back
+  const SceneLayer& layer = flying.registry.resource<SceneLayer>();
+  EXPECT_EQ(layer.rebases(), 2u);
+  EXPECT_EQ(layer.render_origin(), start.position);
+
+  Scene fresh_scene = make();
+  const Frame fresh = render(fresh_scene, backend, mode);
+  EXPECT_EQ(fresh.render_origin, layer.render_origin());
+  const Framebuffer& after = flying.registry.resource<RenderJob>().image;
+  EXPECT_EQ(rmse(after, fresh.image), 0.0) << "the same render space, the same image";
+  float darkest = 1.0f, brightest = 0.0f; // the scene is in view, not just the background
+  for (std::uint32_t y = 0; y < kSize; ++y)
+    for (std::uint32_t x = 0; x < kSize; ++x) {
+      darkest = std::min(darkest, luminance(after.at(x, y)));
+      brightest = std::max(brightest, luminance(after.at(x, y)));
+    }
+  EXPECT_GT(brightest - darkest, 0.3f);
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, LargeWorld,
