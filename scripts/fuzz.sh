@@ -48,6 +48,10 @@ cmake --build "$build" -j "$(nproc 2>/dev/null || echo 2)" --target "${targets[@
 # A failed sanitizer check must end the input with a report and a stack, so libFuzzer saves it.
 export ASAN_OPTIONS="${ASAN_OPTIONS:-abort_on_error=1:detect_leaks=1:symbolize=1}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1:symbolize=1}"
+# Stacks with function names and lines (clang-15 has no llvm-symbolizer of its own version).
+if [ -z "${ASAN_SYMBOLIZER_PATH:-}" ] && command -v llvm-symbolizer >/dev/null; then
+  export ASAN_SYMBOLIZER_PATH=$(command -v llvm-symbolizer)
+fi
 
 scratch=$(mktemp -d)
 trap 'rm -rf "$scratch"' EXIT
@@ -70,7 +74,7 @@ for r in "${readers[@]}"; do
       > "$scratch/$r.log" 2>&1
   rc=$?
   set -e
-  grep -E '^(#[0-9]+ *DONE|stat::number_of_executed_units|stat::new_units_added)' "$scratch/$r.log" || true
+  grep -E '^(#[0-9]+[[:space:]]+DONE|stat::number_of_executed_units|stat::new_units_added)' "$scratch/$r.log" || true
   echo "   $(( $(date +%s) - start ))s, $(ls "$scratch/$r" | wc -l) new inputs"
   if [ $rc -ne 0 ]; then
     failed+=("$r")
