@@ -15,7 +15,9 @@
 # fuzzer found something, naming the reproducers. Replay one with
 #   build/asan/tests/fuzz/fuzz_READER FILE
 # Environment: SPECULA_FUZZ_TIMEOUT (seconds one input may take, default 10),
-# SPECULA_FUZZ_RSS_MB (memory limit, default 2048), SPECULA_FUZZ_FLAGS (more libFuzzer flags).
+# SPECULA_FUZZ_RSS_MB (memory limit, default 2048), SPECULA_FUZZ_MALLOC_MB (largest single
+# allocation, default 1024: a small input asking for more is a finding even when the block is never
+# touched), SPECULA_FUZZ_FLAGS (more libFuzzer flags).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -28,7 +30,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --merge) merge=1 ;;
     --seed) seed=$2; shift ;;
-    -h|--help) sed -n '2,23p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,25p' "$0"; exit 0 ;;
     all) readers=("${all_readers[@]}") ;;
     [0-9]*) seconds=$1 ;;
     *)
@@ -70,6 +72,7 @@ for r in "${readers[@]}"; do
   "$build/tests/fuzz/fuzz_$r" "$scratch/$r" "${seeds[@]}" \
       -dict="tests/fuzz/dict/$r.dict" -max_total_time="$seconds" -seed="$seed" \
       -timeout="${SPECULA_FUZZ_TIMEOUT:-10}" -rss_limit_mb="${SPECULA_FUZZ_RSS_MB:-2048}" \
+      -malloc_limit_mb="${SPECULA_FUZZ_MALLOC_MB:-1024}" \
       -artifact_prefix="$findings/" -print_final_stats=1 ${SPECULA_FUZZ_FLAGS:-} \
       > "$scratch/$r.log" 2>&1
   rc=$?
