@@ -1,5 +1,7 @@
 #include "fuzz_support.h"
 
+#include "specula/core/log.h"
+
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -28,6 +30,9 @@ constexpr std::string_view kTriStl = "solid t\nfacet normal 0 0 1\nouter loop\n"
                                      "endloop\nendfacet\nendsolid t\n";
 
 fs::path make_scratch_dir() {
+  // Readers' warnings (skipped glTF channels and the like) on every input would slow fuzzing down
+  // and bury its report; SPECULA_FUZZ_LOG=1 keeps them, to look at one input.
+  if (std::getenv("SPECULA_FUZZ_LOG") == nullptr) set_log_level(LogLevel::Silent);
   const fs::path dir = fs::temp_directory_path() / ("specula-fuzz-" + std::to_string(::getpid()));
   std::error_code ec;
   fs::create_directories(dir, ec);

@@ -19,7 +19,8 @@ namespace specula::fuzz {
 
 /// This process's scratch folder (one per process, so parallel fuzzing jobs never share a file;
 /// removed at normal exit). It also holds small valid meshes, cube.obj and tri.stl, that JSON
-/// scenes may name as mesh files.
+/// scenes may name as mesh files. The first call also silences the engine's log unless
+/// SPECULA_FUZZ_LOG is set.
 [[nodiscard]] const std::filesystem::path& scratch_dir();
 
 /// Writes `data` to the file `name` in scratch_dir() (replacing it) and returns its path.
