@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Installs every Debian 12 package Specula builds, tests and runs with.
+# Installs every Debian 12 package Specula builds, tests and runs with (clang-15 and
+# libfuzzer-15-dev: the asan preset, which also builds the fuzzers).
 # Idempotent: a fast no-op when everything is present.
 set -euo pipefail
 
@@ -12,6 +13,7 @@ packages=(
   libtinygltf-dev libstb-dev nlohmann-json3-dev libcli11-dev
   libopenexr-dev
   libgtest-dev
+  clang-15 libfuzzer-15-dev
   assimp-testmodels
 )
 

@@ -305,7 +305,9 @@ struct ExrCoreContext {
 /// Owns the buffers of one chunk's decode pipeline.
 struct ExrCoreDecode {
   exr_const_context_t context;
-  exr_decode_pipeline_t decode = EXR_DECODE_PIPELINE_INITIALIZER;
+  // Value-initialised: all zero, what EXR_DECODE_PIPELINE_INITIALIZER ({0}) means, without
+  // Clang's -Wmissing-field-initializers on the macro.
+  exr_decode_pipeline_t decode{};
   explicit ExrCoreDecode(exr_const_context_t c) : context(c) {}
   ExrCoreDecode(const ExrCoreDecode&) = delete;
   ExrCoreDecode& operator=(const ExrCoreDecode&) = delete;

@@ -657,28 +657,43 @@ Scene read_document(const Reader& r, const json& root, const fs::path& base_dir)
 
 /// Output tree that keeps member order and carries each number's text, chosen as the shortest
 /// decimal the reader maps back to the identical float.
+struct OutMember;
 struct Out {
   enum class Kind { Scalar, Array, Object };
   Kind kind = Kind::Object;
   std::string text;
-  std::vector<std::pair<std::string, Out>> members;
+  // A struct completed after Out, not std::pair<std::string, Out>, and the functions that
+  // construct an Out defined after both: Clang (with libstdc++) instantiates the vector's
+  // members, and the pair's default-constructibility check, while Out is still incomplete.
+  std::vector<OutMember> members;
   std::vector<Out> items;
 
-  static Out object() { return Out{}; }
-  static Out array() { return Out{Kind::Array, {}, {}, {}}; }
-  static Out scalar(std::string text) { return Out{Kind::Scalar, std::move(text), {}, {}}; }
-  Out& add(std::string key, Out value) {
-    members.emplace_back(std::move(key), std::move(value));
-    return members.back().second;
-  }
-  Out& push(Out value) {
-    items.push_back(std::move(value));
-    return items.back();
-  }
+  static Out object();
+  static Out array();
+  static Out scalar(std::string text);
+  Out& add(std::string key, Out value);
+  Out& push(Out value);
   [[nodiscard]] bool empty() const {
     return kind != Kind::Scalar && members.empty() && items.empty();
   }
 };
+
+struct OutMember {
+  std::string key;
+  Out value;
+};
+
+Out Out::object() { return Out{}; }
+Out Out::array() { return Out{Kind::Array, {}, {}, {}}; }
+Out Out::scalar(std::string text) { return Out{Kind::Scalar, std::move(text), {}, {}}; }
+Out& Out::add(std::string key, Out value) {
+  members.push_back(OutMember{std::move(key), std::move(value)});
+  return members.back().value;
+}
+Out& Out::push(Out value) {
+  items.push_back(std::move(value));
+  return items.back();
+}
 
 std::string quoted(const std::string& s) {
   return json(s).dump(-1, ' ', false, json::error_handler_t::replace);
@@ -699,7 +714,7 @@ std::string one_line(const Out& v) {
   const bool is_object = v.kind == Out::Kind::Object;
   std::string line(1, is_object ? '{' : '[');
   for (std::size_t i = 0; i < v.members.size(); ++i)
-    line += (i ? ", " : "") + quoted(v.members[i].first) + ": " + one_line(v.members[i].second);
+    line += (i ? ", " : "") + quoted(v.members[i].key) + ": " + one_line(v.members[i].value);
   for (std::size_t i = 0; i < v.items.size(); ++i) line += (i ? ", " : "") + one_line(v.items[i]);
   return line + (is_object ? '}' : ']');
 }
@@ -721,9 +736,9 @@ void print(const Out& v, std::size_t indent, std::size_t column, std::string& ou
   for (std::size_t i = 0; i < n; ++i) {
     out += i ? ",\n" : "\n";
     out.append(indent + 2, ' ');
-    const std::string key = is_object ? quoted(v.members[i].first) + ": " : std::string();
+    const std::string key = is_object ? quoted(v.members[i].key) + ": " : std::string();
     out += key;
-    print(is_object ? v.members[i].second : v.items[i], indent + 2, indent + 2 + key.size(), out);
+    print(is_object ? v.members[i].value : v.items[i], indent + 2, indent + 2 + key.size(), out);
   }
   out += '\n';
   out.append(indent, ' ');

@@ -6,6 +6,7 @@ build_dir=$1
 source_dir=$2
 cxx_flags=${3:-}
 linker_flags=${4:-}
+cxx_compiler=${5:-}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 cmake --install "$build_dir" --prefix "$work/prefix" >/dev/null
@@ -17,6 +18,7 @@ test -f "$work/prefix/include/specula/shared/scene_layout.h"
 test -z "$(find "$work/prefix/include" -mindepth 1 -maxdepth 1 ! -name specula)"
 cmake -S "$source_dir/tests/install/consumer" -B "$work/build" -G Ninja \
       -DCMAKE_PREFIX_PATH="$work/prefix" -DCMAKE_BUILD_TYPE=Release \
+      ${cxx_compiler:+-DCMAKE_CXX_COMPILER="$cxx_compiler"} \
       -DCMAKE_CXX_FLAGS="$cxx_flags" -DCMAKE_EXE_LINKER_FLAGS="$linker_flags" >/dev/null
 cmake --build "$work/build" >/dev/null
 "$work/build/consumer" "$source_dir/samples/scenes/cornell_box.json"
