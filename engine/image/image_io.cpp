@@ -141,12 +141,16 @@ std::uint32_t le32(std::span<const std::uint8_t> bytes, std::size_t at) {
 /// so samples stored in another order would silently land in the wrong channels, and
 /// OpenEXRCore 3.1 crashes (a NULL write in exr_decoding_run) on some such files. `list` is the
 /// value of the chlist attribute: entries of a null-terminated name and 16 bytes, then a 0.
-void check_exr_channel_order(std::span<const std::uint8_t> list,
-                             const std::filesystem::path& path) {
+/// The library reads entries until the empty name, whatever size the attribute declares, so
+/// the list must end exactly at its declared end: otherwise the library's reading and the
+/// framing walked here part ways, and the library takes the bytes after the list for the next
+/// attribute (a fuzzer finding: a 379-byte file whose desynchronised header asked for 1.8 GB).
+void check_exr_channel_list(std::span<const std::uint8_t> list, const std::filesystem::path& path) {
   std::optional<std::string_view> previous;
-  for (std::size_t at = 0; at < list.size() && list[at] != 0;) {
+  std::size_t at = 0;
+  while (at < list.size() && list[at] != 0) {
     const auto end = std::find(list.begin() + static_cast<std::ptrdiff_t>(at), list.end(), 0);
-    if (end == list.end()) return; // malformed: left to the library
+    if (end == list.end()) break;
     const std::string_view name(reinterpret_cast<const char*>(list.data()) + at,
                                 static_cast<std::size_t>(end - list.begin()) - at);
     if (previous && name <= *previous) { // char_traits order: bytes as unsigned, as strcmp
@@ -156,13 +160,70 @@ void check_exr_channel_order(std::span<const std::uint8_t> list,
     previous = name;
     at += name.size() + 1 + 16; // pixel type, pLinear, reserved, x and y sampling
   }
+  if (at + 1 != list.size()) {
+    fail(path, "corrupt EXR: the channel list does not end at its declared size of " +
+                   std::to_string(list.size()) + " bytes");
+  }
 }
 
-/// The names of the header's attributes, from their framing alone (name, type, size; the values
-/// are left to the library, and so is reporting a header that ends early), and the channel
-/// order. Header::readFrom allocates an attribute's declared size before reading its value (and
-/// zero-fills it, for strings), so a 200-byte file declaring a 2 GiB string would cost 2 GiB:
-/// every declared size must fit in the rest of the file.
+/// The size the library reads for a value of `type` whatever the declared size says, for the
+/// fixed-size types of OpenEXR 3.1 (ImfStandardAttributes and the typed attributes).
+std::optional<std::uint32_t> exr_fixed_value_size(std::string_view type) {
+  static constexpr std::array<std::pair<std::string_view, std::uint32_t>, 25> kSizes = {{
+      {"box2i", 16}, {"box2f", 16}, {"chromaticities", 32}, {"compression", 1},
+      {"deepImageState", 1}, {"double", 8}, {"envmap", 1}, {"float", 4}, {"int", 4},
+      {"keycode", 28}, {"lineOrder", 1}, {"m33f", 36}, {"m33d", 72}, {"m44f", 64},
+      {"m44d", 128}, {"rational", 8}, {"tiledesc", 9}, {"timecode", 8}, {"v2i", 8}, {"v2f", 8},
+      {"v2d", 16}, {"v3i", 12}, {"v3f", 12}, {"v3d", 24}, {"uchar", 1},
+  }};
+  for (const auto& [name, size] : kSizes) {
+    if (name == type) return size;
+  }
+  return std::nullopt;
+}
+
+/// An attribute value must be read by the library exactly as its declared size frames it, and
+/// must not make the library allocate more than the value holds: types read at a fixed size
+/// must declare that size, a string vector's strings and a preview's pixels must fill the value.
+void check_exr_attribute_value(std::string_view name, std::string_view type,
+                               std::span<const std::uint8_t> value,
+                               const std::filesystem::path& path) {
+  const auto corrupt = [&](const std::string& what) {
+    fail(path, "corrupt EXR: header attribute '" + printable(name, 64) + "' of type '" +
+                   printable(type, 64) + "' " + what);
+  };
+  if (const auto fixed = exr_fixed_value_size(type)) {
+    if (value.size() != *fixed) {
+      corrupt("declares " + std::to_string(value.size()) + " bytes; the type has " +
+              std::to_string(*fixed));
+    }
+  } else if (type == "chlist") {
+    check_exr_channel_list(value, path);
+  } else if (type == "floatvector") {
+    if (value.size() % 4 != 0) corrupt("has a size that is not a multiple of 4");
+  } else if (type == "stringvector") {
+    // Each string: a 32-bit length, then that many bytes; the library sizes each string from its
+    // length before reading it.
+    for (std::size_t at = 0; at < value.size();) {
+      if (value.size() - at < 4) corrupt("ends inside a string length");
+      const std::uint32_t length = le32(value, at);
+      at += 4;
+      if (length > value.size() - at) corrupt("has a string longer than the attribute");
+      at += length;
+    }
+  } else if (type == "preview") {
+    // Width and height, then width × height RGBA bytes, allocated from the two numbers.
+    if (value.size() < 8) corrupt("is shorter than its width and height");
+    const std::uint64_t pixels = std::uint64_t{le32(value, 0)} * le32(value, 4);
+    if (8 + 4 * pixels != value.size()) corrupt("does not hold the pixels its size names");
+  }
+}
+
+/// The names of the header's attributes, from their framing (name, type, size), with each value
+/// checked against how the library will read it (check_exr_attribute_value; reporting a header
+/// that ends early is left to the library). Header::readFrom allocates an attribute's declared
+/// size before reading its value (and zero-fills it, for strings), so a 200-byte file declaring
+/// a 2 GiB string would cost 2 GiB: every declared size must fit in the rest of the file.
 std::vector<std::string> exr_attribute_names(std::span<const std::uint8_t> bytes,
                                              const std::filesystem::path& path) {
   std::vector<std::string> names;
@@ -177,7 +238,9 @@ std::vector<std::string> exr_attribute_names(std::span<const std::uint8_t> bytes
   };
   for (;;) {
     const auto name = next_text();
-    if (!name || name->empty() || !next_text() || bytes.size() - at < 4) return names;
+    if (!name || name->empty()) return names;
+    const auto type = next_text();
+    if (!type || bytes.size() - at < 4) return names;
     const std::uint32_t size = le32(bytes, at);
     at += 4;
     if (size > bytes.size() - at) {
@@ -185,7 +248,7 @@ std::vector<std::string> exr_attribute_names(std::span<const std::uint8_t> bytes
                      "' declares " + std::to_string(size) + " bytes, more than the " +
                      std::to_string(bytes.size() - at) + " left in the file");
     }
-    if (*name == "channels") check_exr_channel_order(bytes.subspan(at, size), path);
+    check_exr_attribute_value(*name, *type, bytes.subspan(at, size), path);
     at += size;
     names.emplace_back(*name);
   }
@@ -696,6 +759,22 @@ Framebuffer read_png(const std::filesystem::path& path) {
     return std::uint64_t{bytes[at]} << 24 | std::uint64_t{bytes[at + 1]} << 16 |
            std::uint64_t{bytes[at + 2]} << 8 | std::uint64_t{bytes[at + 3]};
   };
+  // Every chunk's declared length must fit in the file before stb sees it: stb grows its IDAT
+  // buffer to a chunk's declared length before reading the chunk, so a 93-byte file declaring a
+  // 1 GiB IDAT cost 1 GiB (a fuzzer finding, tests/data/fuzz-regressions/png/). Length, type,
+  // data, CRC; lengths at most 2^31 - 1 (ISO 15948 §5.3); the walk ends at IEND.
+  for (std::size_t at = kPngSignature.size(); at < bytes.size();) {
+    if (bytes.size() - at < 12) fail(path, "truncated PNG: a chunk is cut short");
+    const std::uint64_t chunk_length = be32(at);
+    const std::string type(reinterpret_cast<const char*>(bytes.data()) + at + 4, 4);
+    if (chunk_length > 0x7fffffffU || chunk_length > bytes.size() - at - 12) {
+      fail(path, "truncated or corrupt PNG: chunk '" + printable(type) + "' declares " +
+                     std::to_string(chunk_length) + " bytes, more than the " +
+                     std::to_string(bytes.size() - at - 12) + " left in the file");
+    }
+    at += 12 + static_cast<std::size_t>(chunk_length);
+    if (type == "IEND") break;
+  }
   const std::uint64_t ihdr_width = be32(16);
   const std::uint64_t ihdr_height = be32(20);
   if (ihdr_width == 0 || ihdr_height == 0 || ihdr_width > kMaxFramebufferSide ||
