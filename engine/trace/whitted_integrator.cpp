@@ -39,7 +39,8 @@ public:
     trace_waves();
     fold(n);
     if (frame_.hook != nullptr && s_.nodes.size() > n) deliver_leaving(n);
-    for (std::size_t k = 0; k < n; ++k) frame_.pixels[s_.nodes[k].pixel] = s_.nodes[k].radiance;
+    for (std::size_t k = 0; k < n; ++k)
+      frame_.pixels[s_.nodes[k].pixel] = finite_or_counted(s_.nodes[k].radiance, counts_);
   }
 
   /// Trees rooted at arbitrary rays (whitted_rays).
@@ -85,7 +86,8 @@ public:
     fold(n);
     for (std::size_t k = 0; k < n; ++k) {
       const WhittedNode& node = s_.nodes[k];
-      out[k] = RadianceSample{node.radiance, node.hit_t, node.hit_entity, node.seen, node.rays};
+      out[k] = RadianceSample{finite_or_counted(node.radiance, counts_), node.hit_t,
+                              node.hit_entity, node.seen, node.rays};
     }
   }
 
@@ -241,9 +243,10 @@ private:
         const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
         if (cos_theta <= 0.0f || max_component(ls.irradiance) <= 0.0f) continue;
         // Stop just short of the light: a light placed on a surface must not shadow itself.
-        const float tfar = std::isinf(ls.distance)
-                               ? ls.distance
-                               : glm::length(light.position - origin) * (1.0f - 1e-5f);
+        const float tfar =
+            std::isinf(ls.distance)
+                ? ls.distance
+                : float(glm::length(glm::dvec3(light.position - origin)) * (1.0 - 1e-5));
         s_.shadow_rays.push_back(Ray{origin, 0.0f, ls.to_light, tfar});
         s_.shadow_node.push_back(index);
         s_.shadow_value.push_back(albedo * ls.irradiance * cos_theta);

@@ -6,12 +6,16 @@
 #include "specula/accel/common/traceable_instance.h"
 #include "specula/render/render_job.h"
 #include "specula/systems/schedule.h"
+#include "specula/core/error.h"
 #include "specula/trace/lights.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <limits>
+#include <numbers>
 
 namespace specula {
 namespace {
@@ -155,6 +159,156 @@ TEST_P(DegenerateInstances, ScaleAnimatedToZeroAndBackHidesAndShowsTheObject) {
   EXPECT_EQ(world.tracer->last_update().hidden_instances, 0u);
   EXPECT_NEAR(world.intersect(down).t, 2.0f, 1e-3f);
 }
+
+// ---- Radiance bounds ---------------------------------------------------------------------------
+
+/// Writes `text` to a temporary file named `name` and loads it; returns the error text or "".
+std::string load_error(const std::string& name, const std::string& text) {
+  const std::filesystem::path path = std::filesystem::temp_directory_path() / name;
+  std::ofstream(path, std::ios::binary) << text;
+  try {
+    (void)load_scene(path);
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+std::string json_scene(const std::string& light, const std::string& emission) {
+  return R"({"format": "specula-scene", "version": 1, "entities": [
+    {"name": "lamp", "light": )" + light + R"(},
+    {"name": "panel", "mesh": {"primitive": "plane"}, "material": {"emission": )" + emission + "}}]}";
+}
+
+TEST(RadianceBounds, JsonRefusesAbsurdIntensityAndEmissionNamingTheFileAndField) {
+  const std::string ok_light = R"({"type": "point", "intensity": 1e20})";
+  EXPECT_EQ(load_error("specula_num_ok.json", json_scene(ok_light, "[1e20, 0, 1]")), "");
+  const std::string big_light = load_error(
+      "specula_num_light.json", json_scene(R"({"type": "point", "intensity": 3.4e38})", "[0, 0, 0]"));
+  EXPECT_NE(big_light.find("specula_num_light.json"), std::string::npos) << big_light;
+  EXPECT_NE(big_light.find("intensity"), std::string::npos) << big_light;
+  EXPECT_NE(big_light.find("1e+20"), std::string::npos) << big_light;
+  // The bound is on colour × intensity: a bright colour counts too.
+  const std::string big_color = load_error(
+      "specula_num_color.json",
+      json_scene(R"({"type": "spot", "color": [1e15, 1, 1], "intensity": 1e6})", "[0, 0, 0]"));
+  EXPECT_NE(big_color.find("color * intensity"), std::string::npos) << big_color;
+  const std::string big_emission =
+      load_error("specula_num_emission.json", json_scene(ok_light, "[0, 3.4e38, 0]"));
+  EXPECT_NE(big_emission.find("specula_num_emission.json"), std::string::npos) << big_emission;
+  EXPECT_NE(big_emission.find("emission"), std::string::npos) << big_emission;
+}
+
+std::string gltf_scene(const std::string& intensity, const std::string& strength) {
+  return R"({"asset": {"version": "2.0"},
+    "extensionsUsed": ["KHR_lights_punctual", "KHR_materials_emissive_strength"],
+    "extensions": {"KHR_lights_punctual": {"lights": [{"type": "point", "intensity": )" +
+         intensity + R"(}]}},
+    "materials": [{"emissiveFactor": [1, 1, 1],
+                   "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": )" +
+         strength + R"(}}}],
+    "buffers": [{"byteLength": 36,
+                 "uri": "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}],
+    "bufferViews": [{"buffer": 0, "byteLength": 36}],
+    "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                   "min": [0, 0, 0], "max": [1, 1, 0]}],
+    "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 0}]}],
+    "scenes": [{"nodes": [0, 1]}], "scene": 0,
+    "nodes": [{"extensions": {"KHR_lights_punctual": {"light": 0}}}, {"mesh": 0}]})";
+}
+
+TEST(RadianceBounds, GltfRefusesAbsurdIntensityAndEmission) {
+  EXPECT_EQ(load_error("specula_num_ok.gltf", gltf_scene("1e20", "1e20")), "");
+  const std::string light = load_error("specula_num_light.gltf", gltf_scene("3.4e38", "1"));
+  EXPECT_NE(light.find("specula_num_light.gltf"), std::string::npos) << light;
+  EXPECT_NE(light.find("intensity"), std::string::npos) << light;
+  const std::string emission = load_error("specula_num_emission.gltf", gltf_scene("1", "3.4e38"));
+  EXPECT_NE(emission.find("emissiveStrength"), std::string::npos) << emission;
+}
+
+TEST(RadianceBounds, FalloffIsTheInverseSquareLawAtTheExtremes) {
+  gpu::GpuLight light{};
+  light.type = gpu::kLightPoint;
+  light.intensity = vec3(kMaxLightIntensity);
+  // Far: 1e20 / (1e19)² = 1e-18 (1 / d² alone, 1e-38, flushed to zero under FTZ).
+  for (const float d : {1e19f, 1.5e19f, 1e10f, 1.0f, 1e-4f}) {
+    light.position = vec3(0.0f, d, 0.0f);
+    const LightSample s = sample_light(light, vec3(0.0f));
+    const double expected = double(kMaxLightIntensity) / (double(d) * double(d));
+    EXPECT_NEAR(s.irradiance.y / expected, 1.0, 1e-6) << "d = " << d;
+    EXPECT_NEAR(s.distance / d, 1.0f, 1e-6f);
+  }
+  // Closer than 1e-5, the law would pass kMaxIrradiance: capped, finite.
+  light.position = vec3(0.0f, 1e-12f, 0.0f);
+  EXPECT_EQ(sample_light(light, vec3(0.0f)).irradiance.y, kMaxIrradiance);
+}
+
+class RadianceBackends : public testing::TestWithParam<std::string> {};
+
+/// A diffuse floor seen from above, lit by one point light straight above its centre.
+void lit_floor(ecs::Registry& reg, float light_height, float intensity) {
+  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(4.0f)), test::at(vec3(0)));
+  test::add_camera(reg, vec3(0, 3, 0.001f), vec3(0), 40.0f);
+  test::add_point_light(reg, vec3(0, light_height, 0), intensity);
+}
+
+TEST_P(RadianceBackends, ALightAtTheLargestDistanceGivesTheInverseSquareLaw) {
+  constexpr float kDistance = 1e19f;
+  for (const TraceMode mode : {TraceMode::Cast, TraceMode::Whitted}) {
+    ecs::Registry reg;
+    lit_floor(reg, kDistance, kMaxLightIntensity);
+    const Frame frame = render(reg, GetParam(), mode, 16, 16);
+    // The centre pixels see the floor's middle, straight below the light (cos θ = 1 within 1e-6).
+    const double expected = 0.8 / std::numbers::pi * double(kMaxLightIntensity) /
+                            (double(kDistance) * double(kDistance));
+    const vec3 centre = frame.image.pixels()[8 * 16 + 8];
+    EXPECT_NEAR(centre.x / expected, 1.0, 1e-4) << trace_mode_name(mode);
+    EXPECT_EQ(frame.stats.rays.nonfinite, 0u);
+  }
+}
+
+TEST_P(RadianceBackends, TheLargestAcceptedValuesGiveFinitePixels) {
+  for (const TraceMode mode : {TraceMode::Cast, TraceMode::Whitted}) {
+    ecs::Registry reg;
+    // The light a hair above the floor, and more of them: the capped falloff keeps the sum finite.
+    lit_floor(reg, 1e-7f, kMaxLightIntensity);
+    test::add_point_light(reg, vec3(0.5f, 1e-6f, 0.0f), kMaxLightIntensity);
+    const ecs::Entity sun = test::add_point_light(reg, vec3(0), kMaxLightIntensity);
+    reg.get<Light>(sun).type = Light::Type::Directional;
+    reg.get<Transform>(sun).rotation = rotation_looking_along(vec3(0, -1, 0));
+    Material glowing;
+    glowing.emission = vec3(kMaxEmission);
+    glowing.reflectivity = 0.5f;
+    test::add_mesh(reg, test::primitive("sphere", 0.3f), test::at(vec3(-0.8f, 0.3f, 0)), glowing);
+    const Frame frame = render(reg, GetParam(), mode, 24, 24);
+    EXPECT_EQ(nonfinite_pixels(frame.image), 0) << trace_mode_name(mode);
+    EXPECT_EQ(frame.stats.rays.nonfinite, 0u) << trace_mode_name(mode);
+  }
+}
+
+TEST_P(RadianceBackends, ANonFiniteSampleIsWrittenAsZeroAndCounted) {
+  for (const TraceMode mode : {TraceMode::Cast, TraceMode::Whitted}) {
+    ecs::Registry reg;
+    lit_floor(reg, 2.0f, 4.0f);
+    // A glowing floor: black in its shadow would look like a zeroed sample.
+    reg.view<Material>().each([](Material& m) { m.emission = vec3(0.1f); });
+    // What no loader lets through, set in code: a NaN emission on a box in the middle.
+    Material broken;
+    broken.emission = vec3(std::numeric_limits<float>::quiet_NaN(), 0.0f, 0.0f);
+    test::add_mesh(reg, test::primitive("box", 1.0f, vec3(0.8f)), test::at(vec3(0, 0.4f, 0)),
+                   broken);
+    const Frame frame = render(reg, GetParam(), mode, 16, 16);
+    EXPECT_EQ(nonfinite_pixels(frame.image), 0) << trace_mode_name(mode);
+    // The box's pixels: black, and each counted.
+    int black = 0;
+    for (const vec3& p : frame.image.pixels()) black += p == vec3(0.0f) ? 1 : 0;
+    EXPECT_GT(black, 4) << trace_mode_name(mode);
+    EXPECT_EQ(frame.stats.rays.nonfinite, std::uint64_t(black)) << trace_mode_name(mode);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, RadianceBackends, testing::ValuesIn(test::available_backends()),
+                         [](const auto& p) { return test::test_name(p.param); });
 
 INSTANTIATE_TEST_SUITE_P(Backends, DegenerateInstances,
                          testing::ValuesIn(test::available_backends()),
