@@ -236,7 +236,7 @@ private:
     const float diffuse = std::max(0.0f, 1.0f - m.reflectivity - m.transmission);
     if (diffuse > 0.0f && !tables_.lights.empty()) {
       const vec3 albedo = m.base_color * (diffuse * kInvPi);
-      const vec3 origin = offset_ray_origin(sp.position, sp.position_error, sp.geometric_normal);
+      const vec3 origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
       for (const gpu::GpuLight& light : tables_.lights) {
         const LightSample ls = sample_light(light, sp.position);
         if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) continue; // behind the surface
@@ -257,11 +257,11 @@ private:
     const SpecularSplit split = split_specular(m, sp, d);
     if (split.reflect_weight > 0.0f)
       spawn(node, index, hit.instance,
-            offset_ray_origin(sp.position, sp.position_error, sp.geometric_normal),
+            offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal),
             split.reflect_direction, split.reflect_weight, RayKind::Reflection, sp.front_face);
     if (split.refract_weight > 0.0f)
       spawn(node, index, hit.instance,
-            offset_ray_origin(sp.position, sp.position_error, -sp.geometric_normal),
+            offset_ray_origin(sp.spawn_point, sp.spawn_error, -sp.geometric_normal),
             split.refract_direction, split.refract_weight, RayKind::Refraction, !sp.front_face);
   }
 
