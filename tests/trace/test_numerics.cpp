@@ -9,8 +9,10 @@
 #include "specula/core/error.h"
 #include "specula/trace/camera_rays.h"
 #include "specula/trace/lights.h"
+#include "specula/trace/stats.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <filesystem>
@@ -245,6 +247,28 @@ TEST(RadianceBounds, FalloffIsTheInverseSquareLawAtTheExtremes) {
   EXPECT_EQ(sample_light(light, vec3(0.0f)).irradiance.y, kMaxIrradiance);
 }
 
+TEST(RadianceBounds, TheNewCountersRoundTripAndOldStatsFilesStillRead) {
+  RunStats stats;
+  stats.settings.scene = "s.json";
+  stats.settings.backend = "embree";
+  stats.settings.mode = "whitted";
+  FrameStats f;
+  f.rays.nonfinite = 7;
+  f.accel.hidden_instances = 3;
+  stats.frames.push_back(f);
+  const std::string text = stats_to_json(stats);
+  EXPECT_NE(text.find("\"nonfinite_samples\": 7"), std::string::npos) << text;
+  EXPECT_NE(text.find("\"hidden_instances\": 3"), std::string::npos) << text;
+  EXPECT_EQ(stats_from_json(text, "stats.json"), stats);
+  // A file from before issue 13 has neither: both read as 0.
+  nlohmann::json old = nlohmann::json::parse(text);
+  old["frames"][0].erase("nonfinite_samples");
+  old["frames"][0]["accel"].erase("hidden_instances");
+  const RunStats read = stats_from_json(old.dump(), "old.json");
+  EXPECT_EQ(read.frames.at(0).rays.nonfinite, 0u);
+  EXPECT_EQ(read.frames.at(0).accel.hidden_instances, 0u);
+}
+
 class RadianceBackends : public testing::TestWithParam<std::string> {};
 
 /// A diffuse floor seen from above, lit by one point light straight above its centre.
@@ -397,6 +421,59 @@ TEST_P(ConcaveSeams, NoBlackLinesAlongTheCornellBoxSeamsAtAnyParity) {
 
 INSTANTIATE_TEST_SUITE_P(Backends, ConcaveSeams, testing::ValuesIn(test::available_backends()),
                          [](const auto& p) { return test::test_name(p.param); });
+
+/// Writes `text` to a temporary file and loads it as a scene.
+Scene load_text(const std::string& name, const std::string& text) {
+  const std::filesystem::path path = std::filesystem::temp_directory_path() / name;
+  std::ofstream(path, std::ios::binary) << text;
+  return load_scene(path);
+}
+
+/// One frame of a loaded scene on `backend` (Whitted, 32 × 24).
+Frame render_scene(Scene& scene, const std::string& backend) {
+  return render(scene.registry, backend, TraceMode::Whitted, 32, 24);
+}
+
+TEST_P(DegenerateInstances, JsonAnimationScaleKeysOf1eMinus38AndAHierarchyAt1eMinus20Render) {
+  // What aborted inside Embree: several animated entities with scale keys of 1e-38 (a set of
+  // point-sized boxes in the top-level build), and a hierarchical child scaled by 1e-20.
+  std::string entities = R"({"name": "camera", "camera": {"position": [0, 1, 4], "look_at": [0, 0.5, 0]}},
+    {"name": "floor", "mesh": {"primitive": "plane", "size": 4}},
+    {"name": "arm", "animation": {"translation": {"interpolation": "linear", "times": [0, 1],
+      "values": [[0, 0.5, 0], [0, 0.6, 0]]}}},
+    {"name": "hand", "parent": "arm", "transform": {"scale": 1e-20}, "mesh": {"primitive": "box"}})";
+  for (int i = 0; i < 5; ++i)
+    entities += R"(, {"name": "ball )" + std::to_string(i) + R"(", "transform": {"translation": [)" +
+                std::to_string(0.1 * i) + R"(, 0.5, 0]}, "mesh": {"primitive": "sphere"},
+      "animation": {"scale": {"interpolation": "linear", "times": [0, 1], "values": [1e-38, 1e-38]}}})";
+  Scene scene = load_text("specula_num_tiny.json",
+                          R"({"format": "specula-scene", "version": 1, "entities": [)" + entities + "]}");
+  const Frame frame = render_scene(scene, GetParam());
+  EXPECT_EQ(frame.stats.accel.hidden_instances, 6u);
+  EXPECT_EQ(nonfinite_pixels(frame.image), 0);
+}
+
+TEST_P(DegenerateInstances, GltfAnimationScaleOutputsOfZeroRender) {
+  // A triangle whose node's scale animates to 0 from the start (glTF allows it, the loader keeps it).
+  Scene scene = load_text("specula_num_zero_scale.gltf", R"({"asset": {"version": "2.0"},
+    "buffers": [{"byteLength": 68, "uri": "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAAAAAAAgD8AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAA="}],
+    "bufferViews": [{"buffer": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 8},
+                    {"buffer": 0, "byteOffset": 44, "byteLength": 24}],
+    "accessors": [
+      {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
+      {"bufferView": 1, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0], "max": [1]},
+      {"bufferView": 2, "componentType": 5126, "count": 2, "type": "VEC3"}],
+    "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+    "nodes": [{"mesh": 0}, {"mesh": 0, "translation": [0.2, 0, 0]}, {"mesh": 0, "translation": [0, 0.2, 0]}],
+    "animations": [{"samplers": [{"input": 1, "output": 2}],
+                    "channels": [{"sampler": 0, "target": {"node": 0, "path": "scale"}},
+                                 {"sampler": 0, "target": {"node": 1, "path": "scale"}},
+                                 {"sampler": 0, "target": {"node": 2, "path": "scale"}}]}],
+    "scenes": [{"nodes": [0, 1, 2]}], "scene": 0})");
+  const Frame frame = render_scene(scene, GetParam());
+  EXPECT_EQ(frame.stats.accel.hidden_instances, 3u);
+  EXPECT_EQ(nonfinite_pixels(frame.image), 0);
+}
 
 INSTANTIATE_TEST_SUITE_P(Backends, DegenerateInstances,
                          testing::ValuesIn(test::available_backends()),
