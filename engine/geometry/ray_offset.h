@@ -71,6 +71,15 @@ inline constexpr float kEdgeInset = 4.0f;
     v /= sum;
   }
   vec3 b(std::max(0.0f, 1.0f - u - v), u, v);
+  // Most hits are far from every edge: bᵢ · 2A ≥ margin · |edge opposite pᵢ|, squared (no root),
+  // in float while |cross|² is comfortably normal; the rest is decided in double below.
+  const vec3 e0 = p2 - p1, e1 = p0 - p2, e2 = p1 - p0;
+  const vec3 c = glm::cross(e2, p2 - p0);
+  const float c2 = glm::dot(c, c);
+  const float m2 = margin * margin;
+  if (c2 > 1e-30f && c2 < 1e30f && b.x * b.x * c2 >= m2 * glm::dot(e0, e0) &&
+      b.y * b.y * c2 >= m2 * glm::dot(e1, e1) && b.z * b.z * c2 >= m2 * glm::dot(e2, e2))
+    return b;
   // In double: the altitudes of a thin triangle far from the origin lose digits in float.
   const glm::dvec3 q0(p0), q1(p1), q2(p2);
   const double twice_area = glm::length(glm::cross(q1 - q0, q2 - q0));
@@ -113,8 +122,9 @@ struct SpawnPoint {
   };
   const float w = 1.0f - u - v;
   const vec3 hit = w * p0 + u * p1 + v * p2;
-  const float margin = inset * glm::length(error_at(vec3(w, u, v), hit));
-  const vec3 b = inset_barycentrics(p0, p1, p2, u, v, margin);
+  const vec3 hit_error = error_at(vec3(w, u, v), hit);
+  const vec3 b = inset_barycentrics(p0, p1, p2, u, v, inset * glm::length(hit_error));
+  if (b == vec3(w, u, v)) return {hit, hit_error}; // far enough from every edge already
   const vec3 q = b.x * p0 + b.y * p1 + b.z * p2;
   return {q, error_at(b, q)};
 }

@@ -59,12 +59,18 @@ struct ShadingPoint {
     const auto error_at = [&](const vec3& b, const vec3& q) {
       return transformed_error(m, q, barycentric_error(p0, p1, p2, b.x, b.y, b.z));
     };
-    const float margin = kEdgeInset * glm::length(error_at(vec3(w, hit.uv.x, hit.uv.y), p_object));
+    const vec3 hit_error = error_at(vec3(w, hit.uv.x, hit.uv.y), p_object);
     const vec3 b = inset_barycentrics(vec3(m * vec4(p0, 1.0f)), vec3(m * vec4(p1, 1.0f)),
-                                      vec3(m * vec4(p2, 1.0f)), hit.uv.x, hit.uv.y, margin);
-    const vec3 q_object = b.x * p0 + b.y * p1 + b.z * p2;
-    sp.spawn_point = vec3(m * vec4(q_object, 1.0f));
-    sp.spawn_error = error_at(b, q_object);
+                                      vec3(m * vec4(p2, 1.0f)), hit.uv.x, hit.uv.y,
+                                      kEdgeInset * glm::length(hit_error));
+    if (b == vec3(w, hit.uv.x, hit.uv.y)) {
+      sp.spawn_point = sp.position;
+      sp.spawn_error = hit_error;
+    } else {
+      const vec3 q_object = b.x * p0 + b.y * p1 + b.z * p2;
+      sp.spawn_point = vec3(m * vec4(q_object, 1.0f));
+      sp.spawn_error = error_at(b, q_object);
+    }
   } else {
     sp.spawn_point = sp.position;
     sp.spawn_error = vec3(0.0f);
