@@ -1,6 +1,7 @@
 #include "commands.h"
 
 #include "specula/core/error.h"
+#include "specula/core/memory_budget.h"
 #include "specula/image/image_io.h"
 #include "specula/render/render_job.h"
 #include "specula/render/tracer_factory.h"
@@ -15,8 +16,13 @@
 #include <chrono>
 #include <cstdio>
 #include <ostream>
+#include <utility>
 
 namespace specula::cli {
+
+// One limit per quantity: what a scene file may set is what the CLI and the framebuffer take.
+static_assert(kMaxImageSide == kMaxFramebufferSide);
+
 namespace {
 
 nlohmann::json vec_json(const vec3& v) { return {v.x, v.y, v.z}; }
@@ -33,13 +39,14 @@ cache::CacheSettings parse_cache(const RenderOptions& o) {
     const auto [end, ec] = std::from_chars(o.cache.data(), o.cache.data() + o.cache.size(), value);
     if (ec != std::errc{} || end != o.cache.data() + o.cache.size() || !power_of_two(value))
       throw Error("--cache", "expected off, on, auto or a power of two from 1 to 4096, got '" +
-                                 o.cache + "'");
+                                 printable(o.cache) + "'");
     c.policy = cache::CachePolicy::Auto;
     c.resolution = value;
   }
   const auto lookup = cache::parse_lookup_mode(o.cache_lookup);
   if (!lookup)
-    throw Error("--cache-lookup", "expected direction, tau or march, got '" + o.cache_lookup + "'");
+    throw Error("--cache-lookup",
+                "expected direction, tau or march, got '" + printable(o.cache_lookup) + "'");
   c.lookup = *lookup;
   if (!(o.cache_tau_deg > 0.0f && o.cache_tau_deg < 90.0f))
     throw Error("--cache-tau", "must lie in (0, 90) degrees");
@@ -58,7 +65,25 @@ cache::CacheSettings parse_cache(const RenderOptions& o) {
   return c;
 }
 
+/// A path or other user text echoed in normal output: control bytes escaped so it stays on its
+/// line, but not cut (the user wants to see which file it was).
+std::string shown(const std::string& text) { return printable(text, 4096); }
+
 } // namespace
+
+std::uint64_t render_memory_bytes(std::uint32_t width, std::uint32_t height, std::uint32_t frames,
+                                  std::optional<ImageFormat> out, bool stats) {
+  const std::uint64_t pixels = std::uint64_t{width} * height;
+  // The PNG: sRGB bytes (3 per pixel), then stb's filtered rows (3), its deflate output (at most
+  // 9/8 of that, in a buffer grown by doubling) and the PNG it is copied into. The EXR is
+  // streamed to the file a chunk of 16 scan lines at a time, through a few chunk-sized buffers.
+  std::uint64_t writing = 0;
+  if (out == ImageFormat::Png) writing = pixels * 14;
+  if (out == ImageFormat::Exr) writing = std::uint64_t{16} * width * sizeof(vec3) * 4;
+  const std::uint64_t per_frame = sizeof(FrameStats) + (stats ? 2048 : 0);
+  return pixels * sizeof(vec3) + writing + std::uint64_t{frames} * per_frame +
+         (std::uint64_t{64} << 20);
+}
 
 int run_info(const InfoOptions& options, std::ostream& out) {
   Scene scene = load_scene(options.scene);
@@ -82,10 +107,11 @@ int run_info(const InfoOptions& options, std::ostream& out) {
                           {"max_depth", scene.settings.max_depth}}}};
     if (!s.bounds.empty())
       j["bounds"] = {{"min", vec_json(s.bounds.min)}, {"max", vec_json(s.bounds.max)}};
-    out << j.dump(2) << "\n";
+    // Invalid UTF-8 in a path is replaced, not a reason to fail.
+    out << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
     return 0;
   }
-  out << "scene:      " << options.scene << "\n"
+  out << "scene:      " << shown(options.scene) << "\n"
       << "entities:   " << s.entities << " (" << s.mesh_entities << " with meshes, "
       << s.unique_meshes << " distinct meshes, " << s.animated << " animated)\n"
       << "triangles:  " << s.triangles << "\n"
@@ -110,8 +136,21 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   // Validate everything the user gave before reporting what this build lacks, so a bad scene or
   // option is reported as such (exit 1) rather than hidden behind "not available" (exit 2).
   const cache::CacheSettings cache_settings = parse_cache(options);
+  for (const auto& [name, value] :
+       {std::pair{"--width", options.width}, std::pair{"--height", options.height}})
+    if (value > kMaxImageSide)
+      throw Error(name, "expected a whole number in [1 - " + std::to_string(kMaxImageSide) +
+                            "], got " + std::to_string(value));
+  if (options.frames < 1 || options.frames > kMaxFrames)
+    throw Error("--frames", "expected a whole number in [1 - " + std::to_string(kMaxFrames) +
+                                "], got " + std::to_string(options.frames));
   const std::optional<TraceMode> mode = parse_trace_mode(options.mode);
-  if (!mode) throw Error("--mode", "unknown mode '" + options.mode + "'");
+  if (!mode) throw Error("--mode", "unknown mode '" + printable(options.mode) + "'");
+  // The output paths too: a render of an hour must not end with "unsupported extension".
+  std::optional<ImageFormat> out_format;
+  if (!options.out.empty())
+    out_format = check_image_output_path(options.out, {ImageFormat::Png, ImageFormat::Exr});
+  const MemoryBudget budget = memory_budget(options.memory_limit, "--memory-limit");
   if (!is_backend_name(options.backend))
     (void)resolve_backend(options.backend); // throws the "unknown backend" error (exit 1)
   Scene scene = load_scene(options.scene);
@@ -124,6 +163,11 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   job.settings.threads = options.threads;
   const std::uint32_t width = options.width ? options.width : scene.settings.width;
   const std::uint32_t height = options.height ? options.height : scene.settings.height;
+  check_memory(
+      render_memory_bytes(width, height, options.frames, out_format, !options.stats.empty()),
+      budget, options.scene,
+      "rendering " + std::to_string(options.frames) + " frame(s) of " + std::to_string(width) +
+          "x" + std::to_string(height));
   job.image = Framebuffer(width, height);
   job.cache = cache_settings;
   prepare_rendering(scene.registry, std::move(job));
@@ -169,8 +213,9 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   const double frame_ms = median(ms);
   const double trace = median(trace_ms);
   const FrameStats& last = stats.frames.back();
-  out << options.scene << ": " << width << "x" << height << " " << options.mode << " on " << backend
-      << (options.backend == "auto" ? " (auto)" : "") << ", " << options.frames << " frame(s)\n"
+  out << shown(options.scene) << ": " << width << "x" << height << " " << options.mode << " on "
+      << backend << (options.backend == "auto" ? " (auto)" : "") << ", " << options.frames
+      << " frame(s)\n"
       << "  frame ms: median " << frame_ms << " (tracing " << trace << "), " << 1000.0 / frame_ms
       << " frames/s\n"
       << "  rays per frame: " << last.rays.total() << " (";
@@ -198,8 +243,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   if (last.accel.hidden_instances > 0)
     out << "  hidden instances: " << last.accel.hidden_instances
         << " (degenerate transform or bounds, e.g. a scale of 0)\n";
-  if (!options.out.empty()) out << "  image: " << options.out << "\n";
-  if (!options.stats.empty()) out << "  stats: " << options.stats << "\n";
+  if (!options.out.empty()) out << "  image: " << shown(options.out) << "\n";
+  if (!options.stats.empty()) out << "  stats: " << shown(options.stats) << "\n";
   return 0;
 }
 

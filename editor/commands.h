@@ -3,11 +3,17 @@
 /// The `specula` program's headless subcommands. Each returns the process exit code:
 /// 0 success, 1 bad input (specula::kExitBadInput), 2 unavailable (specula::kExitUnavailable).
 
+#include "specula/image/image_io.h"
+
 #include <cstdint>
 #include <iosfwd>
+#include <optional>
 #include <string>
 
 namespace specula::cli {
+
+/// Most frames one render may trace (each keeps its statistics in memory).
+inline constexpr std::uint32_t kMaxFrames = 1000000;
 
 struct InfoOptions {
   std::string scene;
@@ -29,17 +35,30 @@ struct RenderOptions {
   std::uint32_t cache_fill = 0;       ///< texels written per frame, 0: no limit
   bool cache_prefill = false;
   double max_error_db = 40.0;
-  std::string out;           ///< PNG path, empty: none
+  std::string out;           ///< .png or .exr path, empty: none
   std::string stats;         ///< stats JSON path, empty: none
+  /// A size such as "4G" (core/memory_budget.h); empty: default_memory_budget().
+  std::string memory_limit;
   /// Progress is shown once the render has run this long (seconds), on a terminal only.
   double progress_after_s = 1.0;
 };
 
 int run_info(const InfoOptions& options, std::ostream& out);
-/// Renders options.frames ticks of the scene. `progress` receives a one-line progress report
-/// (frames done, frames/s, time left), rewritten in place and cleared at the end, once the render
-/// has run longer than options.progress_after_s and when `progress_is_terminal`; pass nullptr for
-/// none.
+
+/// A bound on the bytes a render of this size allocates beyond the scene, its acceleration
+/// structures and ray-cache cubes: the framebuffer (12 bytes per pixel), writing the image in
+/// `out`'s format (none: not written), every frame's statistics (and their JSON when `stats`),
+/// and 64 MiB for the rest of the program.
+[[nodiscard]] std::uint64_t render_memory_bytes(std::uint32_t width, std::uint32_t height,
+                                                std::uint32_t frames,
+                                                std::optional<ImageFormat> out, bool stats);
+
+/// Renders options.frames ticks of the scene. Before loading the scene, checks the options and
+/// the output path (check_image_output_path); before allocating the framebuffer, checks
+/// render_memory_bytes against the memory budget (exit 1 naming the scene when it does not fit).
+/// `progress` receives a one-line progress report (frames done, frames/s, time left), rewritten in
+/// place and cleared at the end, once the render has run longer than options.progress_after_s and
+/// when `progress_is_terminal`; pass nullptr for none.
 int run_render(const RenderOptions& options, std::ostream& out, std::ostream* progress = nullptr,
                bool progress_is_terminal = false);
 

@@ -5,6 +5,7 @@
 #include "commands.h"
 #include "compare_command.h"
 #include "specula/core/error.h"
+#include "specula/core/memory_budget.h"
 #include "specula/render/tracer_factory.h"
 #include "specula/scene/scene.h"
 
@@ -12,6 +13,11 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
 #include <exception>
 #include <iostream>
 #include <string>
@@ -26,6 +32,77 @@ std::vector<std::string> backend_names() {
   return names;
 }
 
+/// The value, when the whole text is a finite decimal number ("12", "-0.5", "1e3"; not "0x10",
+/// "inf", "nan" or " 12").
+bool parse_number(const std::string& text, double& value) {
+  if (text.empty() || text.find_first_not_of("0123456789+-.eE") != std::string::npos) return false;
+  char* end = nullptr;
+  errno = 0;
+  value = std::strtod(text.c_str(), &end);
+  return end == text.c_str() + text.size() && errno != ERANGE;
+}
+
+/// A whole number in [lo, hi], for ->transform (which may rewrite the text: "1e3" → "1000").
+/// CLI11's Range says "not in range" for "abc" too; this tells a value that is not a number from
+/// one out of range.
+CLI::Validator whole_number(std::uint64_t lo, std::uint64_t hi) {
+  const std::string range = std::to_string(lo) + " - " + std::to_string(hi);
+  return CLI::Validator(
+      [lo, hi, range](std::string& text) -> std::string {
+        double value = 0.0;
+        if (!parse_number(text, value))
+          return "expected a number in [" + range + "], got '" + specula::printable(text, 40) + "'";
+        if (value != std::floor(value) || value < double(lo) || value > double(hi))
+          return "expected a whole number in [" + range + "], got " + text;
+        text = std::to_string(static_cast<std::uint64_t>(value)); // "1e3" converts as 1000
+        return {};
+      },
+      "in [" + range + "]");
+}
+
+/// Any finite number (range checks with a message of their own follow in the command).
+CLI::Validator number() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        double value = 0.0;
+        if (!parse_number(text, value))
+          return "expected a number, got '" + specula::printable(text, 40) + "'";
+        return {};
+      },
+      "");
+}
+
+/// One of `names`. CLI11's IsMember echoes the value in full before the list; this cuts it.
+CLI::Validator one_of(std::vector<std::string> names) {
+  std::string list;
+  for (const std::string& name : names) list += (list.empty() ? "" : ", ") + name;
+  return CLI::Validator(
+      [names, list](std::string& text) -> std::string {
+        if (std::find(names.begin(), names.end(), text) != names.end()) return {};
+        return "expected one of " + list + ", got '" + specula::printable(text, 40) + "'";
+      },
+      "{" + list + "}");
+}
+
+/// A path: an empty one is a mistake (of quoting, usually), not "no file".
+CLI::Validator non_empty_path() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        return text.empty() ? "expected a file path, got an empty string" : std::string();
+      },
+      "");
+}
+
+/// A size for --memory-limit.
+CLI::Validator byte_size() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        if (specula::parse_byte_size(text)) return {};
+        return "expected a size such as 512M or 4G, got '" + specula::printable(text, 40) + "'";
+      },
+      "SIZE");
+}
+
 } // namespace
 
 int main(int argc, char** argv) {
@@ -33,6 +110,11 @@ int main(int argc, char** argv) {
   CLI::App app{"Specula: real-time ray tracing engine module"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "specula 0.1.0");
+  // Every parse error in the house style (main's catch below), input escaped and cut.
+  app.failure_message([](const CLI::App*, const CLI::Error& e) {
+    return "specula: error: " + printable(e.what(), 400) +
+           "\nRun with --help for more information.\n";
+  });
 
   cli::InfoOptions info;
   CLI::App* info_cmd =
@@ -40,7 +122,8 @@ int main(int argc, char** argv) {
   info_cmd
       ->add_option("scene", info.scene,
                    "Scene (.json, .gltf, .glb) or mesh (.obj, .ply, .off, .stl)")
-      ->required();
+      ->required()
+      ->check(non_empty_path());
   info_cmd->add_flag("--json", info.json, "Print the summary as JSON");
 
   cli::RenderOptions render;
@@ -48,23 +131,24 @@ int main(int argc, char** argv) {
   render_cmd
       ->add_option("scene", render.scene,
                    "Scene (.json, .gltf, .glb) or mesh (.obj, .ply, .off, .stl)")
-      ->required();
+      ->required()
+      ->check(non_empty_path());
   render_cmd
       ->add_option("--backend", render.backend, "Tracing backend (auto: the best one available)")
-      ->check(CLI::IsMember(backend_names()))
+      ->check(one_of(backend_names()))
       ->capture_default_str();
   render_cmd->add_option("--mode", render.mode, "Integrator")
-      ->check(CLI::IsMember({"cast", "whitted", "path", "shadow"}))
+      ->check(one_of({"cast", "whitted", "path", "shadow"}))
       ->capture_default_str();
   render_cmd->add_option("--width", render.width, "Image width (default: the scene's)")
-      ->check(CLI::Range(1u, kMaxImageSide));
+      ->transform(whole_number(1, kMaxImageSide));
   render_cmd->add_option("--height", render.height, "Image height (default: the scene's)")
-      ->check(CLI::Range(1u, kMaxImageSide));
+      ->transform(whole_number(1, kMaxImageSide));
   render_cmd->add_option("--frames", render.frames, "Frames to trace")
-      ->check(CLI::Range(1u, 1000000u))
+      ->transform(whole_number(1, cli::kMaxFrames))
       ->capture_default_str();
   render_cmd->add_option("--threads", render.threads, "Worker threads (0: all)")
-      ->check(CLI::Range(0u, 1024u))
+      ->transform(whole_number(0, 1024))
       ->capture_default_str();
   render_cmd
       ->add_option("--cache", render.cache,
@@ -72,33 +156,57 @@ int main(int argc, char** argv) {
                    "they save time within --max-error-db), or a face resolution (auto at it)")
       ->capture_default_str();
   render_cmd->add_option("--cache-lookup", render.cache_lookup, "How a cached texel is accepted")
-      ->check(CLI::IsMember({"direction", "tau", "march"}))
+      ->check(one_of({"direction", "tau", "march"}))
       ->capture_default_str();
   render_cmd
       ->add_option("--cache-tau", render.cache_tau_deg,
                    "Acceptance angle (degrees) of the tau and march lookups")
+      ->check(number())
       ->capture_default_str();
-  render_cmd->add_option("--cache-resolution", render.cache_resolution,
-                         "Face resolution of every cube (default: each entity's ray_cache)");
+  render_cmd
+      ->add_option("--cache-resolution", render.cache_resolution,
+                   "Face resolution of every cube (default: each entity's ray_cache)")
+      ->transform(whole_number(1, 4096));
   render_cmd
       ->add_option("--cache-fill", render.cache_fill,
                    "At most this many texels written per frame (0: no limit)")
+      ->transform(whole_number(0, UINT32_MAX))
       ->capture_default_str();
   render_cmd->add_flag("--cache-prefill", render.cache_prefill,
                        "Trace every outdated texel from its cube's centre before each frame");
   render_cmd
       ->add_option("--max-error-db", render.max_error_db,
                    "--cache auto: the PSNR against uncached tracing it must keep")
+      ->check(number())
       ->capture_default_str();
-  render_cmd->add_option("--out", render.out, "Write the last frame as an sRGB PNG");
-  render_cmd->add_option("--stats", render.stats, "Write per-frame statistics as JSON");
+  render_cmd
+      ->add_option("--out", render.out,
+                   "Write the last frame: .png (sRGB, 8-bit) or .exr (linear float)")
+      ->check(non_empty_path());
+  render_cmd->add_option("--stats", render.stats, "Write per-frame statistics as JSON")
+      ->check(non_empty_path());
+  render_cmd
+      ->add_option("--memory-limit", render.memory_limit,
+                   "Refuse a render needing more memory than this, e.g. 8G (default: 3/4 of "
+                   "physical memory)")
+      ->check(byte_size());
 
   cli::CompareOptions compare;
   CLI::App* compare_cmd =
       app.add_subcommand("compare", "Compare two images: RMSE, PSNR and mean FLIP");
-  compare_cmd->add_option("a", compare.a, "Reference image (.png or .exr)")->required();
-  compare_cmd->add_option("b", compare.b, "Test image (.png or .exr)")->required();
-  compare_cmd->add_option("--heatmap", compare.heatmap, "Write the FLIP error map as a magma PNG");
+  compare_cmd->add_option("a", compare.a, "Reference image (.png or .exr)")
+      ->required()
+      ->check(non_empty_path());
+  compare_cmd->add_option("b", compare.b, "Test image (.png or .exr)")
+      ->required()
+      ->check(non_empty_path());
+  compare_cmd->add_option("--heatmap", compare.heatmap, "Write the FLIP error map as a magma .png")
+      ->check(non_empty_path());
+  compare_cmd
+      ->add_option("--memory-limit", compare.memory_limit,
+                   "Refuse a comparison needing more memory than this, e.g. 8G (default: 3/4 of "
+                   "physical memory)")
+      ->check(byte_size());
   compare_cmd->add_flag("--json", compare.json, "Print the metrics as JSON");
 
   try {
@@ -117,13 +225,13 @@ int main(int argc, char** argv) {
     std::cerr << "specula: error: " << e.what() << "\n";
     return kExitBadInput;
   } catch (const UnavailableError& e) {
-    std::cerr << "specula: not available: " << e.what() << "\n";
+    std::cerr << "specula: not available: " << one_line(e.what()) << "\n";
     return kExitUnavailable;
   } catch (const std::bad_alloc&) {
     std::cerr << "specula: error: out of memory\n";
     return kExitBadInput;
   } catch (const std::exception& e) {
-    std::cerr << "specula: internal error: " << e.what() << "\n";
+    std::cerr << "specula: internal error: " << one_line(e.what()) << "\n";
     return 3;
   }
   return 0;

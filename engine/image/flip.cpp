@@ -8,6 +8,7 @@
 
 #include "specula/image/flip.h"
 
+#include "specula/core/assert.h"
 #include "specula/core/error.h"
 #include "specula/image/image_io.h"
 #include "specula/image/srgb.h"
@@ -123,24 +124,34 @@ double max_color_distance(const ColorSpace& space) {
 
 // --- Separable filtering -----------------------------------------------------------------------
 
-/// A single-channel image, row-major.
+/// Rows [first, first + height) of a single-channel image, row-major. FLIP runs over bands of
+/// rows (flip()), so the planes of a band hold the band and, for the inputs of the filters, the
+/// rows around it that the filters reach.
 struct Plane {
   int width = 0;
   int height = 0;
+  int first = 0; ///< the image row of local row 0
   std::vector<float> values;
 
-  Plane(int w, int h) : width(w), height(h), values(static_cast<std::size_t>(w) * h, 0.0f) {}
+  Plane(int w, int h, int first_row = 0)
+      : width(w), height(h), first(first_row), values(static_cast<std::size_t>(w) * h, 0.0f) {}
   float& operator()(int x, int y) { return values[static_cast<std::size_t>(y) * width + x]; }
   float operator()(int x, int y) const { return values[static_cast<std::size_t>(y) * width + x]; }
 };
 
-/// src convolved with kx(x)·ky(y) (odd-length kernels centred on their middle tap). Borders
-/// replicate the edge pixel, as the paper's reference code does, so a uniform image stays
-/// uniform and the image border itself is never reported as a feature.
-Plane convolve_separable(const Plane& src, std::span<const float> kx, std::span<const float> ky) {
+/// Image rows [first, first + rows) of src convolved with kx(x)·ky(y) (odd-length kernels centred
+/// on their middle tap), for an image `image_height` rows tall; src must hold every image row
+/// those output rows reach. Borders replicate the edge pixel, as the paper's reference code
+/// does, so a uniform image stays uniform and the image border itself is never reported as a
+/// feature. Each output value is the same sum, in the same order, whatever the band, so a map
+/// computed in bands is bit-identical to one computed whole.
+Plane convolve_separable(const Plane& src, std::span<const float> kx, std::span<const float> ky,
+                         int image_height, int first, int rows) {
   const int rx = static_cast<int>(kx.size() / 2);
   const int ry = static_cast<int>(ky.size() / 2);
-  Plane horizontal(src.width, src.height);
+  SPECULA_ASSERT(src.first <= std::max(0, first - ry) &&
+                 src.first + src.height >= std::min(image_height, first + rows + ry));
+  Plane horizontal(src.width, src.height, src.first);
   for (int y = 0; y < src.height; ++y) {
     for (int x = 0; x < src.width; ++x) {
       float sum = 0.0f;
@@ -150,13 +161,13 @@ Plane convolve_separable(const Plane& src, std::span<const float> kx, std::span<
       horizontal(x, y) = sum;
     }
   }
-  Plane out(src.width, src.height);
-  for (int y = 0; y < src.height; ++y) {
+  Plane out(src.width, rows, first);
+  for (int y = 0; y < rows; ++y) {
     for (int x = 0; x < src.width; ++x) {
       float sum = 0.0f;
       for (int j = -ry; j <= ry; ++j) {
         sum += ky[static_cast<std::size_t>(j + ry)] *
-               horizontal(x, std::clamp(y + j, 0, src.height - 1));
+               horizontal(x, std::clamp(first + y + j, 0, image_height - 1) - src.first);
       }
       out(x, y) = sum;
     }
@@ -201,10 +212,11 @@ std::vector<SeparableTerm> csf_filter(const std::array<CsfTerm, N>& terms, int r
   return filter;
 }
 
-Plane apply_filter(const Plane& src, const std::vector<SeparableTerm>& filter) {
-  Plane out(src.width, src.height);
+Plane apply_filter(const Plane& src, const std::vector<SeparableTerm>& filter, int image_height,
+                   int first, int rows) {
+  Plane out(src.width, rows, first);
   for (const SeparableTerm& term : filter) {
-    const Plane part = convolve_separable(src, term.taps, term.taps);
+    const Plane part = convolve_separable(src, term.taps, term.taps, image_height, first, rows);
     for (std::size_t i = 0; i < out.values.size(); ++i) {
       out.values[i] += term.weight * part.values[i];
     }
@@ -260,14 +272,17 @@ struct Features {
   Plane points;
 };
 
-Features detect_features(const Plane& achromatic, const Detectors& d) {
-  const Plane edge_x = convolve_separable(achromatic, d.first_derivative, d.gaussian);
-  const Plane edge_y = convolve_separable(achromatic, d.gaussian, d.first_derivative);
-  const Plane point_x = convolve_separable(achromatic, d.second_derivative, d.gaussian);
-  const Plane point_y = convolve_separable(achromatic, d.gaussian, d.second_derivative);
-  Features f{Plane(achromatic.width, achromatic.height),
-             Plane(achromatic.width, achromatic.height)};
-  for (std::size_t i = 0; i < achromatic.values.size(); ++i) {
+Features detect_features(const Plane& achromatic, const Detectors& d, int image_height, int first,
+                         int rows) {
+  const auto convolve = [&](std::span<const float> kx, std::span<const float> ky) {
+    return convolve_separable(achromatic, kx, ky, image_height, first, rows);
+  };
+  const Plane edge_x = convolve(d.first_derivative, d.gaussian);
+  const Plane edge_y = convolve(d.gaussian, d.first_derivative);
+  const Plane point_x = convolve(d.second_derivative, d.gaussian);
+  const Plane point_y = convolve(d.gaussian, d.second_derivative);
+  Features f{Plane(achromatic.width, rows, first), Plane(achromatic.width, rows, first)};
+  for (std::size_t i = 0; i < f.edges.values.size(); ++i) {
     f.edges.values[i] = std::hypot(edge_x.values[i], edge_y.values[i]);
     f.points.values[i] = std::hypot(point_x.values[i], point_y.values[i]);
   }
@@ -281,16 +296,24 @@ struct Prepared {
   Features features;
 };
 
+/// Both pipelines of one image for image rows [first, first + rows), from the rows within
+/// `halo` of them (the filters' reach).
 Prepared prepare(const Framebuffer& image, const std::array<std::vector<SeparableTerm>, 3>& csf,
-                 const Detectors& detectors, const ColorSpace& space) {
+                 const Detectors& detectors, const ColorSpace& space, int first, int rows,
+                 int halo) {
   const int w = static_cast<int>(image.width());
   const int h = static_cast<int>(image.height());
+  const int in_first = std::max(0, first - halo);
+  const int in_rows = std::min(h, first + rows + halo) - in_first;
 
   // The LDR display model: what a monitor shows is clamped to [0, 1]; the paper's sRGB → linear
   // step is the identity here because framebuffers are already linear.
-  std::array<Plane, 3> ycxcz = {Plane(w, h), Plane(w, h), Plane(w, h)};
-  Plane achromatic(w, h);
-  const auto pixels = image.pixels();
+  std::array<Plane, 3> ycxcz = {Plane(w, in_rows, in_first), Plane(w, in_rows, in_first),
+                                Plane(w, in_rows, in_first)};
+  Plane achromatic(w, in_rows, in_first);
+  const auto pixels =
+      image.pixels().subspan(static_cast<std::size_t>(in_first) * static_cast<std::size_t>(w),
+                             static_cast<std::size_t>(in_rows) * static_cast<std::size_t>(w));
   for (std::size_t i = 0; i < pixels.size(); ++i) {
     const vec3 rgb(clamp_unit(pixels[i].r), clamp_unit(pixels[i].g), clamp_unit(pixels[i].b));
     const vec3 v = xyz_to_ycxcz(space.xyz_from_rgb * rgb, space.white);
@@ -301,17 +324,17 @@ Prepared prepare(const Framebuffer& image, const std::array<std::vector<Separabl
 
   // Colour pipeline: filter each opponent channel with its CSF, then back to RGB, clamp (a
   // filtered colour may leave the gamut), and on to Hunt-adjusted L*a*b*.
-  std::array<Plane, 3> filtered = {apply_filter(ycxcz[0], csf[0]), apply_filter(ycxcz[1], csf[1]),
-                                   apply_filter(ycxcz[2], csf[2])};
-  std::array<Plane, 3> lab = {Plane(w, h), Plane(w, h), Plane(w, h)};
-  for (std::size_t i = 0; i < pixels.size(); ++i) {
+  const auto filter = [&](std::size_t c) { return apply_filter(ycxcz[c], csf[c], h, first, rows); };
+  const std::array<Plane, 3> filtered = {filter(0), filter(1), filter(2)};
+  std::array<Plane, 3> lab = {Plane(w, rows, first), Plane(w, rows, first), Plane(w, rows, first)};
+  for (std::size_t i = 0; i < lab[0].values.size(); ++i) {
     const vec3 v(filtered[0].values[i], filtered[1].values[i], filtered[2].values[i]);
     vec3 rgb = space.rgb_from_xyz * ycxcz_to_xyz(v, space.white);
     rgb = vec3(clamp_unit(rgb.r), clamp_unit(rgb.g), clamp_unit(rgb.b));
     const vec3 hunt_lab = hunt_lab_of_rgb(rgb, space);
     for (int c = 0; c < 3; ++c) lab[static_cast<std::size_t>(c)].values[i] = hunt_lab[c];
   }
-  return {std::move(lab), detect_features(achromatic, detectors)};
+  return {std::move(lab), detect_features(achromatic, detectors, h, first, rows)};
 }
 
 /// Colour error redistribution: the q_c-compressed HyAB distance, with [0, p_c·cmax] stretched
@@ -356,53 +379,97 @@ double flip_pixels_per_degree(double distance_m, double width_m, double resoluti
   return distance_m * (resolution_x / width_m) * (std::numbers::pi / 180.0);
 }
 
+namespace {
+
+void check_options(const FlipOptions& options) {
+  const double ppd = options.pixels_per_degree;
+  if (!(ppd > 0.0 && ppd <= 1000.0)) { // also rejects NaN
+    throw Error("flip: pixels per degree " + std::to_string(ppd) + " is outside (0, 1000]");
+  }
+}
+
+/// The CSF filters' radius in pixels: three standard deviations of the widest Gaussian.
+int csf_radius(double ppd) {
+  const double pi = std::numbers::pi;
+  return static_cast<int>(std::ceil(3.0 * std::sqrt(kCsfMaxB / (2.0 * pi * pi)) * ppd));
+}
+
+/// How far, in rows, the filters of either pipeline reach.
+int filter_halo(double ppd, const Detectors& detectors) {
+  return std::max(csf_radius(ppd), static_cast<int>(detectors.gaussian.size() / 2));
+}
+
+/// Rows per band: the option, or the whole image for 0.
+int band_rows(const FlipOptions& options, std::uint32_t height) {
+  return static_cast<int>(options.band_rows == 0 ? height : std::min(options.band_rows, height));
+}
+
+} // namespace
+
+std::uint64_t flip_working_bytes(std::uint32_t width, std::uint32_t height,
+                                 const FlipOptions& options) {
+  check_options(options);
+  const std::uint64_t rows = static_cast<std::uint64_t>(band_rows(options, height));
+  const std::uint64_t halo = static_cast<std::uint64_t>(
+      filter_halo(options.pixels_per_degree, make_detectors(options.pixels_per_degree)));
+  // At most: the reference's band result (5 planes of the band) while the test's band is
+  // prepared, whose peak is 5 input planes and a horizontal pass over the band and its halo,
+  // plus the filtered, L*a*b*, detector and feature planes of the band (about 14): 24 planes of
+  // band + 2·halo rows, a bound. Plus the error map.
+  const std::uint64_t band_bytes = 24 * (rows + 2 * halo) * width * sizeof(float);
+  return std::uint64_t{width} * height * sizeof(float) + band_bytes;
+}
+
 FlipResult flip(const Framebuffer& reference, const Framebuffer& test, const FlipOptions& options) {
   if (reference.width() != test.width() || reference.height() != test.height()) {
     throw Error("flip: image sizes differ (" + std::to_string(reference.width()) + "x" +
                 std::to_string(reference.height()) + " vs " + std::to_string(test.width()) + "x" +
                 std::to_string(test.height()) + ")");
   }
+  check_options(options);
   const double ppd = options.pixels_per_degree;
-  if (!(ppd > 0.0 && ppd <= 1000.0)) { // also rejects NaN
-    throw Error("flip: pixels per degree " + std::to_string(ppd) + " is outside (0, 1000]");
-  }
 
   const ColorSpace& space = srgb_space();
-  const double pi = std::numbers::pi;
-  const int csf_radius =
-      static_cast<int>(std::ceil(3.0 * std::sqrt(kCsfMaxB / (2.0 * pi * pi)) * ppd));
-  const std::array<std::vector<SeparableTerm>, 3> csf = {
-      csf_filter(kCsfAchromatic, csf_radius, ppd), csf_filter(kCsfRedGreen, csf_radius, ppd),
-      csf_filter(kCsfBlueYellow, csf_radius, ppd)};
+  const int radius = csf_radius(ppd);
+  const std::array<std::vector<SeparableTerm>, 3> csf = {csf_filter(kCsfAchromatic, radius, ppd),
+                                                         csf_filter(kCsfRedGreen, radius, ppd),
+                                                         csf_filter(kCsfBlueYellow, radius, ppd)};
   const Detectors detectors = make_detectors(ppd);
-  const Prepared ref = prepare(reference, csf, detectors, space);
-  const Prepared tst = prepare(test, csf, detectors, space);
+  const int halo = filter_halo(ppd, detectors);
   const double cmax = max_color_distance(space);
 
   FlipResult result;
   result.width = reference.width();
   result.height = reference.height();
   result.error_map.resize(reference.pixel_count());
-  double sum = 0.0;
-  for (std::size_t i = 0; i < result.error_map.size(); ++i) {
-    const vec3 lab_ref(ref.lab[0].values[i], ref.lab[1].values[i], ref.lab[2].values[i]);
-    const vec3 lab_tst(tst.lab[0].values[i], tst.lab[1].values[i], tst.lab[2].values[i]);
-    const double color_error = redistribute_color_error(hyab(lab_ref, lab_tst), cmax);
+  const int height = static_cast<int>(reference.height());
+  const int band = band_rows(options, reference.height());
+  double sum = 0.0; // over pixels in row-major order, whatever the band height
+  for (int first = 0; first < height; first += band) {
+    const int rows = std::min(band, height - first);
+    const Prepared ref = prepare(reference, csf, detectors, space, first, rows, halo);
+    const Prepared tst = prepare(test, csf, detectors, space, first, rows, halo);
+    float* const out = result.error_map.data() + static_cast<std::size_t>(first) * result.width;
+    for (std::size_t i = 0; i < ref.lab[0].values.size(); ++i) {
+      const vec3 lab_ref(ref.lab[0].values[i], ref.lab[1].values[i], ref.lab[2].values[i]);
+      const vec3 lab_tst(tst.lab[0].values[i], tst.lab[1].values[i], tst.lab[2].values[i]);
+      const double color_error = redistribute_color_error(hyab(lab_ref, lab_tst), cmax);
 
-    // Feature difference: the larger of the edge and point magnitude differences; each
-    // magnitude is at most √2, hence the 1/√2 that maps the difference into [0, 1].
-    const double edge_diff =
-        std::abs(double{ref.features.edges.values[i]} - tst.features.edges.values[i]);
-    const double point_diff =
-        std::abs(double{ref.features.points.values[i]} - tst.features.points.values[i]);
-    const double feature_error =
-        std::pow(std::max(edge_diff, point_diff) / std::numbers::sqrt2, kQf);
+      // Feature difference: the larger of the edge and point magnitude differences; each
+      // magnitude is at most √2, hence the 1/√2 that maps the difference into [0, 1].
+      const double edge_diff =
+          std::abs(double{ref.features.edges.values[i]} - tst.features.edges.values[i]);
+      const double point_diff =
+          std::abs(double{ref.features.points.values[i]} - tst.features.points.values[i]);
+      const double feature_error =
+          std::pow(std::max(edge_diff, point_diff) / std::numbers::sqrt2, kQf);
 
-    // Features amplify colour errors: an exponent below 1 raises a value in [0, 1]. The clamp
-    // only absorbs rounding (both terms are in [0, 1] by construction).
-    const double error = std::clamp(std::pow(color_error, 1.0 - feature_error), 0.0, 1.0);
-    result.error_map[i] = static_cast<float>(error);
-    sum += error;
+      // Features amplify colour errors: an exponent below 1 raises a value in [0, 1]. The clamp
+      // only absorbs rounding (both terms are in [0, 1] by construction).
+      const double error = std::clamp(std::pow(color_error, 1.0 - feature_error), 0.0, 1.0);
+      out[i] = static_cast<float>(error);
+      sum += error;
+    }
   }
   result.mean = sum / static_cast<double>(result.error_map.size());
   return result;
@@ -421,6 +488,7 @@ vec3 magma(float t) {
 }
 
 void write_flip_heatmap(const FlipResult& result, const std::filesystem::path& path) {
+  (void)check_image_output_path(path, {ImageFormat::Png}); // PNG bytes only under a .png name
   std::vector<std::uint8_t> rgb;
   rgb.reserve(3 * result.error_map.size());
   for (float e : result.error_map) {

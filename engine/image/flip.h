@@ -27,6 +27,10 @@ inline constexpr double kFlipDefaultPixelsPerDegree = 67.0;
 struct FlipOptions {
   /// Must be finite and in (0, 1000]; filter radii grow linearly with it.
   double pixels_per_degree = kFlipDefaultPixelsPerDegree;
+  /// The map is computed in bands of this many rows (0: the whole image at once), so the
+  /// working memory beyond the error map is a few planes of one band, not of the image. The
+  /// result is bit-identical for every band height.
+  std::uint32_t band_rows = 128;
 };
 
 /// The FLIP error map: one value in [0, 1] per pixel, row-major like Framebuffer, and its mean
@@ -51,6 +55,11 @@ struct FlipResult {
 [[nodiscard]] FlipResult flip(const Framebuffer& reference, const Framebuffer& test,
                               const FlipOptions& options = {});
 
+/// Bytes flip() allocates for images of this size: the error map (4 per pixel) and a bound on its
+/// band buffers. Throws specula::Error for bad options, as flip() does.
+[[nodiscard]] std::uint64_t flip_working_bytes(std::uint32_t width, std::uint32_t height,
+                                               const FlipOptions& options = {});
+
 /// The 'magma' colour map (Smith and van der Walt, matplotlib, CC0), the one the FLIP paper
 /// uses for its error maps: t in [0, 1] (clamped) → sRGB-encoded colour in [0, 1]. A piecewise
 /// linear fit through 17 of the 256 published entries (every 16th and the last), off the full
@@ -58,7 +67,8 @@ struct FlipResult {
 [[nodiscard]] vec3 magma(float t);
 
 /// Writes the error map as an 8-bit sRGB PNG coloured by magma(): black-purple for 0, pale
-/// yellow for 1. Throws specula::Error naming the path when it cannot be written.
+/// yellow for 1. Throws specula::Error naming the path when it does not end in .png (the
+/// extension must say what the file holds) or cannot be written.
 void write_flip_heatmap(const FlipResult& result, const std::filesystem::path& path);
 
 } // namespace specula

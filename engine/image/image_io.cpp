@@ -1,6 +1,7 @@
 #include "specula/image/image_io.h"
 
 #include "specula/core/error.h"
+#include "specula/core/file_io.h"
 #include "specula/image/srgb.h"
 
 // The implementations live in the system libstb; only the declarations are included here.
@@ -19,20 +20,29 @@
 #include <ImfVersion.h>
 #include <openexr.h>
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cctype>
 #include <cerrno>
 #include <climits>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <exception>
 #include <fstream>
+#include <initializer_list>
 #include <memory>
 #include <new>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <utility>
 #include <vector>
 
 namespace specula {
@@ -52,23 +62,16 @@ std::string size_text(std::int64_t width, std::int64_t height) {
 }
 
 /// The whole file, with the reasons a file cannot be read told apart (a missing file and an
-/// empty one are different mistakes for the user).
-Bytes read_file_bytes(const std::filesystem::path& path) {
-  std::error_code ec;
-  const auto status = std::filesystem::status(path, ec);
-  if (!std::filesystem::exists(status)) fail(path, "file not found");
-  if (std::filesystem::is_directory(status)) fail(path, "is a directory, not an image file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(path, "cannot open: " + errno_message());
-  in.seekg(0, std::ios::end);
-  const std::streamoff size = in.tellg();
-  if (size < 0) fail(path, "cannot read: " + errno_message());
-  if (size == 0) fail(path, "empty file");
-  in.seekg(0, std::ios::beg);
-  Bytes bytes(static_cast<std::size_t>(size));
-  in.read(reinterpret_cast<char*>(bytes.data()), size);
-  if (in.gcount() != size) fail(path, "cannot read: " + errno_message());
+/// empty one are different mistakes for the user): regular files only, within
+/// kMaxDataFileBytes (docs/limits.md), so a device or FIFO named .png or .exr is refused.
+std::string read_file_bytes(const std::filesystem::path& path, std::string_view what) {
+  std::string bytes = read_file_bounded(path, kMaxDataFileBytes, what);
+  if (bytes.empty()) fail(path, "empty file");
   return bytes;
+}
+
+std::span<const std::uint8_t> as_bytes(const std::string& bytes) {
+  return {reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()};
 }
 
 std::string lowercase_extension(const std::filesystem::path& path) {
@@ -126,28 +129,6 @@ public:
 
 private:
   std::span<const std::uint8_t> bytes_;
-  std::uint64_t position_ = 0;
-};
-
-/// An Imf::OStream that grows a byte vector. The library writes the line offset table from
-/// OutputFile's destructor, where it swallows errors; writing to memory first and then to the
-/// file lets every write error reach the caller.
-class ExrMemoryOutput final : public Imf::OStream {
-public:
-  explicit ExrMemoryOutput(const std::string& name) : Imf::OStream(name.c_str()) {}
-
-  void write(const char c[], int n) override {
-    const std::size_t end = static_cast<std::size_t>(position_) + static_cast<std::size_t>(n);
-    if (end > bytes_.size()) bytes_.resize(end);
-    std::memcpy(bytes_.data() + position_, c, static_cast<std::size_t>(n));
-    position_ = end;
-  }
-  std::uint64_t tellp() override { return position_; }
-  void seekp(std::uint64_t position) override { position_ = position; }
-  [[nodiscard]] const Bytes& bytes() const { return bytes_; }
-
-private:
-  Bytes bytes_;
   std::uint64_t position_ = 0;
 };
 
@@ -260,7 +241,8 @@ ExrColourChannels check_exr_header(const Imf::Header& header,
     colour.gray = true;
   } else {
     std::string found;
-    for (auto it = channels.begin(); it != channels.end(); ++it) found += " " + printable(it.name(), 64);
+    for (auto it = channels.begin(); it != channels.end(); ++it)
+      found += " " + printable(it.name(), 64);
     fail(path, "unsupported EXR: no R, G, B channels (nor Y alone); found:" +
                    (found.empty() ? std::string(" none") : found));
   }
@@ -445,6 +427,14 @@ Framebuffer decode_exr(std::span<const std::uint8_t> bytes, const std::filesyste
   int header_version = version;
   header.readFrom(stream, header_version);
   const ExrColourChannels colour = check_exr_header(header, attributes, tiled, path);
+  {
+    // The framebuffer the pixels go to, allocated once the chunks passed: known now.
+    const Imath::Box2i& window = header.dataWindow();
+    const auto w = static_cast<std::uint64_t>(std::int64_t{window.max.x} - window.min.x + 1);
+    const auto h = static_cast<std::uint64_t>(std::int64_t{window.max.y} - window.min.y + 1);
+    check_memory_budget(path, w * h * sizeof(vec3),
+                        "reading this " + size_text(std::int64_t(w), std::int64_t(h)) + " EXR");
+  }
   check_exr_chunks(bytes, colour, path);
 
   // The header passed: now the library reads the file from the start, tables and pixels.
@@ -485,6 +475,170 @@ Framebuffer decode_exr(std::span<const std::uint8_t> bytes, const std::filesyste
 
 } // namespace
 
+// --- Writing files -----------------------------------------------------------------------------
+
+namespace {
+
+/// An image file being written. Bytes go to a temporary file beside the target, renamed over it
+/// by commit() once every write, and the close, succeeded: a failed write (a full disk, a file
+/// size limit) never leaves a truncated image under the requested name, and an existing image
+/// stays as it was. A target that exists and is not a regular file (a device such as /dev/full, a
+/// FIFO) cannot be replaced and is written directly, and so is an existing file in a folder where
+/// no new file may be created. Every failure throws specula::Error naming
+/// the target; the temporary file is removed unless committed.
+class ImageFileWriter {
+public:
+  ImageFileWriter(const std::filesystem::path& path, const char* format)
+      : path_(path), format_(format) {
+    std::error_code ec;
+    std::filesystem::path target = path;
+    // A link is followed, so the image replaces the file it points to, not the link.
+    if (std::filesystem::is_symlink(std::filesystem::symlink_status(path, ec))) {
+      const std::filesystem::path resolved = std::filesystem::weakly_canonical(path, ec);
+      if (!ec) target = resolved;
+    }
+    const auto status = std::filesystem::status(target, ec);
+    if (std::filesystem::is_directory(status)) fail_write("is a directory");
+    if (std::filesystem::exists(status) && !std::filesystem::is_regular_file(status)) {
+      fd_ = ::open(target.c_str(), O_WRONLY | O_CLOEXEC);
+      if (fd_ < 0) fail_write(errno_message());
+      return;
+    }
+    static std::atomic<unsigned> counter{0};
+    for (int attempt = 0; fd_ < 0; ++attempt) {
+      temp_ = target;
+      temp_.replace_filename("." + target.filename().string() + ".tmp-" +
+                             std::to_string(::getpid()) + "-" + std::to_string(counter++));
+      // 0666 before the umask, as for any new file; the rename keeps it.
+      fd_ = ::open(temp_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+      if (fd_ < 0 && (errno != EEXIST || attempt == 16)) {
+        const int error = errno;
+        temp_.clear();
+        // A folder that takes no new file, holding a file the user may write: replaced in place,
+        // as the user asked, without the guarantee.
+        if ((error == EACCES || error == EPERM) && std::filesystem::is_regular_file(status)) {
+          fd_ = ::open(target.c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
+          if (fd_ >= 0) return;
+        }
+        fail_write(std::error_code(error, std::generic_category()).message());
+      }
+    }
+    final_ = target;
+  }
+  ImageFileWriter(const ImageFileWriter&) = delete;
+  ImageFileWriter& operator=(const ImageFileWriter&) = delete;
+
+  ~ImageFileWriter() {
+    if (fd_ >= 0) ::close(fd_);
+    if (!temp_.empty()) ::unlink(temp_.c_str());
+  }
+
+  /// Writes all of `bytes` at `offset` (the EXR writer seeks back to fill its offset table).
+  void write_at(std::uint64_t offset, std::span<const std::uint8_t> bytes) {
+    while (!bytes.empty()) {
+      const ssize_t n = ::pwrite(fd_, bytes.data(), bytes.size(), static_cast<off_t>(offset));
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0 && errno == ESPIPE && offset == written_) { // a FIFO: only sequential writes
+        write_sequential(bytes);
+        return;
+      }
+      if (n <= 0) fail_write(n < 0 ? errno_message() : "nothing written");
+      bytes = bytes.subspan(static_cast<std::size_t>(n));
+      offset += static_cast<std::uint64_t>(n);
+      written_ = std::max(written_, offset);
+    }
+  }
+  void write(std::span<const std::uint8_t> bytes) { write_at(written_, bytes); }
+
+  /// Closes the file (a close can report a delayed write error) and moves it into place.
+  void commit() {
+    const int fd = fd_;
+    fd_ = -1;
+    if (::close(fd) != 0) fail_write(errno_message());
+    if (temp_.empty()) return;
+    if (std::rename(temp_.c_str(), final_.c_str()) != 0) fail_write(errno_message());
+    temp_.clear();
+  }
+
+  [[noreturn]] void fail_write(const std::string& reason) const {
+    fail(path_, std::string("cannot write ") + format_ + ": " + reason);
+  }
+
+private:
+  void write_sequential(std::span<const std::uint8_t> bytes) {
+    while (!bytes.empty()) {
+      const ssize_t n = ::write(fd_, bytes.data(), bytes.size());
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) fail_write(n < 0 ? errno_message() : "nothing written");
+      bytes = bytes.subspan(static_cast<std::size_t>(n));
+      written_ += static_cast<std::uint64_t>(n);
+    }
+  }
+
+  std::filesystem::path path_;  ///< as the caller named it, for messages
+  std::filesystem::path final_; ///< where the temporary file goes (links resolved)
+  std::filesystem::path temp_;  ///< empty: writing the target directly, or committed
+  const char* format_;
+  int fd_ = -1;
+  std::uint64_t written_ = 0;
+};
+
+/// An Imf::OStream onto an ImageFileWriter. The library writes the line offset table from
+/// OutputFile's destructor, where it swallows exceptions: the first error is kept here and
+/// rethrown once the OutputFile is gone.
+class ExrFileOutput final : public Imf::OStream {
+public:
+  ExrFileOutput(ImageFileWriter& file, const std::string& name)
+      : Imf::OStream(name.c_str()), file_(file) {}
+
+  void write(const char c[], int n) override {
+    if (error_) throw Iex::IoExc("earlier write failed");
+    try {
+      file_.write_at(position_, {reinterpret_cast<const std::uint8_t*>(c),
+                                 static_cast<std::size_t>(std::max(n, 0))});
+    } catch (...) {
+      error_ = std::current_exception();
+      throw Iex::IoExc("write failed");
+    }
+    position_ += static_cast<std::uint64_t>(std::max(n, 0));
+  }
+  std::uint64_t tellp() override { return position_; }
+  void seekp(std::uint64_t position) override { position_ = position; }
+  /// Rethrows the first write error, if any.
+  void check() const {
+    if (error_) std::rethrow_exception(error_);
+  }
+
+private:
+  ImageFileWriter& file_;
+  std::uint64_t position_ = 0;
+  std::exception_ptr error_;
+};
+
+/// stb_image_write's callback: the encoded PNG, in one piece, onto the file.
+void write_png_bytes(void* context, void* data, int size) {
+  auto* writer = static_cast<std::pair<ImageFileWriter*, std::exception_ptr>*>(context);
+  if (writer->second) return;
+  try {
+    writer->first->write({static_cast<const std::uint8_t*>(data), static_cast<std::size_t>(size)});
+  } catch (...) {
+    writer->second = std::current_exception(); // no exception may cross stb's C frames
+  }
+}
+
+std::string extension_list(std::initializer_list<ImageFormat> formats) {
+  std::string text;
+  std::size_t k = 0;
+  for (const ImageFormat f : formats) {
+    if (k > 0) text += k + 1 == formats.size() ? " or " : ", ";
+    text += f == ImageFormat::Png ? ".png" : ".exr";
+    ++k;
+  }
+  return text;
+}
+
+} // namespace
+
 // --- PNG ---------------------------------------------------------------------------------------
 
 void write_png_srgb8(std::span<const std::uint8_t> rgb, std::uint32_t width, std::uint32_t height,
@@ -494,11 +648,17 @@ void write_png_srgb8(std::span<const std::uint8_t> rgb, std::uint32_t width, std
     fail(path, "cannot write PNG: " + std::to_string(rgb.size()) + " bytes do not form a " +
                    size_text(width, height) + " RGB image");
   }
+  // Encoded in memory by stb, then written here: stbi_write_png ignores fwrite's result, so a
+  // full disk would give a truncated file and success.
+  ImageFileWriter file(path, "PNG");
+  std::pair<ImageFileWriter*, std::exception_ptr> context{&file, nullptr};
   const int stride = static_cast<int>(3 * width);
-  if (stbi_write_png(path.string().c_str(), static_cast<int>(width), static_cast<int>(height), 3,
-                     rgb.data(), stride) == 0) {
-    fail(path, "cannot write PNG: " + errno_message());
+  if (stbi_write_png_to_func(&write_png_bytes, &context, static_cast<int>(width),
+                             static_cast<int>(height), 3, rgb.data(), stride) == 0) {
+    file.fail_write("out of memory while encoding");
   }
+  if (context.second) std::rethrow_exception(context.second);
+  file.commit();
 }
 
 void write_png(const Framebuffer& image, const std::filesystem::path& path) {
@@ -513,7 +673,8 @@ void write_png(const Framebuffer& image, const std::filesystem::path& path) {
 }
 
 Framebuffer read_png(const std::filesystem::path& path) {
-  const Bytes bytes = read_file_bytes(path);
+  const std::string file_bytes = read_file_bytes(path, "PNG image");
+  const std::span<const std::uint8_t> bytes = as_bytes(file_bytes);
   if (bytes.size() < kPngSignature.size() ||
       !std::equal(kPngSignature.begin(), kPngSignature.end(), bytes.begin())) {
     fail(path, "not a PNG file (wrong signature)");
@@ -542,6 +703,34 @@ Framebuffer read_png(const std::filesystem::path& path) {
                              static_cast<std::int64_t>(ihdr_height)) +
                    " is outside [1, " + std::to_string(kMaxFramebufferSide) + "] per side");
   }
+  // What decoding will allocate, known from IHDR before anything is: the inflated scan lines
+  // (a filter byte per row), stb's unfiltered copy and RGB result, and the framebuffer.
+  const std::uint64_t bit_depth = bytes[24];
+  const std::uint8_t colour_type = bytes[25];
+  const std::uint64_t samples = colour_type == 2   ? 3
+                                : colour_type == 4 ? 2
+                                : colour_type == 6 ? 4
+                                                   : 1;
+  const std::uint64_t row_bytes = (ihdr_width * samples * bit_depth + 7) / 8;
+  const std::uint64_t raw_bytes = ihdr_height * (1 + row_bytes);
+  const std::uint64_t pixels_count = ihdr_width * ihdr_height;
+  // Deflate expands its input at most 1032 times (zlib's technical notes): a file too small to
+  // hold the image is truncated or corrupt, whatever its IHDR says, and is refused before any
+  // of the memory its IHDR asks for is allocated.
+  constexpr std::uint64_t kMaxDeflateRatio = 1032;
+  if (raw_bytes > kMaxDeflateRatio * bytes.size()) {
+    fail(path, "corrupt or truncated PNG: a " +
+                   size_text(static_cast<std::int64_t>(ihdr_width),
+                             static_cast<std::int64_t>(ihdr_height)) +
+                   " image needs " + std::to_string(raw_bytes) +
+                   " bytes of scan lines, more than the " + std::to_string(bytes.size()) +
+                   "-byte file can hold compressed");
+  }
+  check_memory_budget(
+      path, 2 * raw_bytes + pixels_count * (6 + sizeof(vec3)),
+      "decoding this " +
+          size_text(static_cast<std::int64_t>(ihdr_width), static_cast<std::int64_t>(ihdr_height)) +
+          " PNG");
 
   int width = 0;
   int height = 0;
@@ -596,7 +785,8 @@ void write_exr(const Framebuffer& image, const std::filesystem::path& path) {
     }
   }
 
-  ExrMemoryOutput encoded(path.string());
+  ImageFileWriter file(path, "EXR");
+  ExrFileOutput stream(file, path.string());
   try {
     Imf::Header header(static_cast<int>(width), static_cast<int>(height));
     header.compression() = Imf::ZIP_COMPRESSION; // lossless: the floats come back bit-exact
@@ -607,23 +797,20 @@ void write_exr(const Framebuffer& image, const std::filesystem::path& path) {
       slices.insert(name, Imf::Slice::Make(Imf::FLOAT, &image.pixels()[0][c], Imath::V2i(0, 0),
                                            width, height, sizeof(vec3), sizeof(vec3) * width));
     }
-    Imf::OutputFile file(encoded, header);
-    file.setFrameBuffer(slices);
-    file.writePixels(static_cast<int>(height));
+    Imf::OutputFile exr(stream, header);
+    exr.setFrameBuffer(slices);
+    exr.writePixels(static_cast<int>(height));
   } catch (const std::exception& e) {
-    fail(path, "cannot write EXR: " + one_line(e.what()));
+    stream.check(); // a write error, with its own message
+    file.fail_write(one_line(e.what()));
   }
-
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) fail(path, "cannot write EXR: " + errno_message());
-  out.write(reinterpret_cast<const char*>(encoded.bytes().data()),
-            static_cast<std::streamsize>(encoded.bytes().size()));
-  out.flush();
-  if (!out) fail(path, "cannot write EXR: " + errno_message());
+  stream.check(); // what the OutputFile's destructor wrote last (the offset table)
+  file.commit();
 }
 
 Framebuffer read_exr(const std::filesystem::path& path) {
-  const Bytes bytes = read_file_bytes(path);
+  const std::string file_bytes = read_file_bytes(path, "EXR image");
+  const std::span<const std::uint8_t> bytes = as_bytes(file_bytes);
   if (bytes.size() < 4 || !Imf::isImfMagic(reinterpret_cast<const char*>(bytes.data()))) {
     fail(path, "not an OpenEXR file (wrong magic number)");
   }
@@ -650,12 +837,36 @@ Framebuffer read_image(const std::filesystem::path& path) {
        "unsupported image extension '" + path.extension().string() + "' (expected .png or .exr)");
 }
 
-void write_image(const Framebuffer& image, const std::filesystem::path& path) {
+std::optional<ImageFormat> image_format(const std::filesystem::path& path) {
   const std::string extension = lowercase_extension(path);
-  if (extension == ".png") return write_png(image, path);
-  if (extension == ".exr") return write_exr(image, path);
-  fail(path,
-       "unsupported image extension '" + path.extension().string() + "' (expected .png or .exr)");
+  if (extension == ".png") return ImageFormat::Png;
+  if (extension == ".exr") return ImageFormat::Exr;
+  return std::nullopt;
+}
+
+ImageFormat check_image_output_path(const std::filesystem::path& path,
+                                    std::initializer_list<ImageFormat> accepted) {
+  if (path.empty()) throw Error("output image: the path is empty");
+  const std::optional<ImageFormat> format = image_format(path);
+  if (!format || std::find(accepted.begin(), accepted.end(), *format) == accepted.end()) {
+    fail(path, "unsupported image extension '" + printable(path.extension().string(), 32) +
+                   "' (expected " + extension_list(accepted) + ")");
+  }
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) fail(path, "is a directory, not an image file");
+  const std::filesystem::path folder =
+      path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
+  if (!std::filesystem::is_directory(folder, ec)) {
+    fail(path,
+         "cannot write there: folder '" + printable(folder.string(), 200) + "' does not exist");
+  }
+  return *format;
+}
+
+void write_image(const Framebuffer& image, const std::filesystem::path& path) {
+  if (check_image_output_path(path, {ImageFormat::Png, ImageFormat::Exr}) == ImageFormat::Png)
+    return write_png(image, path);
+  write_exr(image, path);
 }
 
 } // namespace specula

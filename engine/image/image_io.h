@@ -6,19 +6,26 @@
 /// Every reader validates its input and throws specula::Error whose what() names the file and
 /// the problem (missing, empty, truncated, wrong signature, absurd size, unsupported variant,
 /// non-finite values); no reader trusts a size field before checking it.
+/// Every writer encodes in memory and writes the file itself, checking each write and the close,
+/// into a temporary file beside the target that is renamed over it when complete: a failed write
+/// (a full disk, a missing folder, a file size limit) throws specula::Error naming the file and
+/// leaves no truncated image under its name. A target that exists and is not a regular file (a
+/// device such as /dev/full, a FIFO) is written directly.
 
 #include "specula/image/framebuffer.h"
 
 #include <cstdint>
 #include <filesystem>
+#include <initializer_list>
+#include <optional>
 #include <span>
 
 namespace specula {
 
 /// Writes an 8-bit RGB PNG: each linear channel is clamped to [0, 1] (NaN → 0, since PNG is a
 /// display format that cannot hold it), encoded with the exact piecewise sRGB OETF and rounded to
-/// the nearest of 256 levels. Throws specula::Error naming the path when the file cannot be
-/// written.
+/// the nearest of 256 levels, whatever the path's extension. Throws specula::Error naming the path
+/// when the file cannot be written.
 void write_png(const Framebuffer& image, const std::filesystem::path& path);
 
 /// Writes already display-encoded 8-bit RGB (row-major, 3 bytes per pixel, row 0 at the top), for
@@ -58,8 +65,21 @@ void write_exr(const Framebuffer& image, const std::filesystem::path& path);
 /// error naming the file.
 [[nodiscard]] Framebuffer read_image(const std::filesystem::path& path);
 
-/// write_png or write_exr by extension (.png, .exr, case-insensitive); any other extension is an
-/// error naming the file.
+/// The image formats Specula writes.
+enum class ImageFormat { Png, Exr };
+
+/// The format a path's extension names (.png, .exr, case-insensitive); empty for any other.
+[[nodiscard]] std::optional<ImageFormat> image_format(const std::filesystem::path& path);
+
+/// Checks that an image of one of the `accepted` formats can be written to `path`, before the work
+/// that produces it: throws specula::Error naming the path when it is empty, its extension is not
+/// one of theirs (the message lists them), it names a directory, or its folder does not exist.
+/// Returns the format its extension names.
+ImageFormat check_image_output_path(const std::filesystem::path& path,
+                                    std::initializer_list<ImageFormat> accepted);
+
+/// write_png or write_exr by extension (.png, .exr, case-insensitive), after
+/// check_image_output_path: any other extension is an error naming the file.
 void write_image(const Framebuffer& image, const std::filesystem::path& path);
 
 } // namespace specula

@@ -3,15 +3,16 @@
 #include "specula/cache/ray_cache.h"
 #include "specula/core/error.h"
 #include "specula/render/tracer_factory.h"
+#include "specula/scene/scene.h"
 
 #include <string>
 
 namespace specula {
 
 void prepare_rendering(ecs::Registry& registry, RenderJob job) {
-  if (job.settings.max_depth > 32)
-    throw Error("render settings",
-                "max depth must be at most 32, got " + std::to_string(job.settings.max_depth));
+  if (job.settings.max_depth > kMaxTraceDepth)
+    throw Error("render settings", "max depth must be at most " + std::to_string(kMaxTraceDepth) +
+                                       ", got " + std::to_string(job.settings.max_depth));
   if (job.settings.tile_size == 0 || job.settings.tile_size > 1024)
     throw Error("render settings", "tile size must be 1 to 1024");
   if (job.settings.mode == TraceMode::Path || job.settings.mode == TraceMode::Shadow)

@@ -45,7 +45,8 @@ struct ActiveTracer {
 /// Checks the job's settings, creates its tracer through the factory and installs the job, the
 /// tracer and a SceneLayer in the registry; the schedule's scene-layer, acceleration and render
 /// systems then run on every tick. Throws UnavailableError for a backend or mode this build or
-/// machine does not have, specula::Error for bad settings (packet width, depth, tile size).
+/// machine does not have, specula::Error for bad settings (packet width, tile size, a depth above
+/// kMaxTraceDepth, the limit every scene loader applies too).
 void prepare_rendering(ecs::Registry& registry, RenderJob job);
 
 } // namespace specula

@@ -1,6 +1,7 @@
 #include "specula/scene/gltf_loader.h"
 
 #include "specula/core/error.h"
+#include "specula/core/file_io.h"
 #include "specula/core/log.h"
 #include "specula/scene/animation_sampling.h"
 #include "specula/scene/components.h"
@@ -29,7 +30,6 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#include <fstream>
 #include <iterator>
 #include <limits>
 #include <map>
@@ -108,7 +108,9 @@ struct Context {
   [[noreturn]] void fail(const std::string& field, const std::string& message) const {
     throw Error(file, field, message);
   }
-  void warn(const std::string& message) const { log_warning(file + ": " + message); }
+  void warn(const std::string& message) const {
+    log_warning(printable(file, 256) + ": " + one_line(message));
+  }
 };
 
 /// A JSON number as float. Doubles beyond float range (1e300) are errors too: converting them
@@ -134,11 +136,42 @@ std::string trimmed(std::string s) {
   return s;
 }
 
-bool starts_with_glb_magic(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::array<char, 4> magic{};
-  in.read(magic.data(), magic.size());
-  return in.gcount() == 4 && std::memcmp(magic.data(), "glTF", 4) == 0;
+/// The JSON chunk of a GLB (12-byte header, the chunk's length and type, then its text), or
+/// what there is of it: empty when the file is too short, cut at the end of the file when the
+/// length says more. Only for checks made before tinygltf's own; it reports malformed framing.
+std::string_view glb_json_chunk(std::string_view bytes) {
+  if (bytes.size() < 20) return {};
+  std::uint32_t length = 0;
+  for (std::size_t b = 0; b < 4; ++b)
+    length |= std::uint32_t{static_cast<unsigned char>(bytes[12 + b])} << (8 * b);
+  return bytes.substr(20, std::min<std::size_t>(length, bytes.size() - 20));
+}
+
+// tinygltf reads a glTF's external buffers and images (by URI) through these, so that they get
+// the same treatment as the file itself: regular files only, within kMaxDataFileBytes.
+
+bool file_exists(const std::string& path, void*) {
+  std::error_code ec;
+  return fs::exists(fs::status(path, ec)); // a device or FIFO "exists": reading it fails, clearly
+}
+
+std::string same_path(const std::string& path, void*) { return path; }
+
+bool read_bounded(std::vector<unsigned char>* out, std::string* err, const std::string& path,
+                  void*) {
+  try {
+    const std::string bytes = read_file_bounded(path, kMaxDataFileBytes, "glTF buffer or image");
+    out->assign(bytes.begin(), bytes.end());
+    return true;
+  } catch (const Error& e) {
+    if (err) *err += e.message();
+    return false;
+  }
+}
+
+bool write_nothing(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+  if (err) *err += "writing is not supported";
+  return false;
 }
 
 /// Throws for the first entry of `required` that the loader does not support.
@@ -152,25 +185,14 @@ void check_required_extensions(const std::string& file, const std::vector<std::s
                                 ? " (Draco-compressed meshes cannot be decoded by this build)"
                                 : "";
     throw Error(file, index_field("extensionsRequired", i),
-                "required extension " + name + " is not supported" + why);
+                "required extension " + printable(name) + " is not supported" + why);
   }
 }
 
 /// extensionsRequired read straight from the file's JSON (best effort: empty when unreadable).
 /// Used when tinygltf fails, because a file that needs an unsupported extension (Draco) often
 /// fails inside tinygltf first, with a message that hides the real reason.
-std::vector<std::string> required_extensions_in_json(const fs::path& path, bool binary) {
-  std::ifstream in(path, std::ios::binary);
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  std::string text;
-  if (!binary) {
-    text = std::move(bytes);
-  } else if (bytes.size() >= 20) {
-    // GLB: 12-byte header, then the JSON chunk's length and type, then the JSON text.
-    std::uint32_t length = 0;
-    std::memcpy(&length, bytes.data() + 12, sizeof length);
-    if (length <= bytes.size() - 20) text = bytes.substr(20, length);
-  }
+std::vector<std::string> required_extensions_in_json(std::string_view text) {
   const nlohmann::json doc = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
   std::vector<std::string> out;
   if (!doc.is_object()) return out;
@@ -183,48 +205,63 @@ std::vector<std::string> required_extensions_in_json(const fs::path& path, bool 
 
 tinygltf::Model read_model(const fs::path& path) {
   const std::string file = path.string();
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw Error(file, "file not found");
-  if (fs::is_directory(path, ec)) throw Error(file, "is a directory, not a glTF file");
+  // Regular files only, within the size bound (tinygltf would read a device for ever), and the
+  // whole file in memory, which tinygltf then parses from there.
+  const std::string bytes = read_file_bounded(path, kMaxDataFileBytes, "glTF file");
+  if (bytes.empty()) throw Error(file, "empty file (0 bytes)");
 
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   // .glb is always read as binary, so a wrong magic number is reported as such; other names are
   // sniffed, as some tools write binary glTF under .gltf.
-  const bool binary = ext == ".glb" || (ext != ".gltf" && starts_with_glb_magic(path));
+  const bool binary = ext == ".glb" || (ext != ".gltf" && bytes.starts_with("glTF"));
+  const std::string_view json_text = binary ? glb_json_chunk(bytes) : std::string_view(bytes);
+  // tinygltf's JSON handling recurses once per level of nesting: 20,000 levels overflow the
+  // stack. Deeper than any real file is an error before it sees the text.
+  strict_json::check_nesting(strict_json::Reader(file), json_text);
 
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(&skip_image, nullptr);
+  loader.SetFsCallbacks(
+      tinygltf::FsCallbacks{&file_exists, &same_path, &read_bounded, &write_nothing, nullptr});
+  // As LoadASCIIFromFile would: buffer and image URIs are relative to the file's folder.
+  const std::string base_dir = path.parent_path().string();
   tinygltf::Model model;
   std::string err;
   std::string warn;
   bool ok = false;
   try {
-    ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, file)
-                : loader.LoadASCIIFromFile(&model, &err, &warn, file);
+    const auto size = static_cast<unsigned int>(bytes.size()); // kMaxDataFileBytes < 4 GiB
+    ok = binary ? loader.LoadBinaryFromMemory(&model, &err, &warn,
+                                              reinterpret_cast<const unsigned char*>(bytes.data()),
+                                              size, base_dir)
+                : loader.LoadASCIIFromString(&model, &err, &warn, bytes.data(), size, base_dir);
   } catch (const std::exception& e) {
     // tinygltf reports through `err`, but the JSON library under it may still throw on input
     // it did not expect; that is bad input too.
-    throw Error(file, std::string("glTF: ") + e.what());
+    throw Error(file, "glTF: " + one_line(e.what()));
   }
   err = trimmed(err);
   warn = trimmed(warn);
   // tinygltf sometimes notes a real problem in `err` and still returns true: treat both alike.
   if (!ok || !err.empty()) {
-    check_required_extensions(file, required_extensions_in_json(path, binary));
-    std::string message = "glTF: " + (err.empty() ? std::string("could not be parsed") : err);
-    if (!warn.empty()) message += " (" + warn + ")";
+    check_required_extensions(file, required_extensions_in_json(json_text));
+    // tinygltf's reports run over several lines and quote the input: one line, cut.
+    std::string message =
+        "glTF: " + (err.empty() ? std::string("could not be parsed") : one_line(err));
+    if (!warn.empty()) message += " (" + one_line(warn, 256) + ")";
     throw Error(file, message);
   }
   if (!warn.empty()) {
     std::istringstream lines(warn);
     for (std::string line; std::getline(lines, line);)
-      if (!line.empty()) log_warning(file + ": glTF: " + line);
+      if (!line.empty()) log_warning(printable(file, 256) + ": glTF: " + one_line(line));
   }
   if (model.asset.version.empty() || model.asset.version[0] != '2')
     throw Error(file, "asset.version",
-                "glTF version '" + model.asset.version + "' is not supported (expected 2.x)");
+                "glTF version '" + printable(model.asset.version) +
+                    "' is not supported (expected 2.x)");
   check_required_extensions(file, model.extensionsRequired);
   return model;
 }
@@ -1058,7 +1095,8 @@ std::map<int, NodeAnimation> read_animations(const Context& ctx) {
                                              std::to_string(nodes.size()) + " nodes)");
       const std::string& path = channel.target_path;
       if (path != "translation" && path != "rotation" && path != "scale" && path != "weights") {
-        ctx.warn(field + ": animation path '" + path + "' is not supported; channel skipped");
+        ctx.warn(field + ": animation path '" + printable(path) +
+                 "' is not supported; channel skipped");
         continue;
       }
       if (const auto [it, inserted] = claimed.emplace(std::pair(channel.target_node, path), a);
@@ -1088,7 +1126,7 @@ std::map<int, NodeAnimation> read_animations(const Context& ctx) {
         cubic = true;
       else if (sampler.interpolation != "LINEAR" && !sampler.interpolation.empty())
         ctx.fail(sampler_field + ".interpolation",
-                 "unknown interpolation '" + sampler.interpolation + "'");
+                 "unknown interpolation '" + printable(sampler.interpolation) + "'");
 
       const std::vector<float> times = read_floats(ctx, sampler.input, sampler_field + ".input",
                                                    {TINYGLTF_TYPE_SCALAR}, Components::Float);

@@ -1,6 +1,7 @@
 #include "specula/scene/json_scene.h"
 
 #include "specula/core/error.h"
+#include "specula/core/file_io.h"
 #include "specula/scene/animation_sampling.h"
 #include "specula/scene/components.h"
 #include "specula/scene/gltf_loader.h"
@@ -38,8 +39,6 @@ constexpr int kFormatVersion = 1;
 /// names the JSON field.
 constexpr std::uint32_t kMaxTessellation = 4096;
 constexpr std::uint32_t kMaxRayCacheResolution = 4096;
-/// Recursion depth limit: far beyond any useful image, small enough to be an error, not a hang.
-constexpr std::uint32_t kMaxDepthLimit = 64;
 
 // ---------------------------------------------------------------------------------------------
 // Degrees in the file, radians in components. The writer searches for the shortest decimal that
@@ -133,7 +132,7 @@ RenderSettings read_settings(const Reader& r, const json& j, const std::string& 
   if (const json* v = o.find("height"))
     s.height = read_u32(r, *v, o.path("height"), 1, kMaxImageSide);
   if (const json* v = o.find("max_depth"))
-    s.max_depth = read_u32(r, *v, o.path("max_depth"), 0, kMaxDepthLimit);
+    s.max_depth = read_u32(r, *v, o.path("max_depth"), 0, kMaxTraceDepth);
   if (const json* v = o.find("background"))
     s.background = read_radiance(r, *v, o.path("background"));
   return s;
@@ -212,21 +211,27 @@ MeshSource read_file_mesh(const Reader& r, const json& j, const std::string& pat
   const std::string ext = lower(fs::path(s.path).extension().string());
   const bool gltf = ext == ".gltf" || ext == ".glb";
   if (!gltf && !is_mesh_file_extension(ext))
-    r.fail(o.path("file"), "mesh file \"" + s.path +
+    r.fail(o.path("file"), "mesh file \"" + printable(s.path) +
                                "\" has an unsupported extension (expected "
                                ".obj, .ply, .off, .stl, .gltf or .glb)");
   if (const json* v = o.find("gltf_mesh")) {
     if (!gltf)
       r.fail(o.path("gltf_mesh"), "\"gltf_mesh\" selects a mesh inside a .gltf/.glb file, but \"" +
-                                      s.path + "\" is not one");
+                                      printable(s.path) + "\" is not one");
     s.gltf_mesh = static_cast<int>(read_unsigned(r, *v, o.path("gltf_mesh"), 0,
                                                  std::uint64_t(std::numeric_limits<int>::max())));
   }
   const fs::path resolved = fs::path(s.path).is_absolute() ? fs::path(s.path) : base_dir / s.path;
+  // Only whether it is there and what it is: the mesh library reads it (and checks its size).
   std::error_code ec;
-  if (!fs::is_regular_file(resolved, ec))
-    r.fail(o.path("file"), "mesh file \"" + s.path + "\" not found (looked for " +
-                               resolved.lexically_normal().string() + ")");
+  const fs::file_status status = fs::status(resolved, ec);
+  const std::string looked =
+      " (looked for " + printable(resolved.lexically_normal().string()) + ")";
+  if (!fs::exists(status))
+    r.fail(o.path("file"), "mesh file \"" + printable(s.path) + "\" not found" + looked);
+  if (!fs::is_regular_file(status))
+    r.fail(o.path("file"), "mesh file \"" + printable(s.path) + "\" is not a regular file" +
+                               (fs::is_directory(status) ? " (a directory)" : "") + looked);
   return s;
 }
 
@@ -239,7 +244,8 @@ std::shared_ptr<const TriangleMesh> read_inline_mesh(const Reader& r, const json
     if (!v) return;
     const std::string at = o.path(key);
     read_array(r, *v, at, "one entry per vertex");
-    if (v->size() > kMaxTriangles * 3) r.fail(at, "more vertices than any mesh may have");
+    if (v->size() > kMaxVertices)
+      r.fail(at, "more than " + std::to_string(kMaxVertices) + " vertices (docs/limits.md)");
     out.reserve(v->size());
     for (std::size_t i = 0; i < v->size(); ++i)
       out.push_back(read_vec<N>(r, (*v)[i], element_path(at, i)));
@@ -532,8 +538,8 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
     const std::string name = read_string(r, *v, o.path("kinematics"));
     const std::optional<Kinematics::Type> type = parse_kinematics(name);
     if (!type)
-      r.fail(o.path("kinematics"),
-             "unknown kinematics \"" + name + "\" (expected static, hierarchical or free)");
+      r.fail(o.path("kinematics"), "unknown kinematics \"" + printable(name) +
+                                       "\" (expected static, hierarchical or free)");
     reg.emplace<Kinematics>(e, Kinematics{*type});
   }
 
@@ -608,8 +614,8 @@ Scene read_document(const Reader& r, const json& root, const fs::path& base_dir)
     r.fail("format", "expected \"" + std::string(kFormatName) + "\", got " + describe(format));
   const json& version = top.require("version");
   if (!version.is_number_integer() || version.get<std::int64_t>() != kFormatVersion)
-    r.fail("version", "unsupported version " + version.dump() + " (this build reads version " +
-                          std::to_string(kFormatVersion) + ")");
+    r.fail("version", "unsupported version " + printable(version.dump()) +
+                          " (this build reads version " + std::to_string(kFormatVersion) + ")");
 
   Scene scene;
   if (const json* v = top.find("settings")) scene.settings = read_settings(r, *v, "settings");
@@ -955,14 +961,8 @@ Scene parse_json_scene(const std::string& text, const std::string& name, const f
 }
 
 Scene load_json_scene(const fs::path& path) {
-  std::error_code ec;
-  if (fs::is_directory(path, ec)) throw Error(path.string(), "is a directory, not a scene file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path.string(), "cannot open file");
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) throw Error(path.string(), "cannot read file");
-  Scene scene = parse_json_scene(text.str(), path.string(), path.parent_path());
+  const std::string text = read_file_bounded(path, kMaxSceneTextBytes, "scene file");
+  Scene scene = parse_json_scene(text, path.string(), path.parent_path());
   scene.source = path;
   return scene;
 }

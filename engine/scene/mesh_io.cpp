@@ -24,6 +24,8 @@
 #include "specula/scene/mesh_io.h"
 
 #include "specula/core/error.h"
+#include "specula/core/file_io.h"
+#include "specula/scene/scene.h"
 
 // OpenMesh's headers are found under /usr/include, so GCC treats them as system headers and
 // keeps their warnings out of our -Werror build; nothing else is needed around the includes.
@@ -34,12 +36,10 @@
 #include <algorithm>
 #include <array>
 #include <bit>
-#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#include <fstream>
 #include <limits>
 #include <mutex>
 #include <optional>
@@ -79,6 +79,8 @@ struct ScanResult {
   std::optional<std::uint64_t> declared_faces;
   /// Declared faces that repeat a vertex; OpenMesh drops these as degenerate.
   std::uint64_t faces_with_repeated_vertex = 0;
+  /// Triangles the faces seen so far become (n - 2 for a polygon of n corners).
+  std::uint64_t triangles = 0;
 };
 
 // ---- Text scanning helpers ------------------------------------------------------------------
@@ -172,6 +174,25 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
   }
 }
 
+/// Fails when a mesh declares (or, for OBJ, has reached) more vertices or faces than any mesh
+/// may have (kMaxVertices, kMaxTriangles; docs/limits.md): before anything is allocated for them.
+/// A face is at least one triangle, so more faces than kMaxTriangles cannot fit either.
+void check_mesh_counts(const std::string& file, int line, std::uint64_t vertices,
+                       std::uint64_t faces) {
+  std::string message;
+  if (vertices > kMaxVertices)
+    message = std::to_string(vertices) + " vertices, more than the limit of " +
+              std::to_string(kMaxVertices);
+  else if (faces > kMaxTriangles)
+    message = std::to_string(faces) + " faces, more than the limit of " +
+              std::to_string(kMaxTriangles) + " triangles";
+  else
+    return;
+  message = "the mesh has " + message + " per mesh (docs/limits.md)";
+  if (line > 0) throw Error(file, line, message);
+  throw Error(file, message);
+}
+
 [[nodiscard]] std::uint32_t read_u32_le(std::string_view bytes, std::size_t at) {
   std::uint32_t v = 0;
   for (std::size_t b = 0; b < 4; ++b)
@@ -182,6 +203,23 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
 [[nodiscard]] bool has_repeated(std::vector<std::uint64_t>& indices) {
   std::sort(indices.begin(), indices.end());
   return std::adjacent_find(indices.begin(), indices.end()) != indices.end();
+}
+
+/// Records a face of the scan (its corners' vertex indices, reordered here): whether it repeats
+/// a vertex, and the triangles it becomes, which must stay within kMaxTriangles however few
+/// faces the header declares (a face of a million corners is a million triangles less two).
+/// `line` 0: a binary file.
+void note_face(const std::string& file, int line, std::vector<std::uint64_t>& corners,
+               ScanResult& result) {
+  if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
+  result.triangles += corners.size() - 2;
+  if (result.triangles > kMaxTriangles) {
+    const std::string message = "the faces become more than the limit of " +
+                                std::to_string(kMaxTriangles) +
+                                " triangles per mesh (docs/limits.md)";
+    if (line > 0) throw Error(file, line, message);
+    throw Error(file, message);
+  }
 }
 
 // ---- OBJ ------------------------------------------------------------------------------------
@@ -225,7 +263,7 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
         throw Error(file, line,
                     "vertex needs 3 coordinates, found " + std::to_string(values.size()));
       check_numbers(file, line, values, "vertex");
-      ++positions;
+      check_mesh_counts(file, line, ++positions, 0);
     } else if (keyword == "vt") {
       if (values.empty() || values.size() > 3)
         throw Error(file, line, "texture coordinate needs 1 to 3 values");
@@ -255,8 +293,8 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
           if (!vn.empty()) (void)resolve_obj_index(file, line, vn, normals, "normals");
         }
       }
-      if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
-      ++*result.declared_faces;
+      note_face(file, line, corners, result);
+      check_mesh_counts(file, line, 0, ++*result.declared_faces);
     }
     // Everything else (o, g, s, usemtl, mtllib, l, p, ...) does not change the geometry we read.
   });
@@ -276,6 +314,7 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
   if (body.size() < 12) throw Error(file, "binary OFF file truncated: no vertex and face counts");
   const std::uint64_t vertices = read_u32_le(body, 0);
   const std::uint64_t faces = read_u32_le(body, 4);
+  check_mesh_counts(file, 0, vertices, faces);
   const std::uint64_t vertex_size = 12 + (has_normals ? 12 : 0) + (has_texcoords ? 8 : 0);
   // Each face takes at least 16 bytes (a count and three indices).
   if (vertices * vertex_size + faces * 16 > body.size() - 12)
@@ -304,7 +343,7 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
                               " vertices (indices start at 0)");
       corners.push_back(index);
     }
-    if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
+    note_face(file, 0, corners, result);
   }
   result.declared_faces = faces;
   return result;
@@ -385,6 +424,7 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
                     " are not non-negative integers");
   const auto vertices = static_cast<std::uint64_t>(*vertex_count);
   const auto faces = static_cast<std::uint64_t>(*face_count);
+  check_mesh_counts(file, counts_line, vertices, faces);
   // Cheapest possible lines: "0 0 0\n" (6 bytes) per vertex, "3 0 1 2\n" (8) per face.
   const std::uint64_t remaining = text.size() - std::min<std::size_t>(offset, text.size());
   if (vertices > remaining || faces > remaining || vertices * 6 + faces * 8 > remaining + 1)
@@ -435,7 +475,7 @@ void check_numbers(const std::string& file, int line, std::span<const std::strin
                         std::to_string(vertices) + " vertices (indices start at 0)");
       corners.push_back(static_cast<std::uint64_t>(*index));
     }
-    if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
+    note_face(file, line_number, corners, result);
   }
   result.declared_faces = faces;
   if (faces == 0) throw Error(file, counts_line, "the file declares no faces");
@@ -496,6 +536,22 @@ struct PlyElement {
   for (const PlyElement& element : elements)
     if (element.name == "vertex") return element.count;
   return 0;
+}
+
+/// The PLY version: "1.0" as the specification writes it, or another spelling of one ("1",
+/// "1.00"). Not "nan", "inf" or "1e999", on which OpenMesh's header loop never ends, nor "2.0"
+/// or "-1", which it would read as if they were 1.0.
+[[nodiscard]] bool is_ply_version_one(std::string_view token) {
+  const std::size_t dot = token.find('.');
+  const std::string_view whole = token.substr(0, dot);
+  const std::string_view fraction =
+      dot == std::string_view::npos ? std::string_view() : token.substr(dot + 1);
+  const auto digits = [](std::string_view t) {
+    return std::all_of(t.begin(), t.end(), [](char c) { return c >= '0' && c <= '9'; });
+  };
+  return !whole.empty() && digits(whole) && digits(fraction) &&
+         whole.find_first_not_of('0') == whole.size() - 1 && whole.back() == '1' &&
+         fraction.find_first_not_of('0') == std::string_view::npos;
 }
 
 /// ASCII PLY body, value by value (the format is a token stream, as OpenMesh reads it): every
@@ -565,7 +621,7 @@ void walk_ascii_ply(const std::string& file, std::string_view body, int first_li
             throw ply_index_out_of_range(file, line, index, vertices);
           corners.push_back(static_cast<std::uint64_t>(index));
         }
-        if (property.indices && has_repeated(corners)) ++result.faces_with_repeated_vertex;
+        if (property.indices) note_face(file, line, corners, result);
       }
     }
   }
@@ -632,7 +688,7 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
             throw ply_index_out_of_range(file, 0, index, vertices);
           corners.push_back(static_cast<std::uint64_t>(index));
         }
-        if (has_repeated(corners)) ++result.faces_with_repeated_vertex;
+        note_face(file, 0, corners, result);
       }
     }
   }
@@ -667,14 +723,24 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
   std::vector<PlyElement> elements;
   std::vector<std::string_view> tokens;
   int header_lines = 0;
+  const auto last_line =
+      static_cast<int>(std::count(bytes.begin(), bytes.begin() + std::ptrdiff_t(header_end), '\n'));
   for_each_line(bytes.substr(0, header_end), [&](int line, std::string_view content) {
     header_lines = line;
     split_tokens(content, tokens);
-    if (tokens.empty() || line == 1) return;
-    // OpenMesh reads the three words after "ply" as the format line, whatever they are, and
-    // loops for ever on a version that is not a number.
+    if (line == 1) {
+      if (tokens.size() != 1 || tokens[0] != "ply")
+        throw Error(file, 1, "the first line must be 'ply' alone, found " + quote_token(content));
+      return;
+    }
+    if (tokens.empty()) return;
+    const std::string_view keyword = tokens[0];
+    // OpenMesh reads the header word by word, and a word its stream cannot convert (a version
+    // "nan", "inf" or "1e999", a count beyond 32 bits) fails the stream, after which its header
+    // loop never ends. Only the format line as the PLY specification writes it, element and
+    // property lines of the exact shape, comments and end_header get through.
     if (format == PlyFormat::none) {
-      if (tokens[0] != "format" || tokens.size() != 3 || !parse_number(tokens[2]))
+      if (keyword != "format" || tokens.size() != 3 || !is_ply_version_one(tokens[2]))
         throw Error(file, line,
                     "expected 'format <ascii|binary_little_endian|binary_big_endian> "
                     "1.0' after 'ply', found " +
@@ -687,20 +753,33 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
         format = PlyFormat::binary_big;
       else
         throw Error(file, line, "unknown PLY format " + quote_token(tokens[1]));
-    } else if (tokens[0] == "element") {
-      if (tokens.size() < 3) throw Error(file, line, "element line needs a name and a count");
+    } else if (keyword == "element") {
+      if (tokens.size() != 3)
+        throw Error(file, line,
+                    "an element line is 'element <name> <count>', found " + quote_token(content));
       // OpenMesh reads counts as 32-bit unsigned; beyond that its header loop never ends.
       const std::optional<std::int64_t> count = parse_integer(tokens[2]);
       if (!count || *count < 0 || *count > std::numeric_limits<std::uint32_t>::max())
         throw Error(file, line,
                     "element count " + quote_token(tokens[2]) +
                         " is not an integer from 0 to 2^32 - 1 (absurd count)");
-      elements.push_back({std::string(tokens[1]), static_cast<std::uint64_t>(*count), {}});
-    } else if (tokens[0] == "property") {
+      for (const PlyElement& element : elements)
+        if (element.name == tokens[1])
+          throw Error(file, line, "element " + quote_token(tokens[1]) + " declared twice");
+      const auto n = static_cast<std::uint64_t>(*count);
+      if (tokens[1] == "vertex") check_mesh_counts(file, line, n, 0);
+      if (tokens[1] == "face") check_mesh_counts(file, line, 0, n);
+      elements.push_back({std::string(tokens[1]), n, {}});
+    } else if (keyword == "property") {
       // OpenMesh would write into elements_.back() of an empty list.
       if (elements.empty()) throw Error(file, line, "property before any element");
       const bool list = tokens.size() >= 2 && tokens[1] == "list";
-      if (tokens.size() < (list ? 5u : 3u)) throw Error(file, line, "incomplete property line");
+      if (tokens.size() != (list ? 5u : 3u))
+        throw Error(file, line,
+                    std::string("a property line is ") +
+                        (list ? "'property list <count type> <value type> <name>'"
+                              : "'property <type> <name>'") +
+                        ", found " + quote_token(content));
       const std::optional<PlyType> count = list ? ply_type(tokens[2]) : PlyType{};
       const std::optional<PlyType> value = ply_type(tokens[list ? 3 : 1]);
       if (!count || !value || (list && count->floating))
@@ -709,8 +788,21 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
       const bool indices = list && elements.back().name == "face" &&
                            (name == "vertex_indices" || name == "vertex_index");
       elements.back().properties.push_back({name, list, *count, *value, indices});
+    } else if (keyword == "format") {
+      throw Error(file, line, "a second 'format' line");
+    } else if (keyword == "end_header" && line == last_line) {
+      return;
+    } else if (keyword != "comment") {
+      // OpenMesh skips "comment" lines whole, but reads any other line ("obj_info" and stray
+      // text, as in assimp's Wuson.ply, included) word by word, each word as a keyword: an
+      // "element" there would declare an element we do not know of (with a count it may fail
+      // to read, and then loop for ever), an "end_header" would end the header early.
+      for (const std::string_view word : tokens)
+        if (word == "element" || word == "property" || word == "end_header" || word == "format")
+          throw Error(file, line,
+                      "unsupported PLY header line " + quote_token(content) +
+                          ": OpenMesh would read its '" + std::string(word) + "' as a keyword");
     }
-    // "comment", "obj_info", "end_header" and stray lines: OpenMesh skips them too.
   });
   if (format == PlyFormat::none) throw Error(file, "PLY header has no 'format' line");
 
@@ -801,6 +893,7 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
     const std::uint64_t triangles = read_u32_le(bytes, 80);
     if (84 + 50 * triangles == size) {
       if (triangles == 0) throw Error(file, "binary STL with 0 triangles");
+      check_mesh_counts(file, 0, 0, triangles);
       // OpenMesh merges corners through an ordered map, where a NaN key compares equal to
       // anything: the NaN vanishes into some other vertex. Check before it gets there.
       for (std::uint64_t t = 0; t < triangles; ++t)
@@ -847,7 +940,7 @@ void walk_binary_ply(const std::string& file, std::string_view body, bool big_en
         throw Error(file, line,
                     "facet has " + std::to_string(std::max(corners, 0)) + " vertices, 3 needed");
       corners = -1;
-      ++facets;
+      check_mesh_counts(file, line, 0, ++facets);
     } else if (keyword != "solid" && keyword != "endsolid" && keyword != "outer" &&
                keyword != "endloop") {
       throw Error(file, line, "unexpected " + quote_token(tokens[0]) + " in an ASCII STL file");
@@ -1137,39 +1230,21 @@ private:
   return mesh;
 }
 
-[[nodiscard]] std::string read_whole_file(const fs::path& path, std::uintmax_t size) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in)
-    throw Error(path.string(),
-                std::string("cannot open the file for reading: ") + std::strerror(errno));
-  std::string bytes(static_cast<std::size_t>(size), '\0');
-  in.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  if (in.gcount() != static_cast<std::streamsize>(bytes.size()))
-    throw Error(path.string(), "could not read the whole file (" + std::to_string(in.gcount()) +
-                                   " of " + std::to_string(size) + " bytes)");
-  return bytes;
-}
-
 } // namespace
 
 bool is_mesh_file_extension(std::string_view extension) { return format_of(extension).has_value(); }
 
 TriangleMesh load_mesh_file(const fs::path& path) {
   const std::string file = path.string();
-  std::error_code ec;
-  const fs::file_status status = fs::status(path, ec);
-  if (ec || !fs::exists(status)) throw Error(file, "file not found");
-  if (fs::is_directory(status)) throw Error(file, "is a directory, not a mesh file");
-  if (!fs::is_regular_file(status)) throw Error(file, "not a regular file");
+  // Regular files only (a device or FIFO would be read for ever), within the size bound; then
+  // the extension, then the bytes.
+  (void)check_regular_file(path, kMaxDataFileBytes, "mesh file");
   const std::optional<MeshFormat> format = format_of(path.extension().string());
   if (!format)
     throw Error(file, "unknown mesh file extension " + quote_token(path.extension().string()) +
                           " (expected .obj, .ply, .off or .stl)");
-  const std::uintmax_t size = fs::file_size(path, ec);
-  if (ec) throw Error(file, "cannot read the file size: " + ec.message());
-  if (size == 0) throw Error(file, "empty file (0 bytes)");
-
-  const std::string bytes = read_whole_file(path, size);
+  const std::string bytes = read_file_bounded(path, kMaxDataFileBytes, "mesh file");
+  if (bytes.empty()) throw Error(file, "empty file (0 bytes)");
   ScanResult scan;
   switch (*format) {
   case MeshFormat::obj:

@@ -34,7 +34,14 @@ struct Scene {
 /// errors, not allocations).
 inline constexpr std::uint32_t kMaxImageSide = 16384;
 inline constexpr std::uint64_t kMaxTriangles = 100'000'000;
+/// Largest vertex count of one mesh: three distinct vertices per triangle.
+inline constexpr std::uint64_t kMaxVertices = 3 * kMaxTriangles;
 inline constexpr std::uint64_t kMaxEntities = 10'000'000;
+/// Longest chain of secondary rays (RenderSettings::max_depth) a scene may ask for, and the
+/// most the render job accepts (render/render_job.h), so `info` and `render` agree on every file.
+/// The Whitted integrator traces in waves, not by recursion, and kMaxRaysPerPixel bounds what
+/// deep chains cost, so 64 is honoured as it is.
+inline constexpr std::uint32_t kMaxTraceDepth = 64;
 
 /// Reads a scene by extension: .json (Specula), .gltf/.glb (glTF 2.0), .obj/.ply/.off/.stl (one
 /// mesh). Then, whatever the format: computes world transforms, which checks the hierarchy

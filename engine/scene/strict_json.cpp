@@ -42,7 +42,8 @@ std::string element_path(const std::string& parent, std::size_t index) {
 std::string describe(const json& j) {
   if (j.is_number_integer() || j.is_number_unsigned()) return "the integer " + j.dump();
   if (j.is_number_float()) return "the number " + j.dump();
-  if (j.is_string()) return "the string " + j.dump(-1, ' ', false, json::error_handler_t::replace);
+  if (j.is_string()) // quoted and escaped by dump(), cut by printable()
+    return "the string " + printable(j.dump(-1, ' ', false, json::error_handler_t::replace));
   if (j.is_boolean()) return j.get<bool>() ? "true" : "false";
   if (j.is_null()) return "null";
   if (j.is_array()) return "an array of " + std::to_string(j.size());
@@ -165,7 +166,47 @@ private:
 
 } // namespace
 
+void check_nesting(const Reader& r, std::string_view text, std::size_t max_depth) {
+  std::size_t depth = 0;
+  std::size_t deepest = 0;
+  std::size_t line = 1;
+  std::size_t first_line = 0; // where the limit was first exceeded
+  bool in_string = false;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c == '\n') ++line;
+    if (in_string) {
+      if (c == '\\')
+        ++i; // the escaped character, a quote or a backslash among them, cannot end the string
+      else if (c == '"')
+        in_string = false;
+      continue;
+    }
+    switch (c) {
+    case '"':
+      in_string = true;
+      break;
+    case '[':
+    case '{':
+      deepest = std::max(deepest, ++depth);
+      if (depth > max_depth && first_line == 0) first_line = line;
+      break;
+    case ']':
+    case '}':
+      if (depth > 0) --depth; // unbalanced: the parser's to report
+      break;
+    default:
+      break;
+    }
+  }
+  if (deepest > max_depth)
+    r.fail("", "JSON nesting depth " + std::to_string(deepest) + " exceeds the limit of " +
+                   std::to_string(max_depth) + " (first exceeded at line " +
+                   std::to_string(first_line) + "; docs/limits.md)");
+}
+
 json parse(const Reader& r, const std::string& text) {
+  check_nesting(r, text);
   DocumentBuilder builder;
   if (json::sax_parse(text, &builder, json::input_format_t::json, /*strict=*/true,
                       /*ignore_comments=*/false))
@@ -191,11 +232,11 @@ json parse(const Reader& r, const std::string& text) {
     detail = detail.substr(bracket + 2);
   }
   if (builder.error_message_.find("out_of_range") != std::string::npos)
-    r.fail(builder.error_path_, where + ": " + detail + " (numbers must be finite)");
+    r.fail(builder.error_path_, where + ": " + one_line(detail, 256) + " (numbers must be finite)");
   throw Error(r.file(), int(line),
               "malformed JSON at " + where +
                   (builder.error_path_.empty() ? "" : " (in " + builder.error_path_ + ")") + ": " +
-                  detail);
+                  one_line(detail, 256));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -210,7 +251,7 @@ Object::Object(const Reader& r, const json& j, std::string path,
   for (const auto& item : j.items()) {
     const std::string& key = item.key();
     if (std::find(allowed.begin(), allowed.end(), key) != allowed.end()) continue;
-    std::string message = "unknown key \"" + key + "\"";
+    std::string message = "unknown key \"" + printable(key) + "\"";
     std::string_view closest;
     std::size_t best = 3; // at most two edits away counts as a likely typo
     for (const std::string_view candidate : allowed) {

@@ -52,10 +52,22 @@ private:
   std::string file_;
 };
 
+/// Deepest nesting of arrays and objects any JSON input may have (Specula scenes, glTF): far
+/// beyond any real file, and small enough that recursive parsers (tinygltf's) cannot run out
+/// of stack. docs/limits.md.
+inline constexpr std::size_t kMaxJsonNesting = 256;
+
+/// Fails unless the arrays and objects of `text` nest at most `max_depth` deep: "JSON nesting
+/// depth D exceeds the limit of L (first exceeded at line N)". A cheap scan of the bytes, for
+/// use before any parser sees them; brackets inside strings (escaped quotes included) do not
+/// count. Not a syntax check: malformed text is left to the parser.
+void check_nesting(const Reader& r, std::string_view text, std::size_t max_depth = kMaxJsonNesting);
+
 /// Parses `text` as one JSON document (RFC 8259: no comments, no trailing commas). A key that
 /// appears twice in one object is an error at that key's path, rather than the last one silently
 /// winning. Syntax errors name the line and column (Error::line()) and the path being read;
-/// number literals outside the double range (1e999) are errors at their path.
+/// number literals outside the double range (1e999) are errors at their path. Checks the
+/// nesting first (check_nesting).
 [[nodiscard]] json parse(const Reader& r, const std::string& text);
 
 /// A JSON object whose keys are checked against those the format allows at its place, so a typo

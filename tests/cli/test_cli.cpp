@@ -41,13 +41,16 @@ std::string quote(const std::string& s) {
   return q + "'";
 }
 
-Result run(const std::vector<std::string>& args) {
+/// Runs the program with `args`; `shell_prefix` runs first in the same shell (limits, traps) and
+/// the program replaces the shell (exec), so its exit status is the program's.
+Result run(const std::vector<std::string>& args, const std::string& shell_prefix = "") {
   static int counter = 0;
   const fs::path dir = fs::temp_directory_path();
   const std::string tag = std::to_string(::getpid()) + "_" + std::to_string(counter++);
   const fs::path out = dir / ("specula_cli_out_" + tag);
   const fs::path err = dir / ("specula_cli_err_" + tag);
-  std::string cmd = quote(SPECULA_EXE);
+  std::string cmd =
+      shell_prefix.empty() ? quote(SPECULA_EXE) : shell_prefix + "; exec " + quote(SPECULA_EXE);
   for (const auto& a : args) cmd += " " + quote(a);
   cmd += " >" + quote(out.string()) + " 2>" + quote(err.string()) + " </dev/null";
   const int status = std::system(cmd.c_str());
@@ -308,6 +311,301 @@ TEST(Cli, NoAssimpTestModelCrashesTheProgram) {
   }
   // Most of them are valid: a loader that rejects everything must not pass.
   EXPECT_GT(loaded, files.size() / 2) << loaded << " of " << files.size() << " loaded";
+}
+
+// --- Contract breaks of issue 13 ---------------------------------------------------------------
+
+std::string cornell_box() {
+  return (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
+}
+
+/// A fresh folder under the temporary directory, removed at the end of the test.
+struct TempFolder {
+  fs::path path;
+  explicit TempFolder(const std::string& name)
+      : path(fs::temp_directory_path() /
+             ("specula_cli_" + name + "_" + std::to_string(::getpid()))) {
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempFolder() { fs::remove_all(path); }
+  [[nodiscard]] std::string file(const std::string& name) const { return (path / name).string(); }
+};
+
+/// The files in a folder, by name.
+std::set<std::string> names_in(const fs::path& dir) {
+  std::set<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir))
+    names.insert(entry.path().filename().string());
+  return names;
+}
+
+void expect_bad_input(const Result& r, const std::string& context) {
+  ASSERT_TRUE(r.exited) << context;
+  EXPECT_EQ(r.code, 1) << context << "\n" << r.out << r.err;
+  EXPECT_EQ(r.err.rfind("specula: error: ", 0), 0u) << context << "\n" << r.err;
+}
+
+TEST(CliContract, WritingToAFullDeviceFailsNamingTheFile) {
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  const TempFolder dir("full");
+  // A device under a name with the image's extension: the write itself must fail and say so.
+  for (const char* name : {"full.png", "full.exr"})
+    fs::create_symlink("/dev/full", dir.path / name);
+  fs::copy_file(cornell_box(), dir.path / "scene.json");
+  for (const char* name : {"full.png", "full.exr"}) {
+    const Result r = run({"render", cornell_box(), "--width", "16", "--height", "16", "--mode",
+                          "cast", "--out", dir.file(name)});
+    expect_bad_input(r, name);
+    EXPECT_NE(r.err.find(name), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("No space left on device"), std::string::npos) << r.err;
+    EXPECT_EQ(r.out.find("image:"), std::string::npos) << "no path printed as written: " << r.out;
+  }
+  const std::string png = dir.file("a.png");
+  ASSERT_EQ(run({"render", cornell_box(), "--width", "16", "--height", "16", "--out", png}).code,
+            0);
+  const Result r = run({"compare", png, png, "--heatmap", dir.file("full.png")});
+  expect_bad_input(r, "compare --heatmap full.png");
+  EXPECT_NE(r.err.find("full.png"), std::string::npos) << r.err;
+  EXPECT_TRUE(r.out.empty()) << r.out;
+}
+
+TEST(CliContract, AFailedWriteLeavesTheOldImageAndNoTemporaryFile) {
+  // A file size limit of 1 KiB or less (ulimit -f counts 512-byte blocks in dash, 1024 in bash)
+  // makes the write of a 64x64 render fail part-way; SIGXFSZ ignored, it fails with EFBIG.
+  const TempFolder dir("partial");
+  for (const char* name : {"old.png", "old.exr"})
+    std::ofstream(dir.file(name)) << "the previous image";
+  for (const char* name : {"old.png", "old.exr"}) {
+    const Result r = run({"render", cornell_box(), "--width", "64", "--height", "64", "--mode",
+                          "cast", "--out", dir.file(name)},
+                         "ulimit -f 2; trap '' XFSZ");
+    expect_bad_input(r, name);
+    EXPECT_NE(r.err.find(name), std::string::npos) << r.err;
+    EXPECT_EQ(slurp(dir.file(name)), "the previous image") << name << " was overwritten";
+    EXPECT_EQ(names_in(dir.path), (std::set<std::string>{"old.exr", "old.png"}))
+        << "a temporary file was left behind";
+  }
+  // Without the limit, the same command replaces the file with a complete image.
+  const Result r = run({"render", cornell_box(), "--width", "64", "--height", "64", "--mode",
+                        "cast", "--out", dir.file("old.png")});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(slurp(dir.file("old.png")).substr(1, 3), "PNG");
+  EXPECT_EQ(run({"compare", dir.file("old.png"), dir.file("old.png")}).code, 0);
+  EXPECT_EQ(names_in(dir.path), (std::set<std::string>{"old.exr", "old.png"}));
+}
+
+TEST(CliContract, EmptyPathsAreErrorsNotNoFile) {
+  const TempFolder dir("empty");
+  const std::string png = dir.file("a.png");
+  ASSERT_EQ(run({"render", cornell_box(), "--width", "8", "--height", "8", "--out", png}).code, 0);
+  for (const std::vector<std::string>& args : std::vector<std::vector<std::string>>{
+           {"render", cornell_box(), "--width", "8", "--height", "8", "--out", ""},
+           {"render", cornell_box(), "--width", "8", "--height", "8", "--stats", ""},
+           {"compare", png, png, "--heatmap", ""},
+           {"info", ""},
+           {"compare", "", png}}) {
+    const Result r = run(args);
+    expect_bad_input(r, args[0] + " with an empty path");
+    EXPECT_NE(r.err.find("empty"), std::string::npos) << r.err;
+    EXPECT_TRUE(r.out.empty()) << r.out;
+  }
+}
+
+TEST(CliContract, UnsupportedOutputExtensionsAreRefusedBeforeTheWork) {
+  const TempFolder dir("ext");
+  const std::string png = dir.file("a.png");
+  ASSERT_EQ(run({"render", cornell_box(), "--width", "8", "--height", "8", "--out", png}).code, 0);
+  // --out takes what the writer writes: .png and .exr. Refused before rendering (nothing on
+  // stdout), and nothing written.
+  for (const char* name : {"x.jpg", "x", "x.png.tmp"}) {
+    const Result r =
+        run({"render", cornell_box(), "--width", "8", "--height", "8", "--out", dir.file(name)});
+    expect_bad_input(r, name);
+    EXPECT_NE(r.err.find("(expected .png or .exr)"), std::string::npos) << r.err;
+    EXPECT_TRUE(r.out.empty()) << r.out;
+    EXPECT_FALSE(fs::exists(dir.file(name)));
+  }
+  // The heatmap is a PNG, so only .png (an .exr of it would have to be linear radiance).
+  for (const char* name : {"x.jpg", "x.exr"}) {
+    const Result r = run({"compare", png, png, "--heatmap", dir.file(name)});
+    expect_bad_input(r, name);
+    EXPECT_NE(r.err.find("(expected .png)"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(dir.file(name)));
+  }
+  // And a folder that does not exist is found before rendering too.
+  const Result r = run({"render", cornell_box(), "--width", "8", "--height", "8", "--out",
+                        dir.file("missing/x.png")});
+  expect_bad_input(r, "missing folder");
+  EXPECT_NE(r.err.find("does not exist"), std::string::npos) << r.err;
+  EXPECT_TRUE(r.out.empty()) << r.out;
+}
+
+TEST(CliContract, EveryParseErrorHasTheHousePrefix) {
+  for (const std::vector<std::string>& args :
+       std::vector<std::vector<std::string>>{{},
+                                             {"frobnicate"},
+                                             {"render"},
+                                             {"info", cornell_box(), "--bogus"},
+                                             {"render", cornell_box(), "--mode", "radiosity"},
+                                             {"render", cornell_box(), "--width"},
+                                             {"render", cornell_box(), "--frames", "0"},
+                                             {"compare", "a.png"}}) {
+    std::string joined;
+    for (const auto& a : args) joined += a + " ";
+    const Result r = run(args);
+    expect_bad_input(r, joined);
+    EXPECT_NE(r.err.find("Run with --help"), std::string::npos) << joined << "\n" << r.err;
+  }
+  EXPECT_EQ(run({"--help"}).code, 0);
+  EXPECT_EQ(run({"render", "--help"}).code, 0);
+}
+
+TEST(CliContract, ANonNumberIsNotCalledOutOfRange) {
+  for (const auto& [option, value] :
+       std::vector<std::pair<std::string, std::string>>{{"--width", "abc"},
+                                                        {"--height", "0x10"},
+                                                        {"--frames", "two"},
+                                                        {"--threads", ""},
+                                                        {"--cache-tau", "abc"},
+                                                        {"--max-error-db", "40dB"},
+                                                        {"--cache-fill", "many"},
+                                                        {"--cache-resolution", "big"}}) {
+    const Result r = run({"render", cornell_box(), option, value});
+    expect_bad_input(r, option + " " + value);
+    EXPECT_NE(r.err.find(option + ": expected a number"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find("not in range"), std::string::npos) << r.err;
+  }
+  // A number outside the range says what the range is.
+  const Result r = run({"render", cornell_box(), "--width", "100000"});
+  expect_bad_input(r, "--width 100000");
+  EXPECT_NE(r.err.find("--width: expected a whole number in [1 - 16384], got 100000"),
+            std::string::npos)
+      << r.err;
+  // An exponent is a number: 1e1 frames are 10.
+  const Result ten = run({"render", cornell_box(), "--width", "4", "--height", "4", "--frames",
+                          "1e1", "--mode", "cast"});
+  EXPECT_EQ(ten.code, 0) << ten.err;
+  EXPECT_NE(ten.out.find("10 frame(s)"), std::string::npos) << ten.out;
+}
+
+TEST(CliContract, EchoedInputIsEscapedAndCut) {
+  // 100 KB with a line break and control bytes, as an option value and as a path: the message
+  // is one line of bounded length, the bytes escaped.
+  const std::string junk = "abc\ndef\x01" + std::string(100000, 'x');
+  for (const std::vector<std::string>& args : std::vector<std::vector<std::string>>{
+           {"render", cornell_box(), "--mode", junk},
+           {"render", cornell_box(), "--cache", junk},
+           {"render", cornell_box(), "--width", junk},
+           {"info", "/no/such/" + junk + ".json"},
+           {"render", cornell_box(), "--out", "/tmp/" + junk + ".jpg"},
+           {"compare", "/no/such/" + junk + ".png", "/no/such/b.png"}}) {
+    const Result r = run(args);
+    expect_bad_input(r, args[0] + " " + args[args.size() - 2]);
+    EXPECT_LT(r.err.size(), 2000u) << r.err.substr(0, 300);
+    const std::string first_line = r.err.substr(0, r.err.find('\n'));
+    EXPECT_NE(first_line.find("abc\\ndef\\x01"), std::string::npos) << first_line.substr(0, 300);
+    EXPECT_EQ(r.err.find('\x01'), std::string::npos);
+  }
+}
+
+TEST(CliContract, MaxDepthHasOneLimitForInfoAndRender) {
+  // The loader and the render job share kMaxTraceDepth (64): a depth the file may state is one
+  // the renderer accepts, and one beyond it fails in both commands naming the file and field.
+  const TempFolder dir("depth");
+  std::string text = slurp(cornell_box());
+  const auto settings = nlohmann::json::parse(text).at("settings");
+  ASSERT_TRUE(settings.contains("max_depth"));
+  for (const int depth : {33, 64, 65}) {
+    auto scene = nlohmann::json::parse(text);
+    scene["settings"]["max_depth"] = depth;
+    const std::string name = "depth" + std::to_string(depth) + ".json";
+    std::ofstream(dir.file(name)) << scene.dump();
+    const Result info = run({"info", "--json", dir.file(name)});
+    const Result render = run({"render", dir.file(name), "--width", "16", "--height", "16"});
+    if (depth <= 64) {
+      ASSERT_EQ(info.code, 0) << info.err;
+      EXPECT_EQ(nlohmann::json::parse(info.out)["settings"]["max_depth"], depth);
+      EXPECT_EQ(render.code, 0) << render.err;
+    } else {
+      for (const Result* r : {&info, &render}) {
+        expect_bad_input(*r, name);
+        EXPECT_NE(r->err.find(name + ": settings.max_depth: "), std::string::npos) << r->err;
+      }
+      EXPECT_EQ(info.err, render.err) << "the same answer from both commands";
+    }
+  }
+}
+
+/// A PNG of the given size that is only a signature and an IHDR chunk: enough for the size
+/// checks, which must come before anything is decoded.
+void write_png_header(const std::string& path, std::uint32_t width, std::uint32_t height) {
+  std::string bytes = "\x89PNG\r\n\x1a\n";
+  bytes += std::string("\0\0\0\x0dIHDR", 8);
+  for (const std::uint32_t v : {width, height})
+    for (int shift = 24; shift >= 0; shift -= 8) bytes += char((v >> shift) & 0xff);
+  bytes += std::string("\x08\x02\0\0\0", 5); // 8-bit RGB
+  bytes += std::string("\0\0\0\0", 4);       // CRC, never reached
+  std::ofstream(path, std::ios::binary) << bytes;
+}
+
+TEST(CliContract, CompareRefusesImagesBeyondTheMemoryBudgetFromTheirHeaders) {
+  const TempFolder dir("budget");
+  write_png_header(dir.file("big_a.png"), 16384, 16384);
+  write_png_header(dir.file("big_b.png"), 16384, 16384);
+  // Two 16384² images need several GiB however they are compared: with a budget of 4 GiB the
+  // refusal comes from the headers (the files have no pixel data: decoding would have said so).
+  const Result r =
+      run({"compare", dir.file("big_a.png"), dir.file("big_b.png"), "--memory-limit", "4G"});
+  expect_bad_input(r, "compare 16384²");
+  EXPECT_NE(r.err.find("big_a.png"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("16384x16384"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("more than the memory budget of 4.00 GiB (--memory-limit 4G)"),
+            std::string::npos)
+      << r.err;
+  // Sizes that differ are found in the headers too, before decoding.
+  write_png_header(dir.file("other.png"), 16384, 8192);
+  const Result sizes = run({"compare", dir.file("big_a.png"), dir.file("other.png")});
+  expect_bad_input(sizes, "sizes differ");
+  EXPECT_NE(sizes.err.find("image size 16384x8192 differs"), std::string::npos) << sizes.err;
+  // Real images within the budget compare; the same under a budget too small do not.
+  const std::string png = dir.file("a.png");
+  ASSERT_EQ(run({"render", cornell_box(), "--width", "64", "--height", "64", "--out", png}).code,
+            0);
+  EXPECT_EQ(run({"compare", png, png, "--memory-limit", "100M"}).code, 0);
+  const Result tight = run({"compare", png, png, "--memory-limit", "1M"});
+  expect_bad_input(tight, "1M");
+  EXPECT_NE(tight.err.find("memory budget"), std::string::npos) << tight.err;
+  expect_bad_input(run({"compare", png, png, "--memory-limit", "lots"}), "--memory-limit lots");
+}
+
+TEST(CliContract, RenderRefusesAFramebufferBeyondTheMemoryBudgetBeforeAllocating) {
+  // 16384² needs 3 GiB for the framebuffer alone (more with the PNG): refused at once, naming
+  // the scene, under a 1 GiB budget.
+  const Result r = run({"render", cornell_box(), "--width", "16384", "--height", "16384",
+                        "--memory-limit", "1G", "--out", "/tmp/never.png"});
+  expect_bad_input(r, "render 16384²");
+  EXPECT_NE(r.err.find("cornell_box.json: rendering 1 frame(s) of 16384x16384 needs about"),
+            std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("memory budget of 1.00 GiB"), std::string::npos) << r.err;
+  EXPECT_TRUE(r.out.empty());
+  EXPECT_EQ(
+      run({"render", cornell_box(), "--width", "16", "--height", "16", "--memory-limit", "1G"})
+          .code,
+      0);
+}
+
+TEST(CliContract, InfoJsonSurvivesAPathThatIsNotUtf8) {
+  const TempFolder dir("utf8");
+  const std::string odd = dir.file("scene\xff.json");
+  fs::copy_file(cornell_box(), odd);
+  const Result r = run({"info", "--json", odd});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_FALSE(nlohmann::json::parse(r.out, nullptr, false).is_discarded()) << r.out;
+  const Result text = run({"info", odd});
+  ASSERT_EQ(text.code, 0) << text.err;
+  EXPECT_NE(text.out.find("scene\\xff.json"), std::string::npos) << text.out;
 }
 
 } // namespace

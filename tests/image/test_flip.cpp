@@ -172,6 +172,29 @@ TEST(Flip, RejectsMismatchedSizesAndBadViewingConditions) {
   EXPECT_THROW((void)flip(Framebuffer(8, 8), Framebuffer(8, 8), FlipOptions{std::nan("")}), Error);
 }
 
+TEST(Flip, TheMapIsTheSameWhateverTheBandHeight) {
+  // Bands of rows keep the working memory to a few rows; every band height, including one row
+  // (most halo) and bands that do not divide the height, must give the whole image's map bit
+  // for bit: the filters reach across band edges, and the mean sums in the same order.
+  const Framebuffer base = test::random_image(37, 53, 71);
+  const Framebuffer other = add_noise(base, 0.2f, 72);
+  const FlipResult whole = flip(base, other, FlipOptions{kFlipDefaultPixelsPerDegree, 0});
+  for (const std::uint32_t band : {1u, 5u, 10u, 11u, 21u, 52u, 53u, 128u}) {
+    const FlipResult banded = flip(base, other, FlipOptions{kFlipDefaultPixelsPerDegree, band});
+    ASSERT_EQ(banded.error_map.size(), whole.error_map.size());
+    EXPECT_TRUE(banded.error_map == whole.error_map) << "band of " << band << " rows";
+    EXPECT_EQ(banded.mean, whole.mean) << "band of " << band << " rows";
+  }
+}
+
+TEST(Flip, WorkingMemoryIsTheMapAndOneBand) {
+  // 4 bytes per pixel for the map; the band buffers do not grow with the height.
+  const std::uint64_t tall = flip_working_bytes(1000, 16000);
+  const std::uint64_t short_one = flip_working_bytes(1000, 1000);
+  EXPECT_EQ(tall - short_one, std::uint64_t{4} * 1000 * 15000);
+  EXPECT_LT(flip_working_bytes(16384, 16384), std::uint64_t{5} * 16384 * 16384);
+}
+
 TEST(Flip, WorksOnImagesSmallerThanTheFilters) {
   const FlipResult r = flip(Framebuffer(1, 1, vec3(0.2f)), Framebuffer(1, 1, vec3(0.3f)));
   ASSERT_EQ(r.error_map.size(), 1u);

@@ -2,7 +2,9 @@
 // conformance suite runs the backend-specific properties on every backend).
 
 #include "scene_builder.h"
+#include "specula/core/error.h"
 #include "specula/render/render_job.h"
+#include "specula/scene/scene.h"
 #include "specula/systems/schedule.h"
 #include "specula/trace/lights.h"
 #include "specula/trace/shading.h"
@@ -389,6 +391,34 @@ TEST(Render, MaxDepthBoundsTheBounces) {
     Schedule schedule;
     schedule.tick(r2, 0.0);
     EXPECT_EQ(r2.resource<RenderJob>().last.rays[RayKind::Reflection], 64u * depth) << depth;
+  }
+}
+
+TEST(Render, TheDepthLimitOfScenesIsTheRenderJobs) {
+  // Scene loaders accept max_depth up to kMaxTraceDepth; the job takes every such depth (the
+  // wave integrator has no recursion) and honours it: facing mirrors, one bounce per level.
+  Material mirror;
+  mirror.reflectivity = 1.0f;
+  for (const std::uint32_t depth : {kMaxTraceDepth, kMaxTraceDepth + 1}) {
+    ecs::Registry r2;
+    test::add_mesh(r2, test::primitive("box", 1.0f, vec3(0.1f, 10, 10)), test::at(vec3(-2, 0, 0)),
+                   mirror);
+    test::add_mesh(r2, test::primitive("box", 1.0f, vec3(0.1f, 10, 10)), test::at(vec3(2, 0, 0)),
+                   mirror);
+    // A narrow view, so that no pixel's ray walks off the 10-unit mirrors in 64 bounces.
+    test::add_camera(r2, vec3(0, 0, 0), vec3(-1, 0, 0.001f), 0.5f);
+    RenderJob job;
+    job.settings.max_depth = depth;
+    job.settings.min_weight = 0.0f;
+    job.image = Framebuffer(2, 2);
+    if (depth > kMaxTraceDepth) {
+      EXPECT_THROW(prepare_rendering(r2, std::move(job)), Error);
+      continue;
+    }
+    prepare_rendering(r2, std::move(job));
+    Schedule schedule;
+    schedule.tick(r2, 0.0);
+    EXPECT_EQ(r2.resource<RenderJob>().last.rays[RayKind::Reflection], 4u * depth);
   }
 }
 
