@@ -85,14 +85,17 @@ inline constexpr float kEdgeInset = 4.0f;
   const double twice_area = glm::length(glm::cross(q1 - q0, q2 - q0));
   if (!(twice_area > 0.0) || !(margin > 0.0f)) return b;
   // margin / hᵢ = margin · |edge opposite pᵢ| / (2 · area).
-  const glm::dvec3 lower = double(margin) / twice_area *
-                           glm::dvec3(glm::length(q2 - q1), glm::length(q0 - q2), glm::length(q1 - q0));
+  const glm::dvec3 lower =
+      double(margin) / twice_area *
+      glm::dvec3(glm::length(q2 - q1), glm::length(q0 - q2), glm::length(q1 - q0));
   const double floor_sum = lower.x + lower.y + lower.z;
   if (!(floor_sum < 1.0)) return vec3(1.0f / 3.0f);
   double deficit = 0.0, room = 0.0;
   for (int i = 0; i < 3; ++i) {
-    if (double(b[i]) < lower[i]) deficit += lower[i] - double(b[i]);
-    else room += double(b[i]) - lower[i];
+    if (double(b[i]) < lower[i])
+      deficit += lower[i] - double(b[i]);
+    else
+      room += double(b[i]) - lower[i];
   }
   if (deficit == 0.0) return b;
   // room − deficit = 1 − floor_sum > 0: the others can give what is missing.

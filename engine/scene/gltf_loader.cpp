@@ -25,8 +25,8 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <charconv>
 #include <array>
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -968,9 +968,9 @@ std::optional<Light> map_light(const Context& ctx, const tinygltf::Node& node,
   if (const double brightest =
           double(std::max(light.color.x, std::max(light.color.y, light.color.z))) * light.intensity;
       !(brightest <= kMaxLightIntensity))
-    ctx.fail(lfield + ".intensity", "color * intensity must be <= " +
-                                        format_bound(kMaxLightIntensity) + ", got " +
-                                        strict_json::format_double(brightest));
+    ctx.fail(lfield + ".intensity",
+             "color * intensity must be <= " + format_bound(kMaxLightIntensity) + ", got " +
+                 strict_json::format_double(brightest));
   light.range = to_float(ctx, l.range, lfield + ".range"); // 0: not given, unlimited
   if (light.range < 0.0f) ctx.fail(lfield + ".range", "must be > 0");
   if (light.type == Light::Type::Spot) {

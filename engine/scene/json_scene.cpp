@@ -75,7 +75,8 @@ vec3 read_radiance(const Reader& r, const json& j, const std::string& path) {
   const vec3 c = read_color(r, j, path);
   const float largest = std::max(c.x, std::max(c.y, c.z));
   r.check(largest <= kMaxEmission, path,
-          "components must be <= " + format_bound(kMaxEmission) + ", got " + format_double(largest));
+          "components must be <= " + format_bound(kMaxEmission) + ", got " +
+              format_double(largest));
   return c;
 }
 
@@ -351,7 +352,8 @@ Light read_light(const Reader& r, const json& j, const std::string& path) {
   if (const json* v = o.find("color")) l.color = read_color(r, *v, o.path("color"));
   if (const json* v = o.find("intensity"))
     l.intensity = read_non_negative(r, *v, o.path("intensity"));
-  const double brightest = double(std::max(l.color.x, std::max(l.color.y, l.color.z))) * l.intensity;
+  const double brightest =
+      double(std::max(l.color.x, std::max(l.color.y, l.color.z))) * l.intensity;
   r.check(brightest <= kMaxLightIntensity, o.path(o.has("intensity") ? "intensity" : "color"),
           "color * intensity must be <= " + format_bound(kMaxLightIntensity) +
               " per component, got " + format_double(brightest));

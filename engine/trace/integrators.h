@@ -95,7 +95,6 @@ struct TileScratch {
   std::vector<std::uint8_t> confirm_blocked;
 };
 
-
 /// What a pixel (or a sample) receives: the radiance, or 0 when it is Inf or NaN, counted in
 /// counts.nonfinite so that it is never silent (the stats file's nonfinite_samples).
 [[nodiscard]] inline vec3 finite_or_counted(const vec3& radiance, RayCounts& counts) {

@@ -14,7 +14,7 @@
 namespace specula {
 
 struct ShadingPoint {
-  vec3 position;         ///< the hit, where lights are evaluated
+  vec3 position; ///< the hit, where lights are evaluated
   /// Where secondary rays leave from, before offset_ray_origin moves them off the surface: the hit
   /// pulled inside its triangle by kEdgeInset × its error bound (inset_barycentrics), so that a
   /// hit rounded onto a concave edge does not start behind the neighbouring face.

@@ -4,9 +4,9 @@
 
 #include "scene_builder.h"
 #include "specula/accel/common/traceable_instance.h"
+#include "specula/core/error.h"
 #include "specula/render/render_job.h"
 #include "specula/systems/schedule.h"
-#include "specula/core/error.h"
 #include "specula/trace/camera_rays.h"
 #include "specula/trace/lights.h"
 #include "specula/trace/stats.h"
@@ -55,9 +55,9 @@ int nonfinite_pixels(const Framebuffer& f) {
 TEST(TraceableInstance, RegularTransformsAreTraceable) {
   const Aabb unit{vec3(-1.0f), vec3(1.0f)};
   EXPECT_TRUE(accel::traceable_instance(mat4(1.0f), unit));
-  EXPECT_TRUE(accel::traceable_instance(compose_trs(vec3(3, -2, 1e5f), glm::angleAxis(0.7f, vec3(0, 1, 0)),
-                                                    vec3(1e-4f, 2.0f, -3.0f)),
-                                        unit));
+  EXPECT_TRUE(accel::traceable_instance(
+      compose_trs(vec3(3, -2, 1e5f), glm::angleAxis(0.7f, vec3(0, 1, 0)), vec3(1e-4f, 2.0f, -3.0f)),
+      unit));
   // A flat mesh (a plane) is fine: it has extent on two axes.
   EXPECT_TRUE(accel::traceable_instance(mat4(1.0f), Aabb{vec3(-1, 0, -1), vec3(1, 0, 1)}));
 }
@@ -65,14 +65,16 @@ TEST(TraceableInstance, RegularTransformsAreTraceable) {
 TEST(TraceableInstance, SingularTinyNonFiniteOrCollapsedAreNot) {
   const Aabb unit{vec3(-1.0f), vec3(1.0f)};
   const quat r = glm::angleAxis(0.3f, glm::normalize(vec3(1, 2, 3)));
-  for (const vec3 scale : {vec3(0.0f), vec3(1e-20f), vec3(1e-38f), vec3(1, 0, 1), vec3(1, 1, 1e-30f)})
+  for (const vec3 scale :
+       {vec3(0.0f), vec3(1e-20f), vec3(1e-38f), vec3(1, 0, 1), vec3(1, 1, 1e-30f)})
     EXPECT_FALSE(accel::traceable_instance(compose_trs(vec3(0, 1, 0), r, scale), unit))
         << scale.x << " " << scale.y << " " << scale.z;
   mat4 nan = mat4(1.0f);
   nan[3][0] = std::numeric_limits<float>::quiet_NaN();
   EXPECT_FALSE(accel::traceable_instance(nan, unit));
   // Unit geometry at 1e30 is narrower than a float step there: a point.
-  EXPECT_FALSE(accel::traceable_instance(compose_trs(vec3(1e30f), quat(1, 0, 0, 0), vec3(1)), unit));
+  EXPECT_FALSE(
+      accel::traceable_instance(compose_trs(vec3(1e30f), quat(1, 0, 0, 0), vec3(1)), unit));
   // A mesh whose triangles all sit on one point.
   EXPECT_FALSE(accel::traceable_instance(mat4(1.0f), Aabb{vec3(2.0f), vec3(2.0f)}));
   EXPECT_FALSE(accel::traceable_instance(mat4(1.0f), Aabb{})); // empty mesh
@@ -107,8 +109,8 @@ std::vector<ecs::Entity> degenerate_scene(ecs::Registry& reg, bool with_degenera
   std::vector<ecs::Entity> degenerate;
   if (!with_degenerate) return degenerate;
   // Several at one spot: Embree's top-level builder asserted on a set of point-sized boxes.
-  const vec3 scales[] = {vec3(0.0f), vec3(1e-20f), vec3(1e-38f), vec3(1, 0, 1), vec3(0.0f),
-                         vec3(1e-20f)};
+  const vec3 scales[] = {vec3(0.0f),    vec3(1e-20f), vec3(1e-38f),
+                         vec3(1, 0, 1), vec3(0.0f),   vec3(1e-20f)};
   int k = 0;
   for (const vec3& s : scales) {
     const char* shape = k % 2 == 0 ? "sphere" : "box";
@@ -141,9 +143,9 @@ TEST_P(DegenerateInstances, AreLeftOutCountedAndInvisible) {
 TEST_P(DegenerateInstances, ScaleAnimatedToZeroAndBackHidesAndShowsTheObject) {
   ecs::Registry reg;
   test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(6.0f)), test::at(vec3(0)));
-  const ecs::Entity ball = test::add_mesh(reg, test::primitive("sphere", 0.5f),
-                                          test::at(vec3(0, 0.5f, 0)), Material{},
-                                          Kinematics::Type::Hierarchical);
+  const ecs::Entity ball =
+      test::add_mesh(reg, test::primitive("sphere", 0.5f), test::at(vec3(0, 0.5f, 0)), Material{},
+                     Kinematics::Type::Hierarchical);
   test::TracedWorld world(reg, GetParam());
   const Ray down{vec3(0, 3, 0), 0.0f, vec3(0, -1, 0), std::numeric_limits<float>::infinity()};
   const std::uint32_t ball_slot = world.intersect(down).instance;
@@ -180,15 +182,18 @@ std::string load_error(const std::string& name, const std::string& text) {
 
 std::string json_scene(const std::string& light, const std::string& emission) {
   return R"({"format": "specula-scene", "version": 1, "entities": [
-    {"name": "lamp", "light": )" + light + R"(},
-    {"name": "panel", "mesh": {"primitive": "plane"}, "material": {"emission": )" + emission + "}}]}";
+    {"name": "lamp", "light": )" +
+         light + R"(},
+    {"name": "panel", "mesh": {"primitive": "plane"}, "material": {"emission": )" +
+         emission + "}}]}";
 }
 
 TEST(RadianceBounds, JsonRefusesAbsurdIntensityAndEmissionNamingTheFileAndField) {
   const std::string ok_light = R"({"type": "point", "intensity": 1e20})";
   EXPECT_EQ(load_error("specula_num_ok.json", json_scene(ok_light, "[1e20, 0, 1]")), "");
-  const std::string big_light = load_error(
-      "specula_num_light.json", json_scene(R"({"type": "point", "intensity": 3.4e38})", "[0, 0, 0]"));
+  const std::string big_light =
+      load_error("specula_num_light.json",
+                 json_scene(R"({"type": "point", "intensity": 3.4e38})", "[0, 0, 0]"));
   EXPECT_NE(big_light.find("specula_num_light.json"), std::string::npos) << big_light;
   EXPECT_NE(big_light.find("intensity"), std::string::npos) << big_light;
   EXPECT_NE(big_light.find("1e+20"), std::string::npos) << big_light;
@@ -348,8 +353,8 @@ struct CornellFrame {
 /// The Cornell box sample at width × height on `backend` in `mode`, with the scene's settings.
 CornellFrame render_cornell(const std::string& backend, TraceMode mode, std::uint32_t width,
                             std::uint32_t height) {
-  Scene scene = load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) / "samples/scenes" /
-                           "cornell_box.json");
+  Scene scene =
+      load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) / "samples/scenes" / "cornell_box.json");
   RenderJob job;
   job.backend = backend;
   job.settings.mode = mode;
@@ -412,7 +417,7 @@ TEST_P(ConcaveSeams, NoBlackLinesAlongTheCornellBoxSeamsAtAnyParity) {
   // through the ceiling–wall and floor–wall seams. Before issue 13's fix: 165 such pixels at
   // 512×400, 257 at 512×512, 164 at 640×480, almost none at 511×400.
   for (const auto& [w, h] : {std::pair{512u, 400u}, std::pair{511u, 400u}, std::pair{512u, 512u},
-                            std::pair{640u, 480u}}) {
+                             std::pair{640u, 480u}}) {
     const CornellFrame whitted = render_cornell(GetParam(), TraceMode::Whitted, w, h);
     const CornellFrame cast = render_cornell(GetParam(), TraceMode::Cast, w, h);
     EXPECT_EQ(isolated_black_seam_pixels(whitted, cast), 0) << w << "x" << h;
@@ -437,24 +442,28 @@ Frame render_scene(Scene& scene, const std::string& backend) {
 TEST_P(DegenerateInstances, JsonAnimationScaleKeysOf1eMinus38AndAHierarchyAt1eMinus20Render) {
   // What aborted inside Embree: several animated entities with scale keys of 1e-38 (a set of
   // point-sized boxes in the top-level build), and a hierarchical child scaled by 1e-20.
-  std::string entities = R"({"name": "camera", "camera": {"position": [0, 1, 4], "look_at": [0, 0.5, 0]}},
+  std::string entities =
+      R"({"name": "camera", "camera": {"position": [0, 1, 4], "look_at": [0, 0.5, 0]}},
     {"name": "floor", "mesh": {"primitive": "plane", "size": 4}},
     {"name": "arm", "animation": {"translation": {"interpolation": "linear", "times": [0, 1],
       "values": [[0, 0.5, 0], [0, 0.6, 0]]}}},
     {"name": "hand", "parent": "arm", "transform": {"scale": 1e-20}, "mesh": {"primitive": "box"}})";
   for (int i = 0; i < 5; ++i)
-    entities += R"(, {"name": "ball )" + std::to_string(i) + R"(", "transform": {"translation": [)" +
-                std::to_string(0.1 * i) + R"(, 0.5, 0]}, "mesh": {"primitive": "sphere"},
+    entities += R"(, {"name": "ball )" + std::to_string(i) +
+                R"(", "transform": {"translation": [)" + std::to_string(0.1 * i) +
+                R"(, 0.5, 0]}, "mesh": {"primitive": "sphere"},
       "animation": {"scale": {"interpolation": "linear", "times": [0, 1], "values": [1e-38, 1e-38]}}})";
-  Scene scene = load_text("specula_num_tiny.json",
-                          R"({"format": "specula-scene", "version": 1, "entities": [)" + entities + "]}");
+  Scene scene =
+      load_text("specula_num_tiny.json",
+                R"({"format": "specula-scene", "version": 1, "entities": [)" + entities + "]}");
   const Frame frame = render_scene(scene, GetParam());
   EXPECT_EQ(frame.stats.accel.hidden_instances, 6u);
   EXPECT_EQ(nonfinite_pixels(frame.image), 0);
 }
 
 TEST_P(DegenerateInstances, GltfAnimationScaleOutputsOfZeroRender) {
-  // A triangle whose node's scale animates to 0 from the start (glTF allows it, the loader keeps it).
+  // A triangle whose node's scale animates to 0 from the start (glTF allows it, the loader keeps
+  // it).
   Scene scene = load_text("specula_num_zero_scale.gltf", R"({"asset": {"version": "2.0"},
     "buffers": [{"byteLength": 68, "uri": "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAAAAAAAgD8AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAA="}],
     "bufferViews": [{"buffer": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 8},

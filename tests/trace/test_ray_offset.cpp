@@ -166,7 +166,8 @@ TEST(RayOffset, SpawnsAtConcaveEdgesLeaveInFrontOfBothFaces) {
 }
 
 TEST(RayOffset, InsetBarycentricsKeepTheMarginFromEveryEdge) {
-  const vec3 p0(0, 0, 0), p1(4, 0, 0), p2(0, 3, 0); // altitudes: 2.4 onto p1p2, 4 onto p0p2, 3 onto p0p1
+  const vec3 p0(0, 0, 0), p1(4, 0, 0),
+      p2(0, 3, 0); // altitudes: 2.4 onto p1p2, 4 onto p0p2, 3 onto p0p1
   const vec3 b = inset_barycentrics(p0, p1, p2, 1.2f, -0.1f, 0.3f); // outside: clamped, then inset
   EXPECT_NEAR(b.x + b.y + b.z, 1.0f, 1e-6f);
   EXPECT_GE(b.x * 2.4f, 0.3f - 1e-6f);

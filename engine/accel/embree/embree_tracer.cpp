@@ -267,8 +267,10 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
   }
   last_.static_triangles = static_triangles_;
   for (const auto& [slot, d] : dynamic_) {
-    if (d.attached) ++last_.dynamic_instances;
-    else ++last_.hidden_instances;
+    if (d.attached)
+      ++last_.dynamic_instances;
+    else
+      ++last_.hidden_instances;
   }
   return last_;
 }

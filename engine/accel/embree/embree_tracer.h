@@ -51,8 +51,8 @@ public:
 private:
   struct Dynamic {
     RTCGeometry instance = nullptr;
-    RTCScene blas = nullptr;      ///< the scene it instances (shared or own_blas)
-    bool attached = false;        ///< in the top level (false: degenerate, hidden)
+    RTCScene blas = nullptr;     ///< the scene it instances (shared or own_blas)
+    bool attached = false;       ///< in the top level (false: degenerate, hidden)
     RTCScene own_blas = nullptr; ///< deforming instances only
     RTCGeometry own_mesh = nullptr;
   };
