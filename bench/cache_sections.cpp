@@ -224,7 +224,7 @@ public:
   /// sphere's centre) from where the scene file puts it; 0: the scene's own camera.
   void orbit(double deg) {
     const float a = glm::radians(float(deg));
-    const vec3 c = start_.look_at, d = start_.position - c;
+    const vec3 c(start_.look_at), d = vec3(start_.position) - c; // scenes near the origin
     const vec3 p = c + vec3(d.x * std::cos(a) + d.z * std::sin(a), d.y,
                             -d.x * std::sin(a) + d.z * std::cos(a));
     scene_.registry.view<Camera>().each([&](Camera& cam) { cam.position = p; });

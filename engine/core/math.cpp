@@ -14,9 +14,27 @@ Aabb Aabb::transformed(const mat4& m) const {
   return out;
 }
 
+DAabb DAabb::transformed(const Aabb& box, const dmat4& m) {
+  DAabb out;
+  if (box.empty()) return out;
+  for (int i = 0; i < 8; ++i) {
+    const dvec3 corner((i & 1) ? box.max.x : box.min.x, (i & 2) ? box.max.y : box.min.y,
+                       (i & 4) ? box.max.z : box.min.z);
+    out.grow(dvec3(m * dvec4(corner, 1.0)));
+  }
+  return out;
+}
+
 bool is_finite(const mat4& m) {
   for (int c = 0; c < 4; ++c)
     if (!is_finite(m[c])) return false;
+  return true;
+}
+
+bool is_finite(const dmat4& m) {
+  for (int c = 0; c < 4; ++c)
+    for (int r = 0; r < 4; ++r)
+      if (!std::isfinite(m[c][r])) return false;
   return true;
 }
 
@@ -26,6 +44,15 @@ mat4 compose_trs(const vec3& translation, const quat& rotation, const vec3& scal
   m[1] *= scale.y;
   m[2] *= scale.z;
   m[3] = vec4(translation, 1.0f);
+  return m;
+}
+
+dmat4 compose_trs(const dvec3& translation, const quat& rotation, const vec3& scale) {
+  dmat4 m(glm::mat4_cast(rotation)); // the rotation's entries are exact in double
+  m[0] *= double(scale.x);
+  m[1] *= double(scale.y);
+  m[2] *= double(scale.z);
+  m[3] = dvec4(translation, 1.0);
   return m;
 }
 

@@ -18,9 +18,13 @@ void TriangleMesh::validate(const std::string& source) const {
   if (!uvs.empty() && uvs.size() != positions.size())
     throw Error(source, "mesh has " + std::to_string(uvs.size()) + " texture coordinates for " +
                             std::to_string(positions.size()) + " vertices");
-  for (std::size_t i = 0; i < positions.size(); ++i)
+  for (std::size_t i = 0; i < positions.size(); ++i) {
     if (!is_finite(positions[i]))
       throw Error(source, "vertex " + std::to_string(i) + " has a non-finite position (NaN or Inf)");
+    if (!in_range(positions[i]))
+      throw Error(source, "vertex " + std::to_string(i) + " has a coordinate outside " +
+                              kCoordinateRangeText);
+  }
   for (std::size_t i = 0; i < normals.size(); ++i)
     if (!is_finite(normals[i]))
       throw Error(source, "vertex " + std::to_string(i) + " has a non-finite normal (NaN or Inf)");

@@ -24,7 +24,8 @@ struct TriangleMesh {
   [[nodiscard]] Aabb bounds() const;
 
   /// Throws specula::Error(source, ...) naming the first problem: non-finite positions, normals
-  /// or uvs, array sizes that disagree, indices out of range, no triangles.
+  /// or uvs, a position coordinate outside ±kMaxCoordinate (core/math.h), array sizes that
+  /// disagree, indices out of range, no triangles.
   void validate(const std::string& source) const;
 
   /// Area-weighted smooth normals from the triangles (replaces `normals`). Vertices that only

@@ -11,6 +11,7 @@
 #include "specula/scene/components/world_transform.h"
 #include "specula/scene/hierarchy.h"
 #include "specula/scene/kinematics_rules.h"
+#include "specula/scene/scene.h"
 
 #include <algorithm>
 #include <cmath>
@@ -44,13 +45,13 @@ gpu::GpuMaterial to_gpu(const Material& m) {
   return g;
 }
 
-gpu::GpuLight to_gpu(const Light& l, const mat4& world_from_object) {
+gpu::GpuLight to_gpu(const Light& l, const dmat4& world_from_object, const dvec3& render_origin) {
   gpu::GpuLight g{};
   g.type = l.type == Light::Type::Point         ? gpu::kLightPoint
            : l.type == Light::Type::Directional ? gpu::kLightDirectional
                                                 : gpu::kLightSpot;
-  g.position = vec3(world_from_object[3]);
-  const vec3 forward = -vec3(world_from_object[2]);
+  g.position = vec3(dvec3(world_from_object[3]) - render_origin);
+  const vec3 forward = -vec3(dvec3(world_from_object[2]));
   g.direction = glm::length(forward) > 0.0f ? glm::normalize(forward) : vec3(0, 0, -1);
   g.intensity = l.color * l.intensity;
   g.range = l.range;
@@ -68,6 +69,15 @@ Aabb bounds_of(const vec3* p, std::size_t n) {
   Aabb b;
   for (std::size_t i = 0; i < n; ++i) b.grow(p[i]);
   return b;
+}
+
+/// Throws when a mesh entity's world-space extent leaves the representable range (a scale times
+/// vertex coordinates, an animation): an error naming the entity, never an abort in a tracer.
+void check_extent(ecs::Registry& registry, ecs::Entity e, const DAabb& world) {
+  if (in_range(world.min) && in_range(world.max)) return;
+  throw Error("scene", entity_label(registry, e) + " extends from " + format_position(world.min) +
+                           " to " + format_position(world.max) + ", outside " +
+                           kCoordinateRangeText);
 }
 
 bool deforms(ecs::Registry& registry, ecs::Entity e, const Mesh& mesh) {
@@ -88,6 +98,8 @@ const SceneDelta& SceneLayer::sync(ecs::Registry& registry) {
   delta_ = SceneDelta{};
   stats_ = SceneLayerStats{};
   static_moved_ = false;
+  // The render origin first: every transform this sync writes is relative to it.
+  const bool rebased = update_render_origin(registry);
   const TransformChanges* changes = registry.try_resource<TransformChanges>();
   const bool membership_changed = syncs_ == 0 || registry.version<Mesh>() != version_mesh_ ||
                                   registry.version<WorldTransform>() != version_transform_ ||
@@ -105,6 +117,7 @@ const SceneDelta& SceneLayer::sync(ecs::Registry& registry) {
   } else if (has_new_moves) {
     apply_moved(registry, changes->moved);
   }
+  if (rebased) rebase_instances(registry);
   apply_deformations(registry);
   if (stats_.full_scans > 0 || registry.version<Material>() != version_material_)
     refresh_materials(registry);
@@ -137,6 +150,42 @@ const SceneDelta& SceneLayer::sync(ecs::Registry& registry) {
   return delta_;
 }
 
+bool SceneLayer::update_render_origin(ecs::Registry& registry) {
+  const std::optional<Camera> camera = active_camera(registry);
+  if (!camera) return false; // no camera: the origin stays where it is
+  if (!in_range(camera->position) || !in_range(camera->look_at))
+    throw Error("scene", "the camera is at " + format_position(camera->position) + " looking at " +
+                             format_position(camera->look_at) + ", outside " +
+                             kCoordinateRangeText);
+  if (glm::length(camera->position - render_origin_) <= kRebaseDistance) return false;
+  render_origin_ = camera->position;
+  if (syncs_ == 0) return false; // the first sync builds everything relative to it anyway
+  ++stats_.rebases;
+  ++rebases_;
+  return true;
+}
+
+void SceneLayer::rebase_instances(ecs::Registry& registry) {
+  // Every instance's render-space transform changed. Those this sync already added or moved are
+  // current; the rest are rewritten and reported as moved, and the static set is baked again.
+  std::vector<bool> done(slots_.size(), false);
+  for (const std::uint32_t slot : delta_.instances_added) done[slot] = true;
+  for (const std::uint32_t slot : delta_.instances_moved) done[slot] = true;
+  for (std::uint32_t slot = 0; slot < slots_.size(); ++slot) {
+    if (!tables_.live(slot)) continue;
+    if ((tables_.instances[slot].flags & gpu::kInstanceStatic) != 0) {
+      delta_.static_rebuilt = true;
+      continue;
+    }
+    if (done[slot]) continue;
+    write_transform(registry, slot,
+                    registry.get<WorldTransform>(slots_[slot].entity).world_from_object);
+    delta_.instances_moved.push_back(slot);
+    ++stats_.instances_moved;
+  }
+  delta_.lights_changed = true; // refresh_lights compares the new positions anyway
+}
+
 void SceneLayer::full_scan(ecs::Registry& registry, const std::vector<ecs::Entity>* moved) {
   stats_.full_scans = 1;
   // What moved since the last sync: the transform system's list when it covers the whole time,
@@ -167,7 +216,7 @@ void SceneLayer::full_scan(ecs::Registry& registry, const std::vector<ecs::Entit
             delta_.static_rebuilt = true;
             static_moved_ = true;
           } else {
-            write_transform(slot, wt.world_from_object);
+            write_transform(registry, slot, wt.world_from_object);
             delta_.instances_moved.push_back(slot);
             ++stats_.instances_moved;
           }
@@ -198,7 +247,7 @@ void SceneLayer::apply_moved(ecs::Registry& registry, const std::vector<ecs::Ent
       static_moved_ = true;
       continue;
     }
-    write_transform(*slot, wt.world_from_object);
+    write_transform(registry, *slot, wt.world_from_object);
     delta_.instances_moved.push_back(*slot);
     ++stats_.instances_moved;
   }
@@ -221,7 +270,7 @@ void SceneLayer::apply_deformations(ecs::Registry& registry) {
     const Aabb b = bounds_of(positions.data(), positions.size());
     record.bounds_min = b.min;
     record.bounds_max = b.max;
-    write_transform(slot, tables_.instances[slot].world_from_object); // new world bounds
+    write_transform(registry, slot, s.world_from_object); // new world bounds
     delta_.instances_deformed.push_back(slot);
     ++stats_.instances_deformed;
   }
@@ -243,7 +292,7 @@ void SceneLayer::refresh_lights(ecs::Registry& registry) {
   std::vector<gpu::GpuLight> lights;
   lights.reserve(tables_.lights.size());
   registry.view<Light, WorldTransform>().each([&](const Light& l, const WorldTransform& wt) {
-    lights.push_back(to_gpu(l, wt.world_from_object));
+    lights.push_back(to_gpu(l, wt.world_from_object, render_origin_));
   });
   if (lights.size() != tables_.lights.size() ||
       (!lights.empty() && std::memcmp(lights.data(), tables_.lights.data(),
@@ -304,15 +353,26 @@ void SceneLayer::release_shared_mesh(const TriangleMesh* source) {
   shared_.erase(it);
 }
 
-void SceneLayer::write_transform(std::uint32_t slot, const mat4& world_from_object) {
+mat4 SceneLayer::render_from(const dmat4& world_from_object) const {
+  dmat4 m = world_from_object;
+  m[3] -= dvec4(render_origin_, 0.0); // in double: the difference is small, then exact in float
+  return mat4(m);
+}
+
+void SceneLayer::write_transform(ecs::Registry& registry, std::uint32_t slot,
+                                 const dmat4& world_from_object) {
+  slots_[slot].world_from_object = world_from_object;
   gpu::GpuInstance& inst = tables_.instances[slot];
-  inst.world_from_object = world_from_object;
-  const mat3 n = glm::transpose(glm::inverse(mat3(world_from_object)));
-  for (int c = 0; c < 3; ++c) inst.normal_from_object[c] = vec4(n[c], 0.0f);
   const gpu::GpuMesh& record = tables_.meshes[inst.mesh];
-  const Aabb world = Aabb{record.bounds_min, record.bounds_max}.transformed(world_from_object);
-  inst.world_bounds_min = world.min;
-  inst.world_bounds_max = world.max;
+  const Aabb object{record.bounds_min, record.bounds_max};
+  check_extent(registry, slots_[slot].entity, DAabb::transformed(object, world_from_object));
+  const mat4 render_from_object = render_from(world_from_object);
+  inst.world_from_object = render_from_object;
+  const mat3 n = glm::transpose(glm::inverse(mat3(render_from_object)));
+  for (int c = 0; c < 3; ++c) inst.normal_from_object[c] = vec4(n[c], 0.0f);
+  const Aabb render = object.transformed(render_from_object);
+  inst.world_bounds_min = render.min;
+  inst.world_bounds_max = render.max;
 }
 
 void SceneLayer::add_instance(ecs::Registry& registry, ecs::Entity e, const Desired& d) {
@@ -386,7 +446,7 @@ void SceneLayer::add_instance(ecs::Registry& registry, ecs::Entity e, const Desi
     inst.mesh = s.shared_mesh;
     if (tables_.meshes[inst.mesh].first_normal != gpu::kNoIndex) inst.flags = gpu::kInstanceSmooth;
   }
-  write_transform(slot, wt.world_from_object);
+  write_transform(registry, slot, wt.world_from_object);
   delta_.instances_added.push_back(slot);
   ++stats_.instances_added;
 }
@@ -442,11 +502,18 @@ void SceneLayer::relayout(ecs::Registry& registry, bool rebake) {
       const WorldTransform& wt = registry.get<WorldTransform>(slots_[slot].entity);
       slots_[slot].moved_tick = wt.moved_tick;
       const TriangleMesh& m = *mesh.geometry;
+      // The world extent checked in double; the vertices placed in float by the render-space
+      // matrix, whose translation is small (relative to the render origin, taken in double), so
+      // they are as precise as at the world origin — and bit-identical to a world-space float
+      // bake there.
+      check_extent(registry, slots_[slot].entity,
+                   DAabb::transformed(m.bounds(), wt.world_from_object));
+      const mat4 render_from_object = render_from(wt.world_from_object);
       for (const vec3& p : m.positions)
-        positions.push_back(vec3(wt.world_from_object * vec4(p, 1.0f)));
+        positions.push_back(vec3(render_from_object * vec4(p, 1.0f)));
       if (m.normals.size() == m.positions.size()) {
         baked.first_normal = std::uint32_t(normals.size());
-        const mat3 n_from_o = glm::transpose(glm::inverse(mat3(wt.world_from_object)));
+        const mat3 n_from_o = glm::transpose(glm::inverse(mat3(render_from_object)));
         for (const vec3& n : m.normals) normals.push_back(glm::normalize(n_from_o * n));
       }
       triangles.insert(triangles.end(), m.triangles.begin(), m.triangles.end());

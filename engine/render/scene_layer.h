@@ -25,8 +25,16 @@
 
 namespace specula {
 
-/// The flat tables. Instance slots are stable while their entity stays an instance of the same
-/// kind; freed slots (GpuInstance::mesh == gpu::kNoIndex) are reused. Mesh records likewise.
+/// The render origin moves to the camera when the camera is farther than this from it (world
+/// units, Euclidean). Within it, render-space coordinates near the camera stay below 4096·√3,
+/// where float resolves 2^-11 ≈ 4.9e-4 or better (docs/design/large-worlds.md).
+inline constexpr double kRebaseDistance = 4096.0;
+
+/// The flat tables, in render space: world space translated by −SceneLayer::render_origin() and
+/// rounded to float (GpuInstance::world_from_object and world_bounds_*, baked static positions,
+/// light positions are all render-space). Instance slots are stable while their entity stays an
+/// instance of the same kind; freed slots (GpuInstance::mesh == gpu::kNoIndex) are reused. Mesh
+/// records likewise.
 struct SceneTables {
   std::vector<gpu::GpuInstance> instances;
   std::vector<gpu::GpuMaterial> materials; ///< one per instance slot (GpuInstance::material)
@@ -89,6 +97,7 @@ struct SceneLayerStats {
   std::uint32_t static_instances = 0; ///< in the static set after the sync
   std::uint32_t static_triangles = 0;
   std::uint32_t dynamic_instances = 0;
+  std::uint32_t rebases = 0; ///< the render origin moved to the camera (static set rebaked)
 };
 
 class SceneLayer {
@@ -106,6 +115,14 @@ public:
   [[nodiscard]] std::optional<std::uint32_t> instance_of(ecs::Entity entity) const;
   /// Number of syncs so far (0: never synced).
   [[nodiscard]] std::uint64_t syncs() const { return syncs_; }
+  /// Where render space's origin lies in world space. It starts at the world origin and moves to
+  /// the active camera's position when a sync finds the camera farther than kRebaseDistance
+  /// from it (a rebase: the static set is baked again and every dynamic instance is rewritten
+  /// and reported moved). A camera that stays within kRebaseDistance of the world origin never
+  /// causes one, so scenes near the origin render exactly as in world space.
+  [[nodiscard]] const dvec3& render_origin() const { return render_origin_; }
+  /// Rebases since the layer was made (the first sync's choice of origin is not one).
+  [[nodiscard]] std::uint64_t rebases() const { return rebases_; }
 
 private:
   struct Slot {
@@ -115,6 +132,7 @@ private:
     std::uint64_t moved_tick = 0;              ///< WorldTransform::moved_tick as last applied
     std::uint64_t deformed_tick = 0;           ///< Mesh::deformed_tick as last applied
     std::uint32_t shared_mesh = gpu::kNoIndex; ///< the object-space mesh record it uses
+    dmat4 world_from_object{1.0};              ///< dynamic instances: as last written
   };
   struct SharedMesh {
     std::shared_ptr<const TriangleMesh> source;
@@ -136,7 +154,16 @@ private:
   void refresh_lights(ecs::Registry& registry);
   void add_instance(ecs::Registry& registry, ecs::Entity e, const Desired& d);
   void remove_instance(std::uint32_t slot);
-  void write_transform(std::uint32_t slot, const mat4& world_from_object);
+  /// Picks the render origin for this sync (throws when the camera is out of range); true when
+  /// it moved after the first sync.
+  bool update_render_origin(ecs::Registry& registry);
+  /// After a rebase: rewrites every dynamic instance not yet written this sync, flags the static
+  /// set for rebaking and the lights for refreshing.
+  void rebase_instances(ecs::Registry& registry);
+  [[nodiscard]] mat4 render_from(const dmat4& world_from_object) const;
+  /// Writes a dynamic instance's render-space transform and bounds; throws when its world-space
+  /// extent leaves the representable range.
+  void write_transform(ecs::Registry& registry, std::uint32_t slot, const dmat4& world_from_object);
   std::uint32_t acquire_shared_mesh(const std::shared_ptr<const TriangleMesh>& geometry);
   void release_shared_mesh(const TriangleMesh* source);
   std::uint32_t new_mesh_record();
@@ -154,6 +181,8 @@ private:
   std::unordered_map<const TriangleMesh*, SharedMesh> shared_;
   std::vector<std::uint32_t> deforming_; ///< slots of deforming instances
   std::uint64_t syncs_ = 0;
+  std::uint64_t rebases_ = 0;
+  dvec3 render_origin_{0.0};
   std::uint64_t transform_sequence_ = 0;
   std::uint64_t version_mesh_ = 0, version_transform_ = 0, version_kinematics_ = 0,
                 version_animation_ = 0, version_parent_ = 0, version_material_ = 0;

@@ -46,6 +46,12 @@ vec3 sample(const Keyframes<vec3>& track, float t) {
   return sample_track(track, t, [](const vec3& a, const vec3& b, float f) { return glm::mix(a, b, f); });
 }
 
+dvec3 sample(const Keyframes<dvec3>& track, float t) {
+  return sample_track(track, t, [](const dvec3& a, const dvec3& b, float f) {
+    return glm::mix(a, b, double(f));
+  });
+}
+
 quat sample(const Keyframes<quat>& track, float t) {
   return sample_track(track, t, [](const quat& a, const quat& b, float f) {
     return glm::normalize(glm::slerp(a, b, f));
@@ -84,8 +90,8 @@ CameraPath::Key sample(const CameraPath& path, float t) {
                                    [](float v, const CameraPath::Key& k) { return v < k.time; });
   const auto i = static_cast<std::size_t>(std::distance(keys.begin(), it)) - 1;
   const float f = (t - keys[i].time) / (keys[i + 1].time - keys[i].time);
-  return CameraPath::Key{t, glm::mix(keys[i].position, keys[i + 1].position, f),
-                         glm::mix(keys[i].look_at, keys[i + 1].look_at, f)};
+  return CameraPath::Key{t, glm::mix(keys[i].position, keys[i + 1].position, double(f)),
+                         glm::mix(keys[i].look_at, keys[i + 1].look_at, double(f))};
 }
 
 void validate_animation(const Animation& a, std::size_t vertex_count, const std::string& context,
@@ -95,9 +101,9 @@ void validate_animation(const Animation& a, std::size_t vertex_count, const std:
   check_times(a.scale, context, field + ".scale");
   check_times(a.vertices, context, field + ".vertices");
   for (std::size_t i = 0; i < a.translation.values.size(); ++i)
-    if (!is_finite(a.translation.values[i]))
+    if (!is_finite(a.translation.values[i]) || !in_range(a.translation.values[i]))
       throw Error(context, field + ".translation.values[" + std::to_string(i) + "]",
-                  "value is not finite");
+                  std::string("translation is not finite or outside ") + kCoordinateRangeText);
   for (std::size_t i = 0; i < a.rotation.values.size(); ++i) {
     const quat& q = a.rotation.values[i];
     if (!is_finite(q) || glm::length(q) < 1e-6f)
@@ -114,9 +120,10 @@ void validate_animation(const Animation& a, std::size_t vertex_count, const std:
                   "key has " + std::to_string(key.size()) + " vertices but the mesh has " +
                       std::to_string(vertex_count));
     for (const vec3& p : key)
-      if (!is_finite(p))
+      if (!is_finite(p) || !in_range(p))
         throw Error(context, field + ".vertices.values[" + std::to_string(k) + "]",
-                    "vertex position is not finite");
+                    std::string("vertex position is not finite or outside ") +
+                        kCoordinateRangeText);
   }
   if (!std::isfinite(a.speed) || !std::isfinite(a.time))
     throw Error(context, field, "speed and time must be finite");
@@ -130,6 +137,9 @@ void validate_camera_path(const CameraPath& path, const std::string& context,
     const std::string at = field + ".keys[" + std::to_string(i) + "]";
     if (!std::isfinite(k.time) || !is_finite(k.position) || !is_finite(k.look_at))
       throw Error(context, at, "time, position and look_at must be finite");
+    if (!in_range(k.position) || !in_range(k.look_at))
+      throw Error(context, at,
+                  std::string("position or look_at is outside ") + kCoordinateRangeText);
     if (i > 0 && !(k.time > path.keys[i - 1].time))
       throw Error(context, at, "key times must be strictly increasing");
     if (glm::length(k.position - k.look_at) <= 0.0f)

@@ -15,6 +15,7 @@ namespace specula {
 /// previous key; Linear lerps vectors and slerps rotations (shortest arc). Tracks must be
 /// non-empty and valid (validate_animation).
 [[nodiscard]] vec3 sample(const Keyframes<vec3>& track, float t);
+[[nodiscard]] dvec3 sample(const Keyframes<dvec3>& track, float t);
 [[nodiscard]] quat sample(const Keyframes<quat>& track, float t);
 /// Writes the interpolated vertex set into `out` (resized to the keys' vertex count).
 void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3>& out);
@@ -27,7 +28,8 @@ void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3
 [[nodiscard]] CameraPath::Key sample(const CameraPath& path, float t);
 
 /// Throws specula::Error(context, field, ...) for: times not finite or not strictly increasing,
-/// a values count different from the times count, non-finite values, zero-length rotations,
+/// a values count different from the times count, non-finite values, translations or camera
+/// positions outside ±kMaxCoordinate (core/math.h), zero-length rotations,
 /// vertex keys whose size differs from `vertex_count` (pass 0 when there is no mesh: any vertex
 /// track is then an error), non-finite speed.
 void validate_animation(const Animation& animation, std::size_t vertex_count,

@@ -41,6 +41,7 @@
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -119,6 +120,14 @@ float to_float(const Context& ctx, double value, const std::string& field) {
   if (!std::isfinite(value) || std::abs(value) > double(std::numeric_limits<float>::max()))
     ctx.fail(field, "value is not a finite 32-bit float");
   return static_cast<float>(value);
+}
+
+/// A JSON number as a double coordinate (a translation), within the representable range
+/// (core/math.h kMaxCoordinate), so that `info` refuses what `render` could not trace.
+double to_coordinate(const Context& ctx, double value, const std::string& field) {
+  if (!std::isfinite(value) || !in_range(value))
+    ctx.fail(field, std::string("coordinate is not finite or outside ") + kCoordinateRangeText);
+  return value;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -893,7 +902,7 @@ Material map_material(const Context& ctx, int index) {
 }
 
 /// The node's camera in world space; nullopt (with a warning) for orthographic cameras.
-std::optional<Camera> map_camera(const Context& ctx, int index, const mat4& world_from_node,
+std::optional<Camera> map_camera(const Context& ctx, int index, const dmat4& world_from_node,
                                  const RenderSettings& settings, const std::string& node_field) {
   const auto& cameras = ctx.model.cameras;
   if (static_cast<std::size_t>(index) >= cameras.size())
@@ -915,13 +924,16 @@ std::optional<Camera> map_camera(const Context& ctx, int index, const mat4& worl
     ctx.fail(field + ".perspective.aspectRatio", "must be > 0");
 
   Camera camera;
-  camera.position = vec3(world_from_node[3]);
-  const mat3 basis(world_from_node);
+  camera.position = dvec3(world_from_node[3]);
+  if (!in_range(camera.position))
+    ctx.fail(node_field,
+             std::string("the camera's world position is outside ") + kCoordinateRangeText);
+  const mat3 basis{dmat3(world_from_node)};
   const vec3 forward = basis * vec3(0.0f, 0.0f, -1.0f);
   const vec3 up = basis * vec3(0.0f, 1.0f, 0.0f);
   if (!is_finite(forward) || glm::length(forward) <= 0.0f || glm::length(up) <= 0.0f)
     ctx.fail(node_field, "the camera's world transform is degenerate");
-  camera.look_at = camera.position + glm::normalize(forward);
+  camera.look_at = camera.position + dvec3(glm::normalize(forward));
   camera.up = glm::normalize(up);
   camera.vertical_fov = static_cast<float>(yfov);
   camera.aspect = aspect > 0.0 ? to_float(ctx, aspect, field + ".perspective.aspectRatio")
@@ -1004,7 +1016,9 @@ Transform decompose(const Context& ctx, const std::vector<double>& values,
       std::abs(m[3][3] - 1.0f) > 1e-6f)
     ctx.fail(field, "matrix is not affine (its last row must be 0 0 0 1)");
   Transform t;
-  t.translation = vec3(m[3]);
+  // The translation in double, as the file gives it (the float copy above served the checks).
+  for (int r = 0; r < 3; ++r)
+    t.translation[r] = to_coordinate(ctx, values[static_cast<std::size_t>(12 + r)], field);
   vec3 scale(glm::length(vec3(m[0])), glm::length(vec3(m[1])), glm::length(vec3(m[2])));
   const float det = glm::determinant(mat3(m));
   const float max_scale = std::max({scale.x, scale.y, scale.z});
@@ -1029,11 +1043,16 @@ Transform node_transform(const Context& ctx, const tinygltf::Node& node, const s
     return decompose(ctx, node.matrix, field + ".matrix");
   }
   Transform t;
-  const auto vector3 = [&](const std::vector<double>& v, const char* name, vec3& out) {
+  const auto vector3 = [&](const std::vector<double>& v, const char* name, auto& out) {
     if (v.empty()) return;
     if (v.size() != 3) ctx.fail(field + "." + name, "must have 3 numbers");
-    for (int i = 0; i < 3; ++i)
-      out[i] = to_float(ctx, v[static_cast<std::size_t>(i)], field + "." + name);
+    for (int i = 0; i < 3; ++i) {
+      const double x = v[static_cast<std::size_t>(i)];
+      if constexpr (std::is_same_v<std::decay_t<decltype(out)>, dvec3>)
+        out[i] = to_coordinate(ctx, x, field + "." + name);
+      else
+        out[i] = to_float(ctx, x, field + "." + name);
+    }
   };
   vector3(node.translation, "translation", t.translation);
   vector3(node.scale, "scale", t.scale);
@@ -1182,11 +1201,16 @@ std::map<int, NodeAnimation> read_animations(const Context& ctx) {
         const std::vector<vec3> values =
             read_vec3s(ctx, sampler.output, output_field, Components::Float);
         if (values.size() != keys * per_key) count_error(values.size(), "values");
-        Keyframes<vec3>& k = path == "translation" ? track.translation : track.scale;
-        k.times = times;
-        k.interpolation = interpolation;
-        for (std::size_t i = 0; i < keys; ++i)
-          k.values.push_back(values[i * per_key + value_index]);
+        const auto fill = [&](auto& k) {
+          k.times = times;
+          k.interpolation = interpolation;
+          for (std::size_t i = 0; i < keys; ++i)
+            k.values.emplace_back(values[i * per_key + value_index]);
+        };
+        if (path == "translation")
+          fill(track.translation);
+        else
+          fill(track.scale);
       }
       validate_animation(track, 0, ctx.file, field);
       if (path == "translation")
@@ -1303,13 +1327,13 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
   struct Pending {
     int node = -1;
     ecs::Entity parent = ecs::null_entity;
-    mat4 world_from_parent{1.0f};
+    dmat4 world_from_parent{1.0};
     std::string field; ///< where the node index was found, for messages
   };
   std::vector<Pending> stack;
   for (std::size_t i = roots.size(); i-- > 0;)
     stack.push_back(
-        {roots[i], ecs::null_entity, mat4(1.0f), roots_field + "[" + std::to_string(i) + "]"});
+        {roots[i], ecs::null_entity, dmat4(1.0), roots_field + "[" + std::to_string(i) + "]"});
   std::vector<bool> visited(model.nodes.size(), false);
 
   while (!stack.empty()) {
@@ -1339,7 +1363,7 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
     const Transform transform = node_transform(ctx, node, field);
     reg.emplace<Transform>(e, transform);
     if (!item.parent.is_null()) reg.emplace<Parent>(e, Parent{item.parent});
-    const mat4 world_from_node = item.world_from_parent * transform.parent_from_local();
+    const dmat4 world_from_node = item.world_from_parent * transform.parent_from_local();
 
     Animation node_animation;
     if (node_anim != nullptr) node_animation = node_anim->trs;

@@ -7,6 +7,7 @@
 #include "specula/scene/components/world_transform.h"
 
 #include <algorithm>
+#include <charconv>
 #include <limits>
 #include <unordered_map>
 #include <vector>
@@ -33,7 +34,17 @@ std::string cycle_message(const ecs::Registry& registry, const std::vector<ecs::
   return message + entity_label(registry, cycle.front());
 }
 
+std::string shortest(double v) {
+  char buf[32];
+  const auto result = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, result.ptr);
+}
+
 } // namespace
+
+std::string format_position(const dvec3& p) {
+  return "(" + shortest(p.x) + ", " + shortest(p.y) + ", " + shortest(p.z) + ")";
+}
 
 std::string entity_label(const ecs::Registry& registry, ecs::Entity e) {
   const Name* name = registry.try_get<Name>(e);
@@ -86,8 +97,8 @@ std::size_t update_world_transforms(ecs::Registry& registry, std::uint64_t tick,
   std::size_t moved = 0;
   for (const auto& level : by_depth) {
     for (const ecs::Entity e : level) {
-      const mat4 local = registry.get<Transform>(e).parent_from_local();
-      mat4 world = local;
+      const dmat4 local = registry.get<Transform>(e).parent_from_local();
+      dmat4 world = local;
       bool parent_moved = false;
       if (const Parent* parent = registry.try_get<Parent>(e);
           parent != nullptr && !parent->entity.is_null()) {
@@ -95,6 +106,12 @@ std::size_t update_world_transforms(ecs::Registry& registry, std::uint64_t tick,
         world = pw.world_from_object * local;
         parent_moved = pw.moved && pw.moved_tick == tick;
       }
+      // Composition (a parent's scale times a child's translation, an animated parent) can
+      // carry a position out of the range every loader checks: an error here, not an abort in
+      // a tracer.
+      if (const dvec3 origin(world[3]); !in_range(origin))
+        throw Error(context, entity_label(registry, e) + " is placed at " +
+                                 format_position(origin) + ", outside " + kCoordinateRangeText);
       WorldTransform* wt = registry.try_get<WorldTransform>(e);
       if (wt == nullptr) {
         wt = &registry.emplace<WorldTransform>(e);

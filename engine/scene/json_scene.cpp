@@ -80,6 +80,30 @@ vec3 read_radiance(const Reader& r, const json& j, const std::string& path) {
   return c;
 }
 
+/// A position [x, y, z] in double (Transform::translation, Camera, keys), each coordinate within
+/// the representable range (core/math.h kMaxCoordinate), so that `info` refuses what `render`
+/// could not trace.
+dvec3 read_position(const Reader& r, const json& j, const std::string& path) {
+  if (!j.is_array() || j.size() != 3)
+    r.fail(path, "expected an array of 3 numbers [x, y, z], got " + describe(j));
+  dvec3 p;
+  for (int i = 0; i < 3; ++i) {
+    const std::string at = element_path(path, static_cast<std::size_t>(i));
+    p[i] = read_number(r, j[static_cast<std::size_t>(i)], at);
+    r.check(in_range(p[i]), at,
+            "coordinate " + format_double(p[i]) + " is outside " + kCoordinateRangeText);
+  }
+  return p;
+}
+
+/// A primitive's length (radius, height, edge): > 0 and at most kMaxCoordinate.
+float check_length(const Reader& r, float v, const std::string& path) {
+  if (in_range(double(v))) return v;
+  char text[32];
+  const auto shortest = std::to_chars(text, text + sizeof text, v);
+  r.fail(path, "length " + std::string(text, shortest.ptr) + " is outside " + kCoordinateRangeText);
+}
+
 /// Unit quaternions pass through untouched and others are normalized, so a written rotation
 /// reads back bit-identical (normalizing twice could move the last bit).
 quat unit_or_normalized(const quat& q) {
@@ -114,6 +138,7 @@ vec3 read_scale(const Reader& r, const json& j, const std::string& path) {
 vec3 read_box_size(const Reader& r, const json& j, const std::string& path) {
   const vec3 s = j.is_number() ? vec3(read_float(r, j, path)) : read_vec<3>(r, j, path);
   r.check(s.x > 0.0f && s.y > 0.0f && s.z > 0.0f, path, "box edge lengths must be > 0");
+  for (int i = 0; i < 3; ++i) check_length(r, s[i], path);
   return s;
 }
 
@@ -121,6 +146,8 @@ vec3 read_box_size(const Reader& r, const json& j, const std::string& path) {
 vec3 read_plane_size(const Reader& r, const json& j, const std::string& path) {
   const vec2 s = j.is_number() ? vec2(read_float(r, j, path)) : read_vec<2>(r, j, path);
   r.check(s.x > 0.0f && s.y > 0.0f, path, "plane side lengths [x, z] must be > 0");
+  check_length(r, s.x, path);
+  check_length(r, s.y, path);
   return vec3(s.x, MeshSource{}.size.y, s.y);
 }
 
@@ -145,16 +172,16 @@ Transform read_transform(const Reader& r, const json& j, const std::string& path
   Transform t;
   const Object o(r, j, path, {"translation", "rotation", "look_at", "scale"}, "transform");
   if (const json* v = o.find("translation"))
-    t.translation = read_vec<3>(r, *v, o.path("translation"));
+    t.translation = read_position(r, *v, o.path("translation"));
   if (o.has("rotation") && o.has("look_at"))
     r.fail(o.path("look_at"), "give either \"rotation\" or \"look_at\", not both");
   if (const json* v = o.find("rotation")) t.rotation = read_quat(r, *v, o.path("rotation"));
   if (const json* v = o.find("look_at")) {
-    const vec3 target = read_vec<3>(r, *v, o.path("look_at"));
-    const vec3 direction = target - t.translation;
-    r.check(glm::length(direction) > 0.0f, o.path("look_at"),
+    const dvec3 target = read_position(r, *v, o.path("look_at"));
+    const dvec3 direction = target - t.translation; // in double: exact for nearby points far out
+    r.check(glm::length(direction) > 0.0, o.path("look_at"),
             "look_at point equals the translation, so there is no direction to face");
-    t.rotation = unit_or_normalized(rotation_looking_along(direction));
+    t.rotation = unit_or_normalized(rotation_looking_along(vec3(glm::normalize(direction))));
   }
   if (const json* v = o.find("scale")) t.scale = read_scale(r, *v, o.path("scale"));
   return t;
@@ -173,7 +200,8 @@ MeshSource read_primitive(const Reader& r, const json& j, const std::string& pat
   s.primitive = read_string(r, j.at("primitive"), member_path(path, "primitive"));
   if (s.primitive == "sphere") {
     const Object o(r, j, path, {"primitive", "radius", "segments", "rings"}, "sphere");
-    if (const json* v = o.find("radius")) s.radius = read_positive(r, *v, o.path("radius"));
+    if (const json* v = o.find("radius"))
+      s.radius = check_length(r, read_positive(r, *v, o.path("radius")), o.path("radius"));
     if (const json* v = o.find("segments"))
       s.segments = read_u32(r, *v, o.path("segments"), 3, kMaxTessellation);
     if (const json* v = o.find("rings"))
@@ -190,8 +218,10 @@ MeshSource read_primitive(const Reader& r, const json& j, const std::string& pat
       s.rings = read_u32(r, *v, o.path("subdivisions"), 1, kMaxTessellation);
   } else if (s.primitive == "cylinder" || s.primitive == "cone") {
     const Object o(r, j, path, {"primitive", "radius", "height", "segments"}, s.primitive);
-    if (const json* v = o.find("radius")) s.radius = read_positive(r, *v, o.path("radius"));
-    if (const json* v = o.find("height")) s.height = read_positive(r, *v, o.path("height"));
+    if (const json* v = o.find("radius"))
+      s.radius = check_length(r, read_positive(r, *v, o.path("radius")), o.path("radius"));
+    if (const json* v = o.find("height"))
+      s.height = check_length(r, read_positive(r, *v, o.path("height")), o.path("height"));
     if (const json* v = o.find("segments"))
       s.segments = read_u32(r, *v, o.path("segments"), 3, kMaxTessellation);
   } else {
@@ -388,17 +418,17 @@ Camera read_camera(const Reader& r, const json& j, const std::string& path,
                    const RenderSettings& settings) {
   Camera c;
   const Object o(r, j, path, {"position", "look_at", "up", "vertical_fov_deg", "aspect"}, "camera");
-  c.position = read_vec<3>(r, o.require("position"), o.path("position"));
-  c.look_at = read_vec<3>(r, o.require("look_at"), o.path("look_at"));
-  const vec3 forward = c.look_at - c.position;
-  r.check(glm::length(forward) > 0.0f, o.path("look_at"),
+  c.position = read_position(r, o.require("position"), o.path("position"));
+  c.look_at = read_position(r, o.require("look_at"), o.path("look_at"));
+  const dvec3 to_target = c.look_at - c.position;
+  r.check(glm::length(to_target) > 0.0, o.path("look_at"),
           "camera position and look_at are the same point, so there is no view direction");
+  const vec3 forward(glm::normalize(to_target));
   if (const json* v = o.find("up")) {
     c.up = read_vec<3>(r, *v, o.path("up"));
     r.check(glm::length(c.up) > 0.0f, o.path("up"), "up vector has zero length");
   }
-  r.check(glm::length(glm::cross(glm::normalize(forward), glm::normalize(c.up))) > 1e-4f,
-          o.path("up"),
+  r.check(glm::length(glm::cross(forward, glm::normalize(c.up))) > 1e-4f, o.path("up"),
           "up vector is parallel to the view direction, so the camera roll is undefined");
   if (const json* v = o.find("vertical_fov_deg")) {
     const double degrees = read_number(r, *v, o.path("vertical_fov_deg"));
@@ -423,8 +453,8 @@ CameraPath read_camera_path(const Reader& r, const json& j, const std::string& p
     const Object k(r, keys[i], at, {"time", "position", "look_at"}, "camera path key");
     CameraPath::Key key;
     key.time = read_float(r, k.require("time"), k.path("time"));
-    key.position = read_vec<3>(r, k.require("position"), k.path("position"));
-    key.look_at = read_vec<3>(r, k.require("look_at"), k.path("look_at"));
+    key.position = read_position(r, k.require("position"), k.path("position"));
+    key.look_at = read_position(r, k.require("look_at"), k.path("look_at"));
     p.keys.push_back(key);
   }
   validate_camera_path(p, r.file(), path);
@@ -474,8 +504,8 @@ Animation read_animation(const Reader& r, const json& j, const std::string& path
   if (const json* v = o.find("time")) a.time = read_float(r, *v, o.path("time"));
   if (const json* v = o.find("translation"))
     a.translation =
-        read_track<vec3>(r, *v, o.path("translation"), [&](const json& x, const std::string& at) {
-          return read_vec<3>(r, x, at);
+        read_track<dvec3>(r, *v, o.path("translation"), [&](const json& x, const std::string& at) {
+          return read_position(r, x, at);
         });
   if (const json* v = o.find("rotation"))
     a.rotation =
@@ -765,6 +795,16 @@ public:
     return a;
   }
   [[nodiscard]] Out rotation(const quat& q) const { return vec<4>(vec4(q.x, q.y, q.z, q.w)); }
+  /// A double position: each coordinate's shortest text that reads back to exactly it.
+  [[nodiscard]] Out position(const dvec3& p) const {
+    Out a = Out::array();
+    for (int i = 0; i < 3; ++i) {
+      if (!std::isfinite(p[i]))
+        throw Error(context_, "cannot write a non-finite number (NaN or Inf)");
+      a.push(Out::scalar(p[i] == 0.0 ? "0" : format_double(p[i])));
+    }
+    return a;
+  }
 
 private:
   void check_finite(float f) const {
@@ -785,7 +825,7 @@ Out write_settings(const Writer& w, const RenderSettings& s) {
 Out write_transform(const Writer& w, const Transform& t) {
   const Transform identity;
   Out o = Out::object();
-  if (t.translation != identity.translation) o.add("translation", w.vec<3>(t.translation));
+  if (t.translation != identity.translation) o.add("translation", w.position(t.translation));
   if (t.rotation != identity.rotation) o.add("rotation", w.rotation(t.rotation));
   if (t.scale != identity.scale)
     o.add("scale", t.scale.x == t.scale.y && t.scale.y == t.scale.z ? w.number(t.scale.x)
@@ -871,8 +911,8 @@ Out write_light(const Writer& w, const Light& l) {
 
 Out write_camera(const Writer& w, const Camera& c) {
   Out o = Out::object();
-  o.add("position", w.vec<3>(c.position));
-  o.add("look_at", w.vec<3>(c.look_at));
+  o.add("position", w.position(c.position));
+  o.add("look_at", w.position(c.look_at));
   o.add("up", w.vec<3>(c.up));
   o.add("vertical_fov_deg", w.degrees(c.vertical_fov));
   o.add("aspect", w.number(c.aspect));
@@ -887,8 +927,8 @@ Out write_camera_path(const Writer& w, const CameraPath& p) {
   for (const CameraPath::Key& k : p.keys) {
     Out& key = keys.push(Out::object());
     key.add("time", w.number(k.time));
-    key.add("position", w.vec<3>(k.position));
-    key.add("look_at", w.vec<3>(k.look_at));
+    key.add("position", w.position(k.position));
+    key.add("look_at", w.position(k.look_at));
   }
   return o;
 }
@@ -911,7 +951,9 @@ Out write_animation(const Writer& w, const Animation& a) {
   o.add("speed", w.number(a.speed));
   if (a.time != 0.0f) o.add("time", w.number(a.time));
   const auto vec3_value = [&](const vec3& v) { return w.vec<3>(v); };
-  if (!a.translation.empty()) o.add("translation", write_track(w, a.translation, vec3_value));
+  if (!a.translation.empty())
+    o.add("translation",
+          write_track(w, a.translation, [&](const dvec3& p) { return w.position(p); }));
   if (!a.rotation.empty())
     o.add("rotation", write_track(w, a.rotation, [&](const quat& q) { return w.rotation(q); }));
   if (!a.scale.empty()) o.add("scale", write_track(w, a.scale, vec3_value));

@@ -12,6 +12,7 @@
 #include <cctype>
 #include <set>
 #include <system_error>
+#include <unordered_map>
 
 namespace specula {
 namespace {
@@ -39,6 +40,24 @@ Scene scene_from_mesh_file(const std::filesystem::path& path) {
   return scene;
 }
 
+/// Every mesh entity's world-space extent within the representable range, so that `info` refuses
+/// what `render` could not trace (a scale times vertex coordinates; placement is checked by
+/// update_world_transforms).
+void check_world_extents(ecs::Registry& reg, const std::string& context) {
+  std::unordered_map<const TriangleMesh*, Aabb> object_bounds;
+  reg.view<Mesh, WorldTransform>().each([&](ecs::Entity e, const Mesh& mesh,
+                                            const WorldTransform& wt) {
+    if (!mesh.geometry) return;
+    auto [it, added] = object_bounds.try_emplace(mesh.geometry.get());
+    if (added) it->second = mesh.geometry->bounds();
+    const DAabb world = DAabb::transformed(it->second, wt.world_from_object);
+    if (!in_range(world.min) || !in_range(world.max))
+      throw Error(context, entity_label(reg, e) + " extends from " + format_position(world.min) +
+                               " to " + format_position(world.max) + ", outside " +
+                               kCoordinateRangeText);
+  });
+}
+
 } // namespace
 
 Scene load_scene(const std::filesystem::path& path) {
@@ -62,6 +81,7 @@ Scene load_scene(const std::filesystem::path& path) {
   if (scene.registry.alive() > kMaxEntities)
     throw Error(path.string(), "scene has more than " + std::to_string(kMaxEntities) + " entities");
   update_world_transforms(scene.registry, 0, path.string());
+  check_world_extents(scene.registry, path.string());
   settle_kinematics(scene.registry, path.string());
   add_defaults(scene);
   return scene;
@@ -79,13 +99,13 @@ std::optional<Camera> active_camera(ecs::Registry& registry) {
   return best;
 }
 
-Aabb world_bounds(ecs::Registry& registry) {
-  Aabb bounds;
+DAabb world_bounds(ecs::Registry& registry) {
+  DAabb bounds;
   registry.view<Mesh, WorldTransform>().each([&](const Mesh& mesh, const WorldTransform& wt) {
     if (!mesh.geometry) return;
     Aabb local;
     for (const vec3& p : mesh.positions()) local.grow(p);
-    bounds.grow(local.transformed(wt.world_from_object));
+    bounds.grow(DAabb::transformed(local, wt.world_from_object));
   });
   return bounds;
 }
@@ -96,10 +116,10 @@ void add_defaults(Scene& scene) {
   const bool has_light = reg.count<Light>() > 0;
   if (has_camera && has_light) return;
 
-  Aabb bounds = world_bounds(reg);
-  if (bounds.empty()) bounds = Aabb{vec3(-1.0f), vec3(1.0f)};
-  const vec3 center = bounds.center();
-  const float radius = std::max(0.5f * glm::length(bounds.extent()), 1e-6f);
+  DAabb bounds = world_bounds(reg);
+  if (bounds.empty()) bounds = DAabb{dvec3(-1.0), dvec3(1.0)};
+  const dvec3 center = bounds.center();
+  const float radius = std::max(0.5f * float(glm::length(bounds.extent())), 1e-6f);
   const float aspect = float(scene.settings.width) / float(std::max(1u, scene.settings.height));
 
   Camera camera;
@@ -109,7 +129,7 @@ void add_defaults(Scene& scene) {
   const float fov = std::min(camera.vertical_fov, camera.vertical_fov * aspect);
   const float distance = radius / std::sin(0.5f * fov);
   const float elevation = glm::radians(20.0f);
-  camera.position = center + distance * vec3(0.0f, std::sin(elevation), std::cos(elevation));
+  camera.position = center + dvec3(distance * vec3(0.0f, std::sin(elevation), std::cos(elevation)));
 
   if (!has_camera) {
     const ecs::Entity e = reg.create();
@@ -132,7 +152,7 @@ void add_defaults(Scene& scene) {
     Light light;
     light.type = Light::Type::Point;
     // Irradiance I/d² at the bounds' centre is 1 whatever the scene's scale.
-    const float d = glm::length(camera.position - center);
+    const float d = float(glm::length(camera.position - center));
     light.intensity = std::max(d * d, 1e-12f);
     reg.emplace<Light>(e, light);
     reg.emplace<DefaultTag>(e);

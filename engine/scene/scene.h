@@ -47,7 +47,8 @@ inline constexpr std::uint32_t kMaxTraceDepth = 64;
 /// mesh). Then, whatever the format: computes world transforms, which checks the hierarchy
 /// (update_world_transforms), settles Kinematics (settle_kinematics: stated ones checked, the
 /// others inferred), and adds the default camera and light when the file has none
-/// (add_defaults). Throws specula::Error naming the file and the problem.
+/// (add_defaults). Throws specula::Error naming the file and the problem, including an entity
+/// placed or extending outside the representable range (core/math.h kMaxCoordinate).
 [[nodiscard]] Scene load_scene(const std::filesystem::path& path);
 
 /// Marks the entity added by add_defaults, so the writer leaves it out of the saved file.
@@ -64,8 +65,8 @@ void add_defaults(Scene& scene);
 /// choice does not depend on iteration order). Empty when the scene has none.
 [[nodiscard]] std::optional<Camera> active_camera(ecs::Registry& registry);
 
-/// World-space bounds of every mesh entity (world transforms must be current).
-[[nodiscard]] Aabb world_bounds(ecs::Registry& registry);
+/// World-space bounds of every mesh entity, in double (world transforms must be current).
+[[nodiscard]] DAabb world_bounds(ecs::Registry& registry);
 
 /// What `specula info` prints.
 struct SceneSummary {
@@ -80,7 +81,7 @@ struct SceneSummary {
   std::size_t refractive = 0; ///< entities with transmission > 0
   std::size_t ray_cache_cubes = 0;
   std::size_t animated = 0;
-  Aabb bounds;
+  DAabb bounds;
 };
 [[nodiscard]] SceneSummary summarize(Scene& scene);
 

@@ -12,7 +12,10 @@
 namespace specula {
 
 /// Camera basis and image-plane scale for one frame. The image's own aspect (width / height) is
-/// used, so rendering at any size never stretches the picture; vertical_fov is kept.
+/// used, so rendering at any size never stretches the picture; vertical_fov is kept. Rays are in
+/// render space: world space translated by −render_origin (SceneLayer::render_origin()), the
+/// origin and view direction computed in double from the camera's world positions, so a camera
+/// far from the world origin loses no precision.
 struct CameraRays {
   vec3 origin{0.0f};
   vec3 forward{0.0f, 0.0f, -1.0f};
@@ -21,9 +24,12 @@ struct CameraRays {
   float inv_width = 1.0f;
   float inv_height = 1.0f;
 
-  CameraRays(const Camera& camera, std::uint32_t width, std::uint32_t height) {
-    origin = camera.position;
-    forward = glm::normalize(camera.look_at - camera.position);
+  CameraRays(const Camera& camera, std::uint32_t width, std::uint32_t height,
+             const dvec3& render_origin = dvec3(0.0)) {
+    // Differences in double (exact for the nearby points of a far-away camera), rounded once to
+    // float; the rest in float, as for a camera at the world origin.
+    origin = vec3(camera.position - render_origin);
+    forward = glm::normalize(vec3(camera.look_at - camera.position));
     vec3 r = glm::cross(forward, camera.up);
     if (glm::length(r) < 1e-6f)
       r = glm::cross(forward, std::abs(forward.y) < 0.9f ? vec3(0, 1, 0) : vec3(1, 0, 0));

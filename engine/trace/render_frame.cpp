@@ -97,8 +97,9 @@ const char* trace_mode_name(TraceMode mode) {
 }
 
 std::uint64_t trace_primary_frame(const Tracer& tracer, const Camera& camera, std::uint32_t width,
-                                  std::uint32_t height, const TraceSettings& settings) {
-  const CameraRays camera_rays(camera, width, height);
+                                  std::uint32_t height, const TraceSettings& settings,
+                                  const dvec3& render_origin) {
+  const CameraRays camera_rays(camera, width, height, render_origin);
   std::atomic<std::uint64_t> checksum{0};
   for_each_tile(width, height, settings.tile_size, settings.threads, tracer.packet_width(),
                 [&](detail::TileScratch& scratch, const PacketTile& tile) {
@@ -117,7 +118,7 @@ FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Cam
     throw UnavailableError(std::string("mode '") + trace_mode_name(settings.mode) +
                            "' is not available yet");
   const auto start = std::chrono::steady_clock::now();
-  const CameraRays camera_rays(camera, out.width(), out.height());
+  const CameraRays camera_rays(camera, out.width(), out.height(), layer.render_origin());
   if (hook != nullptr) hook->begin_frame(out.width(), out.height());
   const bool lookups = hook != nullptr && settings.mode == TraceMode::Whitted && hook->wants_lookups();
   const detail::FrameInputs frame{tracer, layer.tables(), settings,   camera_rays,

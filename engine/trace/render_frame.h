@@ -47,7 +47,8 @@ struct TraceSettings {
 inline constexpr std::uint32_t kMaxRaysPerPixel = 4096;
 
 /// Renders one frame of the scene layer's tables into `out` (its size is the image size) with
-/// `tracer`, whose structures must be up to date with `layer`. Leaving rays go to `hook` when one
+/// `tracer`, whose structures must be up to date with `layer`. `camera` is in world space; its
+/// rays are made relative to the layer's render origin. Leaving rays go to `hook` when one
 /// is given. Returns the ray counts (FrameStats::trace_ms and ms are left to the caller).
 /// Throws UnavailableError for modes this build does not have.
 FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Camera& camera,
@@ -72,7 +73,9 @@ RayCounts trace_radiance(const Tracer& tracer, const SceneLayer& layer,
 
 /// The primary-ray stage of render_frame alone (camera rays, coherent packets, hits resolved to
 /// instances), for measuring the tracer's own overhead against its backend. Returns a checksum.
+/// `render_origin` is the render origin of the layer the tracer was built from.
 std::uint64_t trace_primary_frame(const Tracer& tracer, const Camera& camera, std::uint32_t width,
-                                  std::uint32_t height, const TraceSettings& settings);
+                                  std::uint32_t height, const TraceSettings& settings,
+                                  const dvec3& render_origin = dvec3(0.0));
 
 } // namespace specula

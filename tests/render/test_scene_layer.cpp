@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <type_traits>
 
 namespace specula {
@@ -102,6 +103,73 @@ TEST(SceneLayer, TheFirstSyncBakesTheStaticSetInWorldSpaceAndPlacesTheRest) {
   ASSERT_EQ(t.lights.size(), 1u);
   EXPECT_EQ(t.lights[0].position, vec3(0, 8, 0));
   EXPECT_FALSE(layer.instance_of(w.lamp).has_value());
+}
+
+/// Camera-relative render space (docs/design/large-worlds.md): the render origin stays at the
+/// world origin while the camera is within kRebaseDistance of it, then moves to the camera; the
+/// tables become world minus origin in float, as a fresh layer would write them there.
+TEST(SceneLayer, TheRenderOriginFollowsTheCameraPastTheRebaseDistance) {
+  World w;
+  const ecs::Entity cam = test::add_camera(w.reg, vec3(0, 2, 10), vec3(0));
+  SceneLayer layer;
+  Ticker tick;
+  tick(w.reg, layer);
+  EXPECT_EQ(layer.render_origin(), dvec3(0.0));
+
+  // Within the distance: nothing is rewritten.
+  w.reg.get<Camera>(cam).position = dvec3(kRebaseDistance - 20.0, 2.0, 10.0);
+  EXPECT_TRUE(tick(w.reg, layer).empty());
+  EXPECT_EQ(layer.stats().rebases, 0u);
+  EXPECT_EQ(layer.render_origin(), dvec3(0.0));
+
+  // Past it, in the same tick as an entity moves: one rebase; the static set is baked again and
+  // every dynamic instance rewritten and reported once.
+  const dvec3 far(1e6 + 0.25, 2.0, 10.0);
+  w.reg.get<Camera>(cam).position = far;
+  w.reg.get<Camera>(cam).look_at = far - dvec3(0.0, 0.0, 10.0);
+  w.reg.get<Transform>(w.ball).translation += dvec3(0.5, 0.0, 0.0);
+  const SceneDelta& d = tick(w.reg, layer);
+  EXPECT_EQ(layer.stats().rebases, 1u);
+  EXPECT_EQ(layer.rebases(), 1u);
+  EXPECT_EQ(layer.render_origin(), far);
+  EXPECT_TRUE(d.static_rebuilt);
+  EXPECT_EQ(layer.stats().static_bakes, 1u);
+  std::vector<std::uint32_t> moved = d.instances_moved;
+  std::sort(moved.begin(), moved.end());
+  EXPECT_EQ(std::unique(moved.begin(), moved.end()), moved.end()) << "each instance once";
+  EXPECT_EQ(moved.size(), 3u); // ball, twin, blob
+  EXPECT_TRUE(d.lights_changed);
+
+  const SceneTables& t = layer.tables();
+  const gpu::GpuInstance& pillar = t.instances[*layer.instance_of(w.pillar)];
+  const gpu::GpuMesh& baked = t.meshes[pillar.mesh];
+  const TriangleMesh& source = *w.reg.get<Mesh>(w.pillar).geometry;
+  // Placed by the render-space matrix: the world matrix with the origin taken off its
+  // translation in double, then rounded to float.
+  dmat4 relative = w.reg.get<WorldTransform>(w.pillar).world_from_object;
+  relative[3] -= dvec4(far, 0.0);
+  const mat4 render_from_object(relative);
+  for (std::size_t i = 0; i < source.positions.size(); ++i)
+    EXPECT_EQ(t.positions[baked.first_vertex + i],
+              vec3(render_from_object * vec4(source.positions[i], 1.0f)));
+  const gpu::GpuInstance& twin = t.instances[*layer.instance_of(w.twin)];
+  EXPECT_EQ(vec3(twin.world_from_object[3]), vec3(dvec3(5, 1, 0) - far));
+  EXPECT_EQ(t.lights[0].position, vec3(dvec3(0, 8, 0) - far));
+
+  // The same tables as a layer made with the camera already there.
+  SceneLayer fresh;
+  fresh.sync(w.reg);
+  EXPECT_EQ(fresh.render_origin(), far);
+  EXPECT_EQ(fresh.stats().rebases, 0u) << "the first sync's choice is not a rebase";
+  const SceneTables& f = fresh.tables();
+  ASSERT_EQ(f.static_triangle_count, t.static_triangle_count);
+  EXPECT_TRUE(std::equal(f.positions.begin(),
+                         f.positions.begin() + baked.first_vertex + baked.vertex_count,
+                         t.positions.begin()));
+  for (const ecs::Entity e : {w.ball, w.twin, w.blob})
+    EXPECT_EQ(f.instances[*fresh.instance_of(e)].world_from_object,
+              t.instances[*layer.instance_of(e)].world_from_object);
+  EXPECT_EQ(f.lights[0].position, t.lights[0].position);
 }
 
 TEST(SceneLayer, AFrameInWhichNothingMovedDoesNoWork) {
@@ -296,7 +364,7 @@ TEST(SceneLayer, CompactionKeepsEveryRecordPointingAtItsOwnData) {
     ASSERT_EQ(record.vertex_count, source.positions.size());
     ASSERT_EQ(record.triangle_count, source.triangles.size());
     const mat4 m = (inst.flags & gpu::kInstanceIdentity)
-                       ? w.reg.get<WorldTransform>(e).world_from_object
+                       ? mat4(w.reg.get<WorldTransform>(e).world_from_object)
                        : mat4(1.0f);
     for (std::size_t i = 0; i < source.positions.size(); i += 7)
       EXPECT_EQ(t.positions[record.first_vertex + i], vec3(m * vec4(source.positions[i], 1.0f)));

@@ -461,7 +461,7 @@ const BadFile kBadFiles[] = {
     {"bad_animation_times.gltf", "strictly increasing", false},
     {"bad_light_index.gltf", "light index 3 is out of range", false},
     {"bad_material_index.gltf", "material index 4 is out of range", false},
-    {"bad_huge_translation.gltf", "not a finite 32-bit float", false},
+    {"bad_huge_translation.gltf", "outside the representable range", false},
     {"does_not_exist.gltf", "not found", true},
 };
 

@@ -231,7 +231,7 @@ TEST(JsonScene, ReadsEveryFeatureAsWritten) {
   // look_at turns -Z toward the point.
   const Transform& jt = reg.get<Transform>(jelly);
   const vec3 minus_z = jt.rotation * vec3(0, 0, -1);
-  EXPECT_NEAR(glm::dot(minus_z, glm::normalize(vec3(0) - jt.translation)), 1.0f, 1e-6f);
+  EXPECT_NEAR(glm::dot(minus_z, glm::normalize(-vec3(jt.translation))), 1.0f, 1e-6f);
   EXPECT_EQ(reg.get<RayCacheCube>(find_named(reg, "mirror")).resolution, RayCacheCube{}.resolution)
       << "an empty ray_cache object takes the default resolution";
 
@@ -343,7 +343,7 @@ const BadCase kBadCases[] = {
     {"unknown_key.json", "entities[1].material.reflectivty", "did you mean \"reflectivity\""},
     {"unknown_entity_key.json", "entities[0].lights", "unknown key"},
     {"nan_like_overflow.json", "entities[0].transform.translation[1]", "1e999"},
-    {"float_out_of_range.json", "entities[0].transform.translation[0]", "single-precision"},
+    {"float_out_of_range.json", "entities[0].transform.translation[0]", "representable range"},
     {"zero_width.json", "settings.width", "[1, 16384]"},
     {"huge_width.json", "settings.width", "1000000"},
     {"negative_depth.json", "settings.max_depth", "[0, 64]"},
@@ -504,6 +504,27 @@ float random_float(std::mt19937& rng) {
     if (std::isfinite(f)) return f;
   }
 }
+/// random_float within the representable range (mesh vertices).
+float random_vertex(std::mt19937& rng) {
+  for (;;)
+    if (const float f = random_float(rng); std::abs(double(f)) <= kMaxCoordinate) return f;
+}
+
+/// Random doubles for positions: any bit pattern within the representable range (tiny,
+/// subnormal, up to 1e12) or a short decimal.
+double random_coordinate(std::mt19937& rng) {
+  if (rng() % 2 == 0) return double(int(rng() % 20001) - 10000) / 100.0;
+  for (;;) {
+    const std::uint64_t bits = (std::uint64_t(rng()) << 32) | rng();
+    double d;
+    std::memcpy(&d, &bits, sizeof d);
+    if (std::isfinite(d) && std::abs(d) <= kMaxCoordinate) return d;
+  }
+}
+dvec3 random_position(std::mt19937& rng) {
+  return dvec3(random_coordinate(rng), random_coordinate(rng), random_coordinate(rng));
+}
+
 float random_unit(std::mt19937& rng) {
   return std::uniform_real_distribution<float>(0.0f, 1.0f)(rng);
 }
@@ -519,15 +540,15 @@ TEST(JsonScene, FloatsSurviveTheTextBitForBit) {
     name += std::to_string(i);
     reg.emplace<Name>(e, Name{name});
     Transform t;
-    t.translation = vec3(random_float(rng), random_float(rng), random_float(rng));
+    t.translation = random_position(rng); // doubles: every bit survives too
     t.rotation = glm::normalize(
         quat(random_unit(rng) + 0.1f, random_unit(rng), random_unit(rng), random_unit(rng)));
     t.scale = vec3(random_float(rng), random_float(rng), random_float(rng));
     if (t.scale.x == 0.0f || t.scale.y == 0.0f || t.scale.z == 0.0f) t.scale = vec3(1.0f);
     reg.emplace<Transform>(e, t);
     auto geometry = std::make_shared<TriangleMesh>();
-    geometry->positions = {vec3(random_float(rng)), vec3(random_float(rng), 0, 1),
-                           vec3(0, random_float(rng), 0)};
+    geometry->positions = {vec3(random_vertex(rng)), vec3(random_vertex(rng), 0, 1),
+                           vec3(0, random_vertex(rng), 0)};
     geometry->triangles = {uvec3(0, 1, 2)};
     reg.emplace<Mesh>(e, Mesh{geometry, {}, {}, 0});
     Material m;
@@ -547,7 +568,12 @@ TEST(JsonScene, FloatsSurviveTheTextBitForBit) {
     l.inner_cone = l.outer_cone * random_unit(rng) * 0.999f;
     reg.emplace<Light>(e, l);
     Camera c;
-    c.position = vec3(random_unit(rng), random_unit(rng), 10.0f + random_unit(rng));
+    c.position = random_position(rng);
+    // Toward the origin, so that look_at stays within the range too.
+    const dvec3 toward_origin(c.position.x > 0 ? -1 : 1, c.position.y > 0 ? -1 : 1,
+                              c.position.z > 0 ? -1 : 1);
+    c.look_at = c.position +
+                toward_origin * dvec3(random_unit(rng), random_unit(rng), 10.0f + random_unit(rng));
     c.vertical_fov = std::max(1e-3f, random_unit(rng) * glm::radians(179.0f));
     c.aspect = 0.1f + random_unit(rng) * 3.0f;
     reg.emplace<Camera>(e, c);
@@ -707,12 +733,12 @@ std::vector<Sphere> spheres_of(ecs::Registry& reg) {
 /// Signed distances of p to the five planes bounding the camera's view (sides and the plane
 /// through the eye facing forward), positive inside.
 std::array<float, 5> frustum_distances(const Camera& c, const vec3& p) {
-  const vec3 forward = glm::normalize(c.look_at - c.position);
+  const vec3 forward(glm::normalize(c.look_at - c.position));
   const vec3 right = glm::normalize(glm::cross(forward, c.up));
   const vec3 up = glm::cross(right, forward);
   const float tan_v = std::tan(0.5f * c.vertical_fov);
   const float tan_h = tan_v * c.aspect;
-  const vec3 d = p - c.position;
+  const vec3 d = p - vec3(c.position);
   return {glm::dot(d, forward), glm::dot(d, glm::normalize(tan_h * forward - right)),
           glm::dot(d, glm::normalize(tan_h * forward + right)),
           glm::dot(d, glm::normalize(tan_v * forward - up)),
@@ -755,7 +781,7 @@ TEST_P(MirrorSpheres, SpheresMeetNeitherEachOtherNorTheCamera) {
   const Camera& camera = reg.get<Camera>(reg.view<Camera>().entities().front());
   const std::vector<Sphere> spheres = spheres_of(reg);
   for (std::size_t i = 0; i < spheres.size(); ++i) {
-    EXPECT_GT(glm::distance(spheres[i].center, camera.position), spheres[i].radius)
+    EXPECT_GT(glm::distance(spheres[i].center, vec3(camera.position)), spheres[i].radius)
         << spheres[i].name;
     EXPECT_GE(spheres[i].center.y - spheres[i].radius, 0.0f)
         << spheres[i].name << " is under the ground";

@@ -27,7 +27,7 @@ Keyframes<V> track(const V& a, const V& b) {
 
 Animation translating() {
   Animation a;
-  a.translation = track(vec3(0.0f), vec3(1.0f, 0.0f, 0.0f));
+  a.translation = track(dvec3(0.0), dvec3(1.0, 0.0, 0.0));
   return a;
 }
 

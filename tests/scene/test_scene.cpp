@@ -43,7 +43,7 @@ ecs::Entity add_box(Scene& scene, const vec3& center, const vec3& half) {
 
 /// Whether p is inside the camera's view frustum (pinhole, vertical fov, aspect).
 bool in_frustum(const Camera& c, const vec3& p) {
-  const mat4 view = glm::lookAt(c.position, c.look_at, c.up);
+  const mat4 view = glm::lookAt(vec3(c.position), vec3(c.look_at), c.up);
   const vec3 q = vec3(view * vec4(p, 1.0f));
   if (q.z >= 0.0f) return false;
   const float tan_half = std::tan(0.5f * c.vertical_fov);
@@ -82,7 +82,7 @@ TEST(Scene, DefaultCameraFramesEveryCornerOfTheBounds) {
     Camera camera;
     scene.registry.view<Camera>().each([&](const Camera& c) { camera = c; });
     EXPECT_NEAR(camera.aspect, 640.0f / 360.0f, 1e-6f);
-    const Aabb b = world_bounds(scene.registry);
+    const DAabb b = world_bounds(scene.registry);
     for (int i = 0; i < 8; ++i) {
       const vec3 corner(i & 1 ? b.max.x : b.min.x, i & 2 ? b.max.y : b.min.y, i & 4 ? b.max.z : b.min.z);
       EXPECT_TRUE(in_frustum(camera, corner)) << "half extent " << half.x << "," << half.y << "," << half.z
@@ -125,8 +125,8 @@ TEST(Scene, DefaultLightGivesUnitIrradianceAtTheCentre) {
     light_pos = vec3(wt.world_from_object[3]);
     intensity = l.intensity;
   });
-  const float d = glm::length(light_pos - world_bounds(scene.registry).center());
-  const float radius = 0.5f * glm::length(world_bounds(scene.registry).extent());
+  const float d = glm::length(light_pos - vec3(world_bounds(scene.registry).center()));
+  const float radius = 0.5f * float(glm::length(world_bounds(scene.registry).extent()));
   EXPECT_NEAR(intensity / (d * d), 1.0f, 1e-4f); // E = I / d²
   EXPECT_GT(d, radius);                          // the light is outside the scene
 }
@@ -157,6 +157,121 @@ TEST(Scene, RotationLookingAlongTurnsMinusZTowardsTheDirection) {
     EXPECT_NEAR(glm::dot(forward, glm::normalize(dir)), 1.0f, 1e-5f);
     EXPECT_NEAR(glm::length(q), 1.0f, 1e-5f);
   }
+}
+
+// --- The representable range (core/math.h kMaxCoordinate, docs/design/large-worlds.md) ----------
+// Positions, mesh coordinates and primitive sizes beyond ±1e12 used to pass `info` and abort
+// inside Embree at render time (issue 13, cause 1). Each is now an error naming the file and the
+// field (or the entity, for what composition produces), so `info` refuses them too.
+
+struct RangeCase {
+  const char* file;     ///< name in the temporary directory
+  std::string text;     ///< its contents
+  const char* field;    ///< Error::field() ("" when the entity is named instead)
+  const char* fragment; ///< a piece of the message
+};
+
+std::string entities(const std::string& list) {
+  return R"({"format": "specula-scene", "version": 1, "entities": [)" + list + "]}";
+}
+
+const char* const kCamera =
+    R"({"name": "camera", "camera": {"position": [0, 0, 5], "look_at": [0, 0, 0]}})";
+
+std::vector<RangeCase> range_cases() {
+  return {
+      {"range_box_size.json", entities(R"({"name": "slab", "mesh": {"primitive": "box", "size": 1.8e19}})"),
+       "entities[0].mesh.size", "length 1.8e+19 is outside the representable range"},
+      {"range_sphere_radius.json",
+       entities(R"({"name": "ball", "mesh": {"primitive": "sphere", "radius": 1e13}})"),
+       "entities[0].mesh.radius", "outside the representable range"},
+      {"range_translation.json",
+       entities(R"({"name": "far", "transform": {"translation": [0, 1e19, 0]}, "mesh": {"primitive": "sphere"}})"),
+       "entities[0].transform.translation[1]", "coordinate 1e+19 is outside the representable range"},
+      {"range_camera_1e19.json",
+       entities(R"({"name": "camera", "camera": {"position": [0, 0, 1e19], "look_at": [0, 0, 0]}})"),
+       "entities[0].camera.position[2]", "outside the representable range"},
+      // Used to say "up vector is parallel to the view direction" (the float difference overflowed).
+      {"range_camera_1e30.json",
+       entities(R"({"name": "camera", "camera": {"position": [1e30, 0, 0], "look_at": [0, 0, 0]}})"),
+       "entities[0].camera.position[0]", "outside the representable range"},
+      {"range_look_at.json",
+       entities(R"({"name": "camera", "camera": {"position": [0, 0, 0], "look_at": [0, 0, -1e19]}})"),
+       "entities[0].camera.look_at[2]", "outside the representable range"},
+      {"range_animation_key.json",
+       entities(R"({"name": "mover", "animation": {"translation": {"times": [0, 1], "values": [[0, 0, 0], [1e19, 0, 0]]}}})"),
+       "entities[0].animation.translation.values[1][0]", "outside the representable range"},
+      {"range_camera_path_key.json",
+       entities(R"({"name": "camera", "camera": {"position": [0, 0, 5], "look_at": [0, 0, 0]},
+                   "camera_path": {"keys": [{"time": 0, "position": [0, 0, 5], "look_at": [0, 0, 0]},
+                                            {"time": 1, "position": [0, 0, 2e12], "look_at": [0, 0, 0]}]}})"),
+       "entities[0].camera_path.keys[1].position[2]", "outside the representable range"},
+      {"range_inline_vertex.json",
+       entities(R"({"name": "tri", "mesh": {"inline": {"positions": [[0, 0, 0], [1e30, 0, 0], [0, 1, 0]], "triangles": [[0, 1, 2]]}}})"),
+       "", "vertex 1 has a coordinate outside the representable range"},
+      // Composition: each value is in range, the product is not.
+      {"range_parent_scale.json",
+       entities(std::string(kCamera) + R"(, {"name": "giant", "transform": {"scale": 1e10}},
+                {"name": "far child", "parent": "giant", "transform": {"translation": [0, 0, 1e5]}, "mesh": {"primitive": "sphere"}})"),
+       "", "\"far child\" is placed at (0, 0, 1e+15), outside the representable range"},
+      {"range_scaled_extent.json",
+       entities(std::string(kCamera) + R"(, {"name": "balloon", "transform": {"scale": 1e8}, "mesh": {"primitive": "sphere", "radius": 1e5}})"),
+       "", "\"balloon\" extends from"},
+      {"range_vertex.stl",
+       "solid far\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n   vertex 1e30 0 0\n"
+       "   vertex 0 1 0\n  endloop\n endfacet\nendsolid far\n",
+       "", "has a coordinate outside the representable range"},
+      {"range_vertex.obj", "v 0 0 0\nv 0 2e12 0\nv 1 0 0\nf 1 2 3\n", "",
+       "has a coordinate outside the representable range"},
+      {"range_node.gltf",
+       R"({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+           "nodes": [{"name": "far", "translation": [1e19, 0, 0]}]})",
+       "nodes[0].translation", "outside the representable range"},
+      {"range_node_matrix.gltf",
+       R"({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+           "nodes": [{"name": "far", "matrix": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,-3e12,1]}]})",
+       "nodes[0].matrix", "outside the representable range"},
+  };
+}
+
+TEST(Scene, CoordinatesOutsideTheRangeAreErrorsNamingTheFileAndField) {
+  for (const RangeCase& c : range_cases()) {
+    const fs::path path = fs::temp_directory_path() / c.file;
+    std::ofstream(path, std::ios::binary) << c.text;
+    try {
+      (void)load_scene(path);
+      ADD_FAILURE() << c.file << " loaded without an error";
+    } catch (const Error& e) {
+      const std::string what = e.what();
+      EXPECT_EQ(e.file(), path.string()) << what;
+      if (*c.field != '\0') {
+        EXPECT_EQ(e.field(), c.field) << what;
+      }
+      EXPECT_NE(what.find(c.fragment), std::string::npos)
+          << c.file << ": expected \"" << c.fragment << "\" in: " << what;
+      EXPECT_EQ(what.find("parallel"), std::string::npos) << what;
+    }
+    fs::remove(path);
+  }
+}
+
+TEST(Scene, CoordinatesJustInsideTheRangeLoad) {
+  const fs::path path = fs::temp_directory_path() / "range_just_inside.json";
+  std::ofstream(path, std::ios::binary) << entities(
+      R"({"name": "camera", "camera": {"position": [-1e12, 1e12, 0.999e12], "look_at": [-1e12, 1e12, 0]}},
+         {"name": "big", "mesh": {"primitive": "box", "size": 1e12}},
+         {"name": "lamp", "transform": {"translation": [1e12, -1e12, 1e12]}, "light": {"type": "point"}},
+         {"name": "giant", "transform": {"scale": 1e7}},
+         {"name": "child", "parent": "giant", "transform": {"translation": [0, 0, 1e5]}, "light": {"type": "point"}})");
+  Scene scene = load_scene(path);
+  fs::remove(path);
+  const Camera camera = *active_camera(scene.registry);
+  EXPECT_EQ(camera.position, dvec3(-1e12, 1e12, 0.999e12)) << "positions are kept in double";
+  scene.registry.view<Name, WorldTransform>().each([](const Name& n, const WorldTransform& wt) {
+    if (n.value == "child") {
+      EXPECT_EQ(wt.world_from_object[3].z, 1e12) << "1e7 × 1e5, composed in double";
+    }
+  });
 }
 
 } // namespace

@@ -19,8 +19,9 @@ struct Keyframes {
 /// Keyframed TRS tracks (applied to Transform) and vertex animation (applied to Mesh: each key is
 /// a full set of positions, as many as the mesh's vertices). animation_system samples at
 /// `time + speed * t`; with `loop`, time wraps to the track's duration.
+/// Translation keys are double (world positions far from the origin keep their precision).
 struct Animation {
-  Keyframes<vec3> translation;
+  Keyframes<dvec3> translation;
   Keyframes<quat> rotation;
   Keyframes<vec3> scale;
   Keyframes<std::vector<vec3>> vertices;

@@ -5,10 +5,10 @@
 
 namespace specula {
 
-/// A pinhole camera in world space.
+/// A pinhole camera in world space (positions in double, like Transform::translation).
 struct Camera {
-  vec3 position{0.0f, 0.0f, 5.0f};
-  vec3 look_at{0.0f};
+  dvec3 position{0.0, 0.0, 5.0};
+  dvec3 look_at{0.0};
   vec3 up{0.0f, 1.0f, 0.0f};
   float vertical_fov = glm::radians(45.0f); ///< radians
   /// Width / height as the scene file gives it (JSON "aspect", default the settings' width /
@@ -23,8 +23,8 @@ struct Camera {
 struct CameraPath {
   struct Key {
     float time = 0.0f;
-    vec3 position{0.0f};
-    vec3 look_at{0.0f};
+    dvec3 position{0.0};
+    dvec3 look_at{0.0};
     friend bool operator==(const Key&, const Key&) = default;
   };
   std::vector<Key> keys;

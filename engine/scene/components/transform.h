@@ -4,12 +4,16 @@
 namespace specula {
 
 /// Local translation-rotation-scale, relative to the Parent's world transform (or the world).
+/// The translation is in double, so that a position far from the origin (1e7, 1e9) keeps the
+/// precision it was given; rotation and scale stay float (docs/design/large-worlds.md).
 struct Transform {
-  vec3 translation{0.0f};
+  dvec3 translation{0.0};
   quat rotation{1.0f, 0.0f, 0.0f, 0.0f}; // w, x, y, z
   vec3 scale{1.0f};
 
-  [[nodiscard]] mat4 parent_from_local() const { return compose_trs(translation, rotation, scale); }
+  [[nodiscard]] dmat4 parent_from_local() const {
+    return compose_trs(translation, rotation, scale);
+  }
   friend bool operator==(const Transform&, const Transform&) = default;
 };
 

@@ -6,9 +6,11 @@
 namespace specula {
 
 /// Written by transform_system: the entity's object-to-world matrix, and whether it changed in
-/// the latest tick (the acceleration and cache-invalidation systems react to `moved`).
+/// the latest tick (the acceleration and cache-invalidation systems react to `moved`). In double:
+/// world space may be far from the origin; the scene layer turns it into float render space
+/// (camera-relative) for the tracers.
 struct WorldTransform {
-  mat4 world_from_object{1.0f};
+  dmat4 world_from_object{1.0};
   /// True when world_from_object changed in the last tick (or the entity is new).
   bool moved = true;
   /// Tick in which world_from_object last changed.
