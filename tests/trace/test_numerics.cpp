@@ -284,7 +284,8 @@ void lit_floor(ecs::Registry& reg, float light_height, float intensity) {
 }
 
 TEST_P(RadianceBackends, ALightAtTheLargestDistanceGivesTheInverseSquareLaw) {
-  constexpr float kDistance = 1e19f;
+  // As far as a light can be placed (core/math.h's coordinate range) above a floor at the origin.
+  constexpr float kDistance = float(kMaxCoordinate);
   for (const TraceMode mode : {TraceMode::Cast, TraceMode::Whitted}) {
     ecs::Registry reg;
     lit_floor(reg, kDistance, kMaxLightIntensity);

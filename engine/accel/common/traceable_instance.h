@@ -22,8 +22,9 @@ namespace specula::accel {
 /// uniform scale of 1e-10.
 inline constexpr double kMinInstanceDeterminant = 1e-30;
 /// The largest entry of a traceable instance's object_from_world. Object-space ray origins are
-/// object_from_world · world origin: with world coordinates up to 1e19 they stay below 3e37,
-/// finite in float with room for the intersector's arithmetic.
+/// object_from_world · render-space origin: render-space coordinates stay within a few times
+/// kMaxCoordinate (1e12, core/math.h), so they stay below about 1e31, finite in float with room
+/// for the intersector's arithmetic (and still below 3e37 for coordinates up to 1e19).
 inline constexpr double kMaxInstanceInverse = 1e18;
 /// World bounds thinner than this fraction of their largest coordinate (about 8 float ULPs) have
 /// collapsed to a point in float: the geometry has no extent left to hit.
