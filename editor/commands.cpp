@@ -238,6 +238,11 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   }
   if (last.rays.dropped > 0)
     out << "  dropped rays: " << last.rays.dropped << " (per-pixel ray budget)\n";
+  if (last.rays.nonfinite > 0)
+    out << "  non-finite samples: " << last.rays.nonfinite << " (Inf/NaN radiance, written as 0)\n";
+  if (last.accel.hidden_instances > 0)
+    out << "  hidden instances: " << last.accel.hidden_instances
+        << " (degenerate transform or bounds, e.g. a scale of 0)\n";
   if (!options.out.empty()) out << "  image: " << shown(options.out) << "\n";
   if (!options.stats.empty()) out << "  stats: " << shown(options.stats) << "\n";
   return 0;

@@ -27,6 +27,7 @@ void acceleration_system(ecs::Registry& registry, const FrameContext& /*ctx*/) {
     a.blas_builds = u.blas_builds;
     a.refits = u.blas_refits;
     a.restructures = u.blas_restructures;
+    a.hidden_instances = u.hidden_instances;
   }
 }
 

@@ -11,6 +11,7 @@
 
 #include "specula/core/math.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -42,6 +43,93 @@ namespace specula {
   const mat3 abs_m(glm::abs(vec3(m[0])), glm::abs(vec3(m[1])), glm::abs(vec3(m[2])));
   const vec3 abs_t = glm::abs(vec3(m[3]));
   return (gamma_bound(3) + 1.0f) * (abs_m * p_error) + gamma_bound(3) * (abs_m * glm::abs(p) + abs_t);
+}
+
+/// How far inside its triangle a spawn point is pulled, in units of the length of its error bound
+/// (inset_barycentrics). At a concave edge (two faces meeting at an interior angle θ < 180°, as a
+/// wall meets the floor), a hit rounded onto the edge can land just behind the neighbouring face,
+/// and the offset along its own normal does not bring it back: its shadow ray starts behind the
+/// wall. Pulled inward by k·|e|, it is in front of the neighbour by about (k − 1)·|e|·sin θ minus
+/// what the normal offset takes back when θ < 90°. With k = 4 every origin of
+/// tests/trace/test_ray_offset.cpp's seeded wedges (θ from 20° to 178°, sizes 1e-3 to 1e4) lies
+/// in front of both faces; k = 1 already fails below 60°. docs/design/ray-offsets.md.
+inline constexpr float kEdgeInset = 4.0f;
+
+/// Barycentrics (b0, b1, b2) for a hit with intersector barycentrics (u, v) on triangle p0 p1 p2,
+/// clamped into the triangle (rounding may put them just outside) and then raised, where needed,
+/// so that the point lies at least `margin` from every edge: bᵢ ≥ margin / hᵢ, with hᵢ the altitude
+/// onto the edge opposite pᵢ; what is added is taken from the other barycentrics in proportion
+/// to their room above their own minimum. A triangle too small for the margin gives its centroid;
+/// a degenerate one the clamped barycentrics.
+[[nodiscard]] inline vec3 inset_barycentrics(const vec3& p0, const vec3& p1, const vec3& p2,
+                                             float u, float v, float margin) {
+  u = std::clamp(u, 0.0f, 1.0f);
+  v = std::clamp(v, 0.0f, 1.0f);
+  if (u + v > 1.0f) {
+    const float sum = u + v;
+    u /= sum;
+    v /= sum;
+  }
+  vec3 b(std::max(0.0f, 1.0f - u - v), u, v);
+  // Most hits are far from every edge: bᵢ · 2A ≥ margin · |edge opposite pᵢ|, squared (no root),
+  // in float while |cross|² is comfortably normal; the rest is decided in double below.
+  const vec3 e0 = p2 - p1, e1 = p0 - p2, e2 = p1 - p0;
+  const vec3 c = glm::cross(e2, p2 - p0);
+  const float c2 = glm::dot(c, c);
+  const float m2 = margin * margin;
+  if (c2 > 1e-30f && c2 < 1e30f && b.x * b.x * c2 >= m2 * glm::dot(e0, e0) &&
+      b.y * b.y * c2 >= m2 * glm::dot(e1, e1) && b.z * b.z * c2 >= m2 * glm::dot(e2, e2))
+    return b;
+  // In double: the altitudes of a thin triangle far from the origin lose digits in float.
+  const glm::dvec3 q0(p0), q1(p1), q2(p2);
+  const double twice_area = glm::length(glm::cross(q1 - q0, q2 - q0));
+  if (!(twice_area > 0.0) || !(margin > 0.0f)) return b;
+  // margin / hᵢ = margin · |edge opposite pᵢ| / (2 · area).
+  const glm::dvec3 lower =
+      double(margin) / twice_area *
+      glm::dvec3(glm::length(q2 - q1), glm::length(q0 - q2), glm::length(q1 - q0));
+  const double floor_sum = lower.x + lower.y + lower.z;
+  if (!(floor_sum < 1.0)) return vec3(1.0f / 3.0f);
+  double deficit = 0.0, room = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    if (double(b[i]) < lower[i])
+      deficit += lower[i] - double(b[i]);
+    else
+      room += double(b[i]) - lower[i];
+  }
+  if (deficit == 0.0) return b;
+  // room − deficit = 1 − floor_sum > 0: the others can give what is missing.
+  const double keep = 1.0 - deficit / room;
+  glm::dvec3 out;
+  for (int i = 0; i < 3; ++i)
+    out[i] = double(b[i]) < lower[i] ? lower[i] : lower[i] + (double(b[i]) - lower[i]) * keep;
+  return vec3(out);
+}
+
+/// Where secondary rays leave a hit on a world-space triangle, before the normal offset: the point
+/// at the inset barycentrics, and the bound on its rounding error.
+struct SpawnPoint {
+  vec3 point;
+  vec3 error;
+};
+
+/// The spawn point of a hit with intersector barycentrics (u, v) on the world-space triangle
+/// p0 p1 p2: pulled inside the triangle by `inset` × the length of the hit's error bound
+/// (inset_barycentrics), its own error bounded as the hit's. The bound includes the (γ₃ + 1, γ₃)
+/// terms of transformed_error with the identity, as for every baked instance.
+[[nodiscard]] inline SpawnPoint spawn_point(const vec3& p0, const vec3& p1, const vec3& p2, float u,
+                                            float v, float inset = kEdgeInset) {
+  const auto error_at = [&](const vec3& b, const vec3& q) {
+    return (gamma_bound(3) + 1.0f) * barycentric_error(p0, p1, p2, b.x, b.y, b.z) +
+           gamma_bound(3) * glm::abs(q);
+  };
+  const float w = 1.0f - u - v;
+  const vec3 hit = w * p0 + u * p1 + v * p2;
+  const vec3 hit_error = error_at(vec3(w, u, v), hit);
+  const vec3 b = inset_barycentrics(p0, p1, p2, u, v, inset * glm::length(hit_error));
+  if (b == vec3(w, u, v)) return {hit, hit_error}; // far enough from every edge already
+  const vec3 q = b.x * p0 + b.y * p1 + b.z * p2;
+  return {q, error_at(b, q)};
 }
 
 /// p moved off the surface along the unit geometric normal n, by enough to clear p_error, and

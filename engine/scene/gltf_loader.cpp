@@ -26,6 +26,7 @@
 
 #include <algorithm>
 #include <array>
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -832,6 +833,12 @@ std::optional<double> extension_number(const Context& ctx, const tinygltf::Exten
   return v.GetNumberAsDouble();
 }
 
+/// A float bound as messages print it: its shortest spelling ("1e+20").
+std::string format_bound(float v) {
+  char buf[32];
+  return std::string(buf, std::to_chars(buf, buf + sizeof buf, v).ptr);
+}
+
 Material map_material(const Context& ctx, int index) {
   // Primitives without a material use the glTF default material (white, metallic 1, rough 1),
   // which is what a default-constructed tinygltf::Material holds.
@@ -870,6 +877,10 @@ Material map_material(const Context& ctx, int index) {
     const float value = to_float(ctx, *strength, where);
     if (value < 0.0f) ctx.fail(where, "emissiveStrength must be ≥ 0");
     out.emission *= value;
+    const float largest = std::max(out.emission.x, std::max(out.emission.y, out.emission.z));
+    if (!(largest <= kMaxEmission))
+      ctx.fail(where, "emissiveFactor * emissiveStrength must be <= " + format_bound(kMaxEmission) +
+                          ", got " + strict_json::format_double(largest));
   }
 
   // See the mapping notes at the top of the file.
@@ -966,6 +977,12 @@ std::optional<Light> map_light(const Context& ctx, const tinygltf::Node& node,
   }
   light.intensity = to_float(ctx, l.intensity, lfield + ".intensity");
   if (light.intensity < 0.0f) ctx.fail(lfield + ".intensity", "must be ≥ 0");
+  if (const double brightest =
+          double(std::max(light.color.x, std::max(light.color.y, light.color.z))) * light.intensity;
+      !(brightest <= kMaxLightIntensity))
+    ctx.fail(lfield + ".intensity",
+             "color * intensity must be <= " + format_bound(kMaxLightIntensity) + ", got " +
+                 strict_json::format_double(brightest));
   light.range = to_float(ctx, l.range, lfield + ".range"); // 0: not given, unlimited
   if (light.range < 0.0f) ctx.fail(lfield + ".range", "must be > 0");
   if (light.type == Light::Type::Spot) {

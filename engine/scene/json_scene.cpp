@@ -64,6 +64,22 @@ vec3 read_color(const Reader& r, const json& j, const std::string& path) {
   return c;
 }
 
+/// A float bound as messages print it: its shortest spelling ("1e+20").
+std::string format_bound(float v) {
+  char buf[32];
+  return std::string(buf, std::to_chars(buf, buf + sizeof buf, v).ptr);
+}
+
+/// A radiance (emission, background): a colour no component of which exceeds kMaxEmission.
+vec3 read_radiance(const Reader& r, const json& j, const std::string& path) {
+  const vec3 c = read_color(r, j, path);
+  const float largest = std::max(c.x, std::max(c.y, c.z));
+  r.check(largest <= kMaxEmission, path,
+          "components must be <= " + format_bound(kMaxEmission) + ", got " +
+              format_double(largest));
+  return c;
+}
+
 /// A position [x, y, z] in double (Transform::translation, Camera, keys), each coordinate within
 /// the representable range (core/math.h kMaxCoordinate), so that `info` refuses what `render`
 /// could not trace.
@@ -145,7 +161,8 @@ RenderSettings read_settings(const Reader& r, const json& j, const std::string& 
     s.height = read_u32(r, *v, o.path("height"), 1, kMaxImageSide);
   if (const json* v = o.find("max_depth"))
     s.max_depth = read_u32(r, *v, o.path("max_depth"), 0, kMaxTraceDepth);
-  if (const json* v = o.find("background")) s.background = read_color(r, *v, o.path("background"));
+  if (const json* v = o.find("background"))
+    s.background = read_radiance(r, *v, o.path("background"));
   return s;
 }
 
@@ -328,7 +345,7 @@ Material read_material(const Reader& r, const json& j, const std::string& path) 
                  {"base_color", "emission", "reflectivity", "transmission", "ior", "roughness"},
                  "material");
   if (const json* v = o.find("base_color")) m.base_color = read_color(r, *v, o.path("base_color"));
-  if (const json* v = o.find("emission")) m.emission = read_color(r, *v, o.path("emission"));
+  if (const json* v = o.find("emission")) m.emission = read_radiance(r, *v, o.path("emission"));
   if (const json* v = o.find("reflectivity"))
     m.reflectivity = read_float_in(r, *v, o.path("reflectivity"), 0.0f, 1.0f);
   if (const json* v = o.find("transmission"))
@@ -365,6 +382,11 @@ Light read_light(const Reader& r, const json& j, const std::string& path) {
   if (const json* v = o.find("color")) l.color = read_color(r, *v, o.path("color"));
   if (const json* v = o.find("intensity"))
     l.intensity = read_non_negative(r, *v, o.path("intensity"));
+  const double brightest =
+      double(std::max(l.color.x, std::max(l.color.y, l.color.z))) * l.intensity;
+  r.check(brightest <= kMaxLightIntensity, o.path(o.has("intensity") ? "intensity" : "color"),
+          "color * intensity must be <= " + format_bound(kMaxLightIntensity) +
+              " per component, got " + format_double(brightest));
   if (const json* v = o.find("range")) {
     r.check(l.type != Light::Type::Directional, o.path("range"),
             "a directional light has no position, so no range");

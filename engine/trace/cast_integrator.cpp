@@ -11,6 +11,7 @@
 #include "specula/trace/lights.h"
 #include "specula/trace/shading.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -118,7 +119,9 @@ void shading_frames(const SceneTables& tables, const PrimaryHits& h, CastWave& w
 }
 
 /// Stage 3 for one point light without range or cone, the common case: sample_light's point
-/// branch and the integrator's tests, branch-free over the wave; adds irradiance × cos θ.
+/// branch (in float: its double d only matters beyond d ≈ 1.8e19, where d² overflows here and the
+/// light's contribution, below 1e20 / 3.4e38, is lost) and the integrator's tests, branch-free
+/// over the wave; adds irradiance × cos θ.
 SPECULA_SIMD_CLONES
 void point_light_kernel(std::size_t n, float lx, float ly, float lz, float ir, float ig, float ib,
                         const std::uint32_t* __restrict flags, const float* __restrict px,
@@ -132,8 +135,12 @@ void point_light_kernel(std::size_t n, float lx, float ly, float lz, float ir, f
     const float dist2 = dx * dx + dy * dy + dz * dz;
     const float dist = std::sqrt(dist2);
     const float tx = dx / dist, ty = dy / dist, tz = dz / dist;
-    const float attenuation = 1.0f / dist2;
-    const float er = ir * attenuation, eg = ig * attenuation, eb = ib * attenuation;
+    // sample_light's I / d / d capped at kMaxIrradiance, in float: 1 / d² would flush to zero
+    // beyond d ≈ 1e19 (flush-to-zero mode) and I / d² overflow close to a bright light.
+    const float inv = 1.0f / dist;
+    const float er = std::min(ir * inv * inv, kMaxIrradiance);
+    const float eg = std::min(ig * inv * inv, kMaxIrradiance);
+    const float eb = std::min(ib * inv * inv, kMaxIrradiance);
     const float facing = tx * gx[i] + ty * gy[i] + tz * gz[i];
     const float cos_theta = tx * sx[i] + ty * sy[i] + tz * sz[i];
     const float r = er * cos_theta, g = eg * cos_theta, b = eb * cos_theta;
@@ -204,7 +211,7 @@ void cast_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& sc
       }
       radiance = emission + albedo * vec3(w.lr[k], w.lg[k], w.lb[k]);
     }
-    frame.pixels[std::size_t(y) * frame.width + x] = radiance;
+    frame.pixels[std::size_t(y) * frame.width + x] = finite_or_counted(radiance, counts);
   });
 }
 

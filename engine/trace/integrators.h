@@ -12,6 +12,7 @@
 #include "specula/trace/stats.h"
 #include "specula/trace/tracer.h"
 
+#include <cmath>
 #include <span>
 #include <vector>
 
@@ -94,6 +95,14 @@ struct TileScratch {
   std::vector<std::uint8_t> confirm_blocked;
 };
 
+/// What a pixel (or a sample) receives: the radiance, or 0 when it is Inf or NaN, counted in
+/// counts.nonfinite so that it is never silent (the stats file's nonfinite_samples).
+[[nodiscard]] inline vec3 finite_or_counted(const vec3& radiance, RayCounts& counts) {
+  if (std::isfinite(radiance.x) && std::isfinite(radiance.y) && std::isfinite(radiance.z))
+    return radiance;
+  ++counts.nonfinite;
+  return vec3(0.0f);
+}
 
 /// Local shading of every primary hit: emission plus the diffuse term of every light, no shadow
 /// rays, no secondary rays; misses get the background.

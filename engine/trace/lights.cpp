@@ -12,15 +12,15 @@ LightSample sample_light(const gpu::GpuLight& light, const vec3& p) {
     return s;
   }
   const vec3 d = light.position - p;
-  const float dist2 = glm::dot(d, d);
-  if (!(dist2 > 0.0f)) return s; // the point is on the light: no defined direction
-  s.distance = std::sqrt(dist2);
-  s.to_light = d / s.distance;
-  float attenuation = 1.0f / dist2;
+  const double dist = std::sqrt(double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z);
+  if (!(dist > 0.0)) return s; // the point is on the light: no defined direction
+  s.distance = float(dist);
+  s.to_light = vec3(glm::dvec3(d) / dist);
+  double attenuation = 1.0;
   if (light.range > 0.0f) {
     // glTF's recommended window: smooth cut-off at the range.
-    const float r = s.distance / light.range;
-    const float w = glm::clamp(1.0f - r * r * r * r, 0.0f, 1.0f);
+    const double r = dist / light.range;
+    const double w = glm::clamp(1.0 - r * r * r * r, 0.0, 1.0);
     attenuation *= w * w;
   }
   if (light.type == gpu::kLightSpot) {
@@ -29,7 +29,8 @@ LightSample sample_light(const gpu::GpuLight& light, const vec3& p) {
     const float t = glm::clamp((cos_angle - light.cos_outer) / span, 0.0f, 1.0f);
     attenuation *= t * t;
   }
-  s.irradiance = light.intensity * attenuation;
+  const glm::dvec3 e = glm::dvec3(light.intensity) * attenuation / dist / dist;
+  s.irradiance = vec3(glm::min(e, glm::dvec3(kMaxIrradiance)));
   return s;
 }
 

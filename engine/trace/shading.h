@@ -14,8 +14,12 @@
 namespace specula {
 
 struct ShadingPoint {
-  vec3 position;
-  vec3 position_error;   ///< bound on the rounding error of position (ray_offset.h)
+  vec3 position; ///< the hit, where lights are evaluated
+  /// Where secondary rays leave from, before offset_ray_origin moves them off the surface: the hit
+  /// pulled inside its triangle by kEdgeInset × its error bound (inset_barycentrics), so that a
+  /// hit rounded onto a concave edge does not start behind the neighbouring face.
+  vec3 spawn_point;
+  vec3 spawn_error;      ///< bound on the rounding error of spawn_point (ray_offset.h)
   vec3 geometric_normal; ///< facing the incoming ray
   vec3 shading_normal;   ///< facing the same side as geometric_normal
   bool front_face;       ///< the ray hit the side the triangle's winding faces (entering)
@@ -42,15 +46,34 @@ struct ShadingPoint {
   const vec3& p2 = positions[tri.z];
   const vec3 p_object = w * p0 + hit.uv.x * p1 + hit.uv.y * p2;
   const bool identity = (inst.flags & gpu::kInstanceIdentity) != 0;
+  const mat4& m = inst.world_from_object;
   ShadingPoint sp;
-  sp.position = identity ? p_object : vec3(inst.world_from_object * vec4(p_object, 1.0f));
-  if (with_error_bound) {
-    const vec3 e = barycentric_error(p0, p1, p2, w, hit.uv.x, hit.uv.y);
-    // transformed_error with the identity is exactly this.
-    sp.position_error = identity ? (gamma_bound(3) + 1.0f) * e + gamma_bound(3) * glm::abs(p_object)
-                                 : transformed_error(inst.world_from_object, p_object, e);
+  sp.position = identity ? p_object : vec3(m * vec4(p_object, 1.0f));
+  if (with_error_bound && identity) {
+    const SpawnPoint spawn = spawn_point(p0, p1, p2, hit.uv.x, hit.uv.y);
+    sp.spawn_point = spawn.point;
+    sp.spawn_error = spawn.error;
+  } else if (with_error_bound) {
+    // spawn_point's steps through the transform: the inset in world space, where the neighbouring
+    // faces are; the points interpolated in object space and transformed, as the hit.
+    const auto error_at = [&](const vec3& b, const vec3& q) {
+      return transformed_error(m, q, barycentric_error(p0, p1, p2, b.x, b.y, b.z));
+    };
+    const vec3 hit_error = error_at(vec3(w, hit.uv.x, hit.uv.y), p_object);
+    const vec3 b = inset_barycentrics(vec3(m * vec4(p0, 1.0f)), vec3(m * vec4(p1, 1.0f)),
+                                      vec3(m * vec4(p2, 1.0f)), hit.uv.x, hit.uv.y,
+                                      kEdgeInset * glm::length(hit_error));
+    if (b == vec3(w, hit.uv.x, hit.uv.y)) {
+      sp.spawn_point = sp.position;
+      sp.spawn_error = hit_error;
+    } else {
+      const vec3 q_object = b.x * p0 + b.y * p1 + b.z * p2;
+      sp.spawn_point = vec3(m * vec4(q_object, 1.0f));
+      sp.spawn_error = error_at(b, q_object);
+    }
   } else {
-    sp.position_error = vec3(0.0f);
+    sp.spawn_point = sp.position;
+    sp.spawn_error = vec3(0.0f);
   }
   const mat3 n_from_o = normal_matrix(inst);
   const vec3 normal = glm::normalize(identity ? hit.object_normal : n_from_o * hit.object_normal);

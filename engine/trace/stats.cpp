@@ -76,6 +76,7 @@ std::uint64_t RayCounts::total() const {
 RayCounts& RayCounts::operator+=(const RayCounts& o) {
   for (int i = 0; i < kRayKindCount; ++i) count[i] += o.count[i];
   dropped += o.dropped;
+  nonfinite += o.nonfinite;
   return *this;
 }
 
@@ -122,6 +123,7 @@ std::string stats_to_json(const RunStats& stats) {
                       {"trace_ms", f.trace_ms},
                       {"rays", rays},
                       {"dropped_rays", f.rays.dropped},
+                      {"nonfinite_samples", f.rays.nonfinite},
                       {"mrays_per_s", rates},
                       {"cache", cache_json(f.cache)},
                       {"accel",
@@ -134,7 +136,8 @@ std::string stats_to_json(const RunStats& stats) {
                         {"static_builds", f.accel.static_builds},
                         {"blas_builds", f.accel.blas_builds},
                         {"refits", f.accel.refits},
-                        {"restructures", f.accel.restructures}}}});
+                        {"restructures", f.accel.restructures},
+                        {"hidden_instances", f.accel.hidden_instances}}}});
     total_ms += f.ms;
     total_trace_ms += f.trace_ms;
     total_rays += f.rays;
@@ -200,6 +203,8 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
     for (const RayKind k : kKinds)
       f.rays[k] = read<std::uint64_t>(rays, ray_kind_name(k), name, at + ".rays");
     f.rays.dropped = read<std::uint64_t>(frames[i], "dropped_rays", name, at);
+    // Arrived with issue 13 (non-finite radiance written as 0): older files have none.
+    read_optional(frames[i], "nonfinite_samples", f.rays.nonfinite, name, at);
     const json c = read<json>(frames[i], "cache", name, at);
     f.cache.lookups = read<std::uint64_t>(c, "lookups", name, at + ".cache");
     f.cache.hits = read<std::uint64_t>(c, "hits", name, at + ".cache");
@@ -246,6 +251,8 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
       f.accel.blas_builds = read<std::uint32_t>(a, "blas_builds", name, where);
       f.accel.refits = read<std::uint32_t>(a, "refits", name, where);
       f.accel.restructures = read<std::uint32_t>(a, "restructures", name, where);
+      // Arrived with issue 13's degenerate-instance handling: older files have none.
+      read_optional(a, "hidden_instances", f.accel.hidden_instances, name, where);
     }
     stats.frames.push_back(f);
   }

@@ -20,6 +20,10 @@ struct RayCounts {
   std::uint64_t count[kRayKindCount] = {};
   /// Secondary rays not traced because their pixel reached kMaxRaysPerPixel (not in total()).
   std::uint64_t dropped = 0;
+  /// Radiance samples (pixels, or trace_radiance's rays) that came out Inf or NaN and were
+  /// written as 0 instead (not in total()). Loaders bound intensities so that this stays 0: a
+  /// non-zero count is a bug, reported rather than written into the image.
+  std::uint64_t nonfinite = 0;
   [[nodiscard]] std::uint64_t& operator[](RayKind k) { return count[static_cast<int>(k)]; }
   [[nodiscard]] std::uint64_t operator[](RayKind k) const { return count[static_cast<int>(k)]; }
   [[nodiscard]] std::uint64_t total() const;
@@ -71,6 +75,8 @@ struct AccelStats {
   std::uint32_t blas_builds = 0;
   std::uint32_t refits = 0;
   std::uint32_t restructures = 0;
+  /// Instances left out of the top level: singular transform or collapsed bounds (a scale of 0).
+  std::uint32_t hidden_instances = 0;
   friend bool operator==(const AccelStats&, const AccelStats&) = default;
 };
 

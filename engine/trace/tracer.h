@@ -70,6 +70,9 @@ struct TracerUpdateStats {
   std::uint32_t blas_restructures = 0; ///< degraded subtrees rebuilt after refits (native BVH)
   std::uint32_t static_triangles = 0;  ///< triangles in the static structure
   std::uint32_t dynamic_instances = 0; ///< instances in the top level (the static set excluded)
+  /// Dynamic instances left out of the top level because their transform is singular or their
+  /// world bounds degenerate (accel::traceable_instance): a scale of 0 makes an object vanish.
+  std::uint32_t hidden_instances = 0;
   /// Milliseconds of each step of this update (the stats file's "accel" object).
   double static_build_ms = 0.0; ///< building the static structure
   double blas_build_ms = 0.0;   ///< building per-mesh structures

@@ -39,7 +39,8 @@ public:
     trace_waves();
     fold(n);
     if (frame_.hook != nullptr && s_.nodes.size() > n) deliver_leaving(n);
-    for (std::size_t k = 0; k < n; ++k) frame_.pixels[s_.nodes[k].pixel] = s_.nodes[k].radiance;
+    for (std::size_t k = 0; k < n; ++k)
+      frame_.pixels[s_.nodes[k].pixel] = finite_or_counted(s_.nodes[k].radiance, counts_);
   }
 
   /// Trees rooted at arbitrary rays (whitted_rays).
@@ -85,7 +86,8 @@ public:
     fold(n);
     for (std::size_t k = 0; k < n; ++k) {
       const WhittedNode& node = s_.nodes[k];
-      out[k] = RadianceSample{node.radiance, node.hit_t, node.hit_entity, node.seen, node.rays};
+      out[k] = RadianceSample{finite_or_counted(node.radiance, counts_), node.hit_t,
+                              node.hit_entity, node.seen, node.rays};
     }
   }
 
@@ -234,16 +236,17 @@ private:
     const float diffuse = std::max(0.0f, 1.0f - m.reflectivity - m.transmission);
     if (diffuse > 0.0f && !tables_.lights.empty()) {
       const vec3 albedo = m.base_color * (diffuse * kInvPi);
-      const vec3 origin = offset_ray_origin(sp.position, sp.position_error, sp.geometric_normal);
+      const vec3 origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
       for (const gpu::GpuLight& light : tables_.lights) {
         const LightSample ls = sample_light(light, sp.position);
         if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) continue; // behind the surface
         const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
         if (cos_theta <= 0.0f || max_component(ls.irradiance) <= 0.0f) continue;
         // Stop just short of the light: a light placed on a surface must not shadow itself.
-        const float tfar = std::isinf(ls.distance)
-                               ? ls.distance
-                               : glm::length(light.position - origin) * (1.0f - 1e-5f);
+        const float tfar =
+            std::isinf(ls.distance)
+                ? ls.distance
+                : float(glm::length(glm::dvec3(light.position - origin)) * (1.0 - 1e-5));
         s_.shadow_rays.push_back(Ray{origin, 0.0f, ls.to_light, tfar});
         s_.shadow_node.push_back(index);
         s_.shadow_value.push_back(albedo * ls.irradiance * cos_theta);
@@ -254,11 +257,11 @@ private:
     const SpecularSplit split = split_specular(m, sp, d);
     if (split.reflect_weight > 0.0f)
       spawn(node, index, hit.instance,
-            offset_ray_origin(sp.position, sp.position_error, sp.geometric_normal),
+            offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal),
             split.reflect_direction, split.reflect_weight, RayKind::Reflection, sp.front_face);
     if (split.refract_weight > 0.0f)
       spawn(node, index, hit.instance,
-            offset_ray_origin(sp.position, sp.position_error, -sp.geometric_normal),
+            offset_ray_origin(sp.spawn_point, sp.spawn_error, -sp.geometric_normal),
             split.refract_direction, split.refract_weight, RayKind::Refraction, !sp.front_face);
   }
 

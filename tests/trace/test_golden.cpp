@@ -1,7 +1,9 @@
 // Golden images: the sample scenes at 128×128 in cast and Whitted mode against committed
 // references (linear EXR), within a stated tolerance: PSNR ≥ 60 dB and mean FLIP ≤ 0.001, on every
 // backend. The references predate the wave integrators and the scene layer, so this also holds
-// that reshaping to "unchanged but for float summation order" (docs/design/scene-layer.md).
+// that reshaping to "unchanged but for float summation order" (docs/design/scene-layer.md); the
+// Cornell box's Whitted references were rewritten for issue 13's seam fix (its old ones carried
+// one-pixel black lines along the ceiling–wall and floor–wall seams: docs/design/ray-offsets.md).
 // Embree picks its kernels by CPU, and hits at shared edges may differ in the last bits: with each
 // of its ISAs forced (SPECULA_EMBREE_CONFIG=isa=avx512|avx2|sse4.2|sse2) the images stay within
 // 63.5 dB and FLIP 0.00022 of the references (the SSE kernels on the Cornell box are the worst);

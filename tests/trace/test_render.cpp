@@ -156,7 +156,7 @@ Step follow_refraction(const test::TracedWorld& world, const Ray& ray) {
   step.sp = shading_point(world.tables(), hit, ray.direction);
   step.split = split_specular(material_of(world, hit), step.sp, ray.direction);
   step.next.origin =
-      offset_ray_origin(step.sp.position, step.sp.position_error, -step.sp.geometric_normal);
+      offset_ray_origin(step.sp.spawn_point, step.sp.spawn_error, -step.sp.geometric_normal);
   step.next.direction = step.split.refract_direction;
   return step;
 }

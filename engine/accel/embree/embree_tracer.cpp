@@ -1,5 +1,6 @@
 #include "specula/accel/embree/embree_tracer.h"
 
+#include "specula/accel/common/traceable_instance.h"
 #include "specula/core/assert.h"
 #include "specula/core/error.h"
 #include "specula/render/scene_layer.h"
@@ -15,6 +16,16 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+/// A committed scene's bounds, as Embree computes them for the instances over it.
+Aabb scene_bounds(RTCScene scene) {
+  RTCBounds b;
+  rtcGetSceneBounds(scene, &b);
+  Aabb box;
+  box.min = vec3(b.lower_x, b.lower_y, b.lower_z);
+  box.max = vec3(b.upper_x, b.upper_y, b.upper_z);
+  return box;
 }
 } // namespace
 
@@ -148,10 +159,25 @@ RTCScene EmbreeTracer::shared_blas(const SceneTables& tables, std::uint32_t mesh
   return blas;
 }
 
+void EmbreeTracer::place(std::uint32_t slot, Dynamic& d, const mat4& world_from_object) {
+  // A degenerate instance never reaches Embree's builder (accel/common/traceable_instance.h): it
+  // leaves the top level, and its transform is not handed to Embree, which would invert it.
+  const bool traceable = accel::traceable_instance(world_from_object, scene_bounds(d.blas));
+  if (traceable) {
+    rtcSetGeometryTransform(d.instance, 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR,
+                            &world_from_object[0][0]);
+    rtcCommitGeometry(d.instance);
+    if (!d.attached) rtcAttachGeometryByID(top_, d.instance, slot + 1);
+  } else if (d.attached) {
+    rtcDetachGeometry(top_, slot + 1);
+  }
+  d.attached = traceable;
+}
+
 void EmbreeTracer::release_dynamic(std::uint32_t slot) {
   const auto it = dynamic_.find(slot);
   if (it == dynamic_.end()) return;
-  rtcDetachGeometry(top_, slot + 1);
+  if (it->second.attached) rtcDetachGeometry(top_, slot + 1);
   rtcReleaseGeometry(it->second.instance);
   if (it->second.own_blas != nullptr) rtcReleaseScene(it->second.own_blas); // owns own_mesh
   dynamic_.erase(it);
@@ -192,12 +218,10 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     } else {
       blas = shared_blas(tables, inst.mesh);
     }
+    d.blas = blas;
     d.instance = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_INSTANCE);
     rtcSetGeometryInstancedScene(d.instance, blas);
-    rtcSetGeometryTransform(d.instance, 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR,
-                            &inst.world_from_object[0][0]);
-    rtcCommitGeometry(d.instance);
-    rtcAttachGeometryByID(top_, d.instance, slot + 1);
+    place(slot, d, inst.world_from_object);
     check("adding an instance");
     dynamic_[slot] = d;
     last_.blas_build_ms += ms_since(start);
@@ -205,16 +229,13 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     top_dirty = true;
   }
   for (const std::uint32_t slot : delta.instances_moved) {
-    const Dynamic& d = dynamic_.at(slot);
-    rtcSetGeometryTransform(d.instance, 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR,
-                            &tables.instances[slot].world_from_object[0][0]);
-    rtcCommitGeometry(d.instance);
+    place(slot, dynamic_.at(slot), tables.instances[slot].world_from_object);
     ++last_.instances_moved;
     top_dirty = true;
   }
   for (const std::uint32_t slot : delta.instances_deformed) {
     const auto start = Clock::now();
-    const Dynamic& d = dynamic_.at(slot);
+    Dynamic& d = dynamic_.at(slot);
     const gpu::GpuMesh& m = tables.meshes[tables.instances[slot].mesh];
     auto* vertices =
         static_cast<float*>(rtcGetGeometryBufferData(d.own_mesh, RTC_BUFFER_TYPE_VERTEX, 0));
@@ -225,6 +246,7 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     // The instance caches its scene's bounds: without this commit the top level keeps the old
     // ones, and rays miss whatever moved outside them (found by tests/accel/test_differential).
     rtcCommitGeometry(d.instance);
+    place(slot, d, tables.instances[slot].world_from_object); // the mesh may have collapsed
     check("refitting a deforming mesh");
     ++last_.blas_refits;
     last_.refit_ms += ms_since(start);
@@ -244,7 +266,12 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     last_.top_build_ms += ms_since(start);
   }
   last_.static_triangles = static_triangles_;
-  last_.dynamic_instances = std::uint32_t(dynamic_.size());
+  for (const auto& [slot, d] : dynamic_) {
+    if (d.attached)
+      ++last_.dynamic_instances;
+    else
+      ++last_.hidden_instances;
+  }
   return last_;
 }
 

@@ -51,6 +51,8 @@ public:
 private:
   struct Dynamic {
     RTCGeometry instance = nullptr;
+    RTCScene blas = nullptr;     ///< the scene it instances (shared or own_blas)
+    bool attached = false;       ///< in the top level (false: degenerate, hidden)
     RTCScene own_blas = nullptr; ///< deforming instances only
     RTCGeometry own_mesh = nullptr;
   };
@@ -65,6 +67,9 @@ private:
   void rebuild_static(const SceneTables& tables);
   RTCScene shared_blas(const SceneTables& tables, std::uint32_t mesh);
   void release_dynamic(std::uint32_t slot);
+  /// Gives the instance its transform and puts it in the top level, or takes it out when the
+  /// transform or its bounds are degenerate (accel::traceable_instance).
+  void place(std::uint32_t slot, Dynamic& d, const mat4& world_from_object);
   RTCGeometry make_triangles(const SceneTables& tables, std::uint32_t mesh,
                              RTCBuildQuality quality);
   void check(const char* what);

@@ -1,5 +1,6 @@
 #include "specula/accel/native/native_tracer.h"
 
+#include "specula/accel/common/traceable_instance.h"
 #include "specula/core/assert.h"
 #include "specula/core/error.h"
 #include "specula/render/scene_layer.h"
@@ -121,7 +122,9 @@ const NativeTracer::Blas* NativeTracer::shared_blas(const SceneTables& tables, s
 
 void NativeTracer::set_transform(Dynamic& d, const mat4& world_from_object) {
   d.world_from_object = world_from_object;
-  d.object_from_world = glm::inverse(world_from_object);
+  // Degenerate instances stay out of the top level (rebuild_top), and their inverse is never used.
+  d.traceable = accel::traceable_instance(world_from_object, d.blas->bvh.bounds());
+  d.object_from_world = d.traceable ? mat4(accel::inverse_affine(world_from_object)) : mat4(1.0f);
   d.identity = world_from_object == mat4(1.0f);
 }
 
@@ -129,9 +132,9 @@ void NativeTracer::rebuild_top() {
   const auto start = Clock::now();
   // In slot order, so the top level does not depend on the hash map's iteration order.
   top_slot_.clear();
-  // Instances of empty meshes are left out: nothing can hit them.
+  // Instances of empty meshes are left out: nothing can hit them; so are degenerate ones.
   for (const auto& [slot, d] : dynamic_)
-    if (!d.blas->bvh.empty()) top_slot_.push_back(slot);
+    if (!d.blas->bvh.empty() && d.traceable) top_slot_.push_back(slot);
   std::sort(top_slot_.begin(), top_slot_.end());
   std::vector<Aabb> boxes;
   boxes.reserve(top_slot_.size());
@@ -200,12 +203,16 @@ const TracerUpdateStats& NativeTracer::update(const SceneLayer& layer) {
         d.own->bvh.restructure(d.own->view(), options_.restructure_threshold);
     last_.blas_restructures += rs.subtrees_rebuilt;
     last_.restructure_ms += ms_since(start);
+    set_transform(d, d.world_from_object); // the mesh may have collapsed (or come back)
     top_dirty = true; // the instance's bounds changed
   }
   for (const std::uint32_t mesh : delta.meshes_removed) blas_.erase(mesh);
   if (top_dirty) rebuild_top();
   last_.static_triangles = std::uint32_t(static_triangles_.size());
   last_.dynamic_instances = std::uint32_t(dynamic_.size());
+  for (const auto& [slot, d] : dynamic_)
+    if (!d.traceable) ++last_.hidden_instances;
+  last_.dynamic_instances -= last_.hidden_instances;
   return last_;
 }
 

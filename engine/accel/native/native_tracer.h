@@ -83,8 +83,9 @@ private:
     const Blas* blas = nullptr;
     std::unique_ptr<Blas> own; ///< deforming instances only
     mat4 world_from_object{1.0f};
-    mat4 object_from_world{1.0f};
+    mat4 object_from_world{1.0f}; ///< inverted in double (identity when not traceable)
     bool identity = false;
+    bool traceable = true; ///< accel::traceable_instance: false keeps it out of the top level
   };
 
   template <accel::TriangleTest Test>

@@ -3,6 +3,10 @@
 
 namespace specula {
 
+/// The largest emission component (and background colour) the loaders accept: a pixel sums at most
+/// a few thousand such values weighted ≤ 1, far from float's 3.4e38.
+inline constexpr float kMaxEmission = 1e20f;
+
 /// Surface description shared by every backend. Reflectivity and transmission are weights in
 /// [0, 1] (their sum ≤ 1); the rest of the weight is diffuse with base_color.
 struct Material {
