@@ -169,6 +169,25 @@ TEST(Png, BadFilesThrowErrorsNamingTheFile) {
   expect_png_error(dir.file("garbage.png"));
 }
 
+// stb_image grows its buffer to a chunk's declared length before reading it: any chunk whose
+// declared length does not fit in the file is refused first (a fuzzer finding: 93 bytes asked
+// for 1 GiB). Each chunk type and several lengths, on a file otherwise valid.
+TEST(Png, ChunkLengthsBeyondTheFileAreRefusedBeforeDecoding) {
+  TempDir dir;
+  for (const char* type : {"IDAT", "PLTE", "tEXt", "zzZz"}) {
+    for (const std::uint32_t length : {1000U, 0x00100000U, 0x4154000bU, 0x7fffffffU, 0xffffffffU}) {
+      Bytes bytes = test::png_header(4, 4, 8, 2);
+      test::put_chunk(bytes, type, Bytes(40, 0x11));
+      test::put_chunk(bytes, "IEND", {});
+      const std::size_t at = 8 + 25; // after the signature and IHDR (12 + 13 bytes)
+      for (int i = 0; i < 4; ++i) bytes[at + i] = static_cast<std::uint8_t>(length >> (24 - 8 * i));
+      const auto name = std::string(type) + std::to_string(length) + ".png";
+      test::write_bytes(dir.file(name), bytes);
+      expect_png_error(dir.file(name), "declares " + std::to_string(length) + " bytes");
+    }
+  }
+}
+
 TEST(Png, WriteToMissingFolderThrowsNamingThePath) {
   TempDir dir;
   const auto path = dir.file("no_such_folder") / "out.png";
@@ -838,6 +857,62 @@ std::size_t attribute_value_at(const Bytes& file, const std::string& name,
 
 void put_le32(Bytes& file, std::size_t at, std::uint32_t v) {
   for (std::size_t i = 0; i < 4; ++i) file[at + i] = static_cast<std::uint8_t>(v >> (8 * i));
+}
+
+// OpenEXR reads fixed-size types at their own size, a channel list until its empty name, and
+// sizes string-vector strings and preview pixels from numbers inside the value — whatever size
+// the attribute declares. A value framed otherwise makes the library's parse part from the
+// framing (a fuzzer finding: a 379-byte file asked for 1.8 GB), so it is refused first.
+TEST(Exr, AttributeValuesTheLibraryWouldReadOtherwiseAreRefused) {
+  TempDir dir;
+  const auto value = [](const std::string& type, const Bytes& bytes) {
+    Bytes out(type.begin(), type.end());
+    out.push_back(0);
+    out.insert(out.end(), bytes.begin(), bytes.end());
+    return out;
+  };
+  LeBytes long_string;
+  long_string.u32(0x40000000); // a string of 1 GiB announced inside an 8-byte value
+  long_string.u32(0);
+  LeBytes preview;
+  preview.u32(100000);
+  preview.u32(100000);
+  LeBytes list; // one channel, its terminator, then 20 bytes the library would take for more
+  list.str("Z");
+  for (int i = 0; i < 4; ++i) list.u32(0);
+  list.u8(0);
+  for (int i = 0; i < 5; ++i) list.u32(7);
+  const std::vector<std::pair<std::string, Bytes>> cases = {
+      {"declares", value("float", Bytes(8, 0))},
+      {"declares", value("box2i", Bytes(4, 0))},
+      {"declares", value("compression", Bytes(2, 0))},
+      {"string longer", value("stringvector", long_string.bytes)},
+      {"pixels", value("preview", preview.bytes)},
+      {"channel list does not end", value("chlist", list.bytes)},
+  };
+  int index = 0;
+  for (const auto& [needle, type_and_value] : cases) {
+    ExrSpec spec;
+    spec.extra = {{"extra", type_and_value}};
+    const auto name = "attribute" + std::to_string(index++) + ".exr";
+    test::write_bytes(dir.file(name), build_exr(spec, position_sample));
+    expect_exr_error(dir.file(name), needle);
+  }
+  // The same attributes framed as the library reads them load.
+  LeBytes good_list;
+  good_list.str("Z");
+  for (const std::uint32_t v : {2U, 0U, 1U, 1U}) good_list.u32(v); // float, pLinear, sampling
+  good_list.u8(0);
+  LeBytes good_strings;
+  good_strings.u32(2);
+  good_strings.u8('a');
+  good_strings.u8('b');
+  ExrSpec spec;
+  spec.extra = {{"a", value("float", Bytes(4, 0))},
+                {"b", value("stringvector", good_strings.bytes)},
+                {"c", value("chlist", good_list.bytes)}};
+  test::write_bytes(dir.file("good.exr"), build_exr(spec, position_sample));
+  EXPECT_NO_THROW((void)read_exr(dir.file("good.exr")));
 }
 
 TEST(Exr, ChunksThatDecompressShortAreRefused) {
