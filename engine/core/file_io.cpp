@@ -120,14 +120,4 @@ std::uint64_t physical_memory_bytes() {
   return static_cast<std::uint64_t>(pages) * static_cast<std::uint64_t>(page_size);
 }
 
-void check_memory_budget(const std::filesystem::path& path, std::uint64_t bytes,
-                         std::string_view what, std::uint64_t budget) {
-  if (budget == 0 || bytes <= budget) return;
-  constexpr std::uint64_t kMiB = 1 << 20;
-  throw Error(path.string(), std::string(what) + " needs about " +
-                                 std::to_string((bytes + kMiB - 1) / kMiB) +
-                                 " MiB of memory, more than the " + std::to_string(budget / kMiB) +
-                                 " MiB this machine has (docs/limits.md)");
-}
-
 } // namespace specula

@@ -39,10 +39,4 @@ inline constexpr std::uint64_t kMaxDataFileBytes = std::uint64_t(2) << 30;
 /// Bytes of physical memory on this machine (sysconf), or 0 when unknown.
 [[nodiscard]] std::uint64_t physical_memory_bytes();
 
-/// Fails with "<what> needs about N MiB of memory, more than the M MiB this machine has" when
-/// `bytes` exceeds `budget` (by default the physical memory; 0 means no bound). For readers
-/// that learn an allocation's size from a header (image sides), before they allocate it.
-void check_memory_budget(const std::filesystem::path& path, std::uint64_t bytes,
-                         std::string_view what, std::uint64_t budget = physical_memory_bytes());
-
 } // namespace specula

@@ -2,6 +2,7 @@
 
 #include "specula/core/error.h"
 #include "specula/core/file_io.h"
+#include "specula/core/memory_budget.h"
 #include "specula/image/srgb.h"
 
 // The implementations live in the system libstb; only the declarations are included here.
@@ -497,8 +498,8 @@ Framebuffer decode_exr(std::span<const std::uint8_t> bytes, const std::filesyste
     const Imath::Box2i& window = header.dataWindow();
     const auto w = static_cast<std::uint64_t>(std::int64_t{window.max.x} - window.min.x + 1);
     const auto h = static_cast<std::uint64_t>(std::int64_t{window.max.y} - window.min.y + 1);
-    check_memory_budget(path, w * h * sizeof(vec3),
-                        "reading this " + size_text(std::int64_t(w), std::int64_t(h)) + " EXR");
+    check_memory(w * h * sizeof(vec3), memory_budget({}, "--memory-limit"), path.string(),
+                 "reading this " + size_text(std::int64_t(w), std::int64_t(h)) + " EXR");
   }
   check_exr_chunks(bytes, colour, path);
 
@@ -807,11 +808,12 @@ Framebuffer read_png(const std::filesystem::path& path) {
                    " bytes of scan lines, more than the " + std::to_string(bytes.size()) +
                    "-byte file can hold compressed");
   }
-  check_memory_budget(
-      path, 2 * raw_bytes + pixels_count * (6 + sizeof(vec3)),
-      "decoding this " +
-          size_text(static_cast<std::int64_t>(ihdr_width), static_cast<std::int64_t>(ihdr_height)) +
-          " PNG");
+  check_memory(2 * raw_bytes + pixels_count * (6 + sizeof(vec3)),
+               memory_budget({}, "--memory-limit"), path.string(),
+               "decoding this " +
+                   size_text(static_cast<std::int64_t>(ihdr_width),
+                             static_cast<std::int64_t>(ihdr_height)) +
+                   " PNG");
 
   int width = 0;
   int height = 0;

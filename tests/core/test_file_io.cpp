@@ -94,19 +94,7 @@ TEST(FileIo, DevicesFifosAndDirectoriesAreNotRegularFiles) {
             std::string::npos);
 }
 
-TEST(FileIo, MemoryBudgetRefusesMoreThanItAllows) {
-  EXPECT_NO_THROW(check_memory_budget("x.png", 1000, "decoding", 1000));
-  EXPECT_NO_THROW(check_memory_budget("x.png", std::uint64_t(1) << 50, "decoding", 0)); // unknown
-  try {
-    check_memory_budget("x.png", std::uint64_t(3) << 30, "decoding this PNG",
-                        std::uint64_t(1) << 30);
-    ADD_FAILURE() << "no error";
-  } catch (const Error& e) {
-    EXPECT_STREQ(e.what(), "x.png: decoding this PNG needs about 3072 MiB of memory, more than the "
-                           "1024 MiB this machine has (docs/limits.md)");
-  }
-  EXPECT_GT(physical_memory_bytes(), std::uint64_t(1) << 20);
-}
+TEST(FileIo, PhysicalMemoryIsKnownHere) { EXPECT_GT(physical_memory_bytes(), std::uint64_t(1) << 20); }
 
 } // namespace
 } // namespace specula
