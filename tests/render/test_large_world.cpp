@@ -74,18 +74,9 @@ struct Frame {
 };
 
 Frame render(Scene& scene, const std::string& backend, TraceMode mode) {
-  RenderJob job;
-  job.backend = backend;
-  job.settings.mode = mode;
-  job.settings.max_depth = scene.settings.max_depth;
-  job.settings.background = scene.settings.background;
-  job.settings.threads = 2;
-  job.image = Framebuffer(kSize, kSize);
-  prepare_rendering(scene.registry, std::move(job));
-  Schedule schedule;
-  schedule.tick(scene.registry, 0.0);
+  Framebuffer image = test::render_scene(scene, mode, backend, kSize, kSize);
   const SceneLayer& layer = scene.registry.resource<SceneLayer>();
-  return {scene.registry.resource<RenderJob>().image, layer.stats(), layer.render_origin()};
+  return {std::move(image), layer.stats(), layer.render_origin()};
 }
 
 float luminance(const vec3& c) {

@@ -153,23 +153,30 @@ inline std::string test_name(std::string backend) {
   return backend;
 }
 
-/// One frame of a sample scene (samples/scenes/NAME.json) at size × size through the schedule,
-/// on the named backend, with the scene's depth and background, on 2 threads.
-inline Framebuffer render_sample(const std::string& scene_name, TraceMode mode,
-                                 const std::string& backend, std::uint32_t size) {
-  Scene scene = load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) / "samples/scenes" /
-                           (scene_name + ".json"));
+/// One frame of `scene` at width × height through the schedule, on the named backend, with the
+/// scene's depth and background, on 2 threads. The registry keeps the frame's resources
+/// (RenderJob, SceneLayer, ActiveTracer) for the caller to inspect.
+inline Framebuffer render_scene(Scene& scene, TraceMode mode, const std::string& backend,
+                                std::uint32_t width, std::uint32_t height) {
   RenderJob job;
   job.backend = backend;
   job.settings.mode = mode;
   job.settings.max_depth = scene.settings.max_depth;
   job.settings.background = scene.settings.background;
   job.settings.threads = 2;
-  job.image = Framebuffer(size, size);
+  job.image = Framebuffer(width, height);
   prepare_rendering(scene.registry, std::move(job));
   Schedule schedule;
   schedule.tick(scene.registry, 0.0);
   return scene.registry.resource<RenderJob>().image;
+}
+
+/// One frame of a sample scene (samples/scenes/NAME.json) at size × size (render_scene).
+inline Framebuffer render_sample(const std::string& scene_name, TraceMode mode,
+                                 const std::string& backend, std::uint32_t size) {
+  Scene scene = load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) / "samples/scenes" /
+                           (scene_name + ".json"));
+  return render_scene(scene, mode, backend, size, size);
 }
 
 } // namespace specula::test

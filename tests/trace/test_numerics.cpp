@@ -12,6 +12,7 @@
 #include "specula/trace/stats.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 #include <nlohmann/json.hpp>
 
 #include <cmath>
@@ -168,16 +169,24 @@ TEST_P(DegenerateInstances, ScaleAnimatedToZeroAndBackHidesAndShowsTheObject) {
 
 // ---- Radiance bounds ---------------------------------------------------------------------------
 
+/// A path in the temporary folder that no other test process uses at the same time: ctest runs
+/// each backend's instance of a test as its own process, in parallel.
+std::filesystem::path private_temp_path(const std::string& name) {
+  return std::filesystem::temp_directory_path() / (std::to_string(::getpid()) + "_" + name);
+}
+
 /// Writes `text` to a temporary file named `name` and loads it; returns the error text or "".
 std::string load_error(const std::string& name, const std::string& text) {
-  const std::filesystem::path path = std::filesystem::temp_directory_path() / name;
+  const std::filesystem::path path = private_temp_path(name);
   std::ofstream(path, std::ios::binary) << text;
+  std::string error;
   try {
     (void)load_scene(path);
   } catch (const Error& e) {
-    return e.what();
+    error = e.what();
   }
-  return "";
+  std::filesystem::remove(path);
+  return error;
 }
 
 std::string json_scene(const std::string& light, const std::string& emission) {
@@ -356,18 +365,8 @@ CornellFrame render_cornell(const std::string& backend, TraceMode mode, std::uin
                             std::uint32_t height) {
   Scene scene =
       load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) / "samples/scenes" / "cornell_box.json");
-  RenderJob job;
-  job.backend = backend;
-  job.settings.mode = mode;
-  job.settings.max_depth = scene.settings.max_depth;
-  job.settings.background = scene.settings.background;
-  job.settings.threads = 2;
-  job.image = Framebuffer(width, height);
-  prepare_rendering(scene.registry, std::move(job));
-  Schedule schedule;
-  schedule.tick(scene.registry, 0.0);
   CornellFrame out;
-  out.image = scene.registry.resource<RenderJob>().image;
+  out.image = test::render_scene(scene, mode, backend, width, height);
   const Tracer& tracer = *scene.registry.resource<ActiveTracer>().tracer;
   const CameraRays camera(*active_camera(scene.registry), width, height);
   out.near_seam.resize(std::size_t(width) * height);
@@ -430,9 +429,11 @@ INSTANTIATE_TEST_SUITE_P(Backends, ConcaveSeams, testing::ValuesIn(test::availab
 
 /// Writes `text` to a temporary file and loads it as a scene.
 Scene load_text(const std::string& name, const std::string& text) {
-  const std::filesystem::path path = std::filesystem::temp_directory_path() / name;
+  const std::filesystem::path path = private_temp_path(name);
   std::ofstream(path, std::ios::binary) << text;
-  return load_scene(path);
+  Scene scene = load_scene(path);
+  std::filesystem::remove(path);
+  return scene;
 }
 
 /// One frame of a loaded scene on `backend` (Whitted, 32 × 24).
