@@ -151,7 +151,7 @@ void check_exr_channel_list(std::span<const std::uint8_t> list, const std::files
   std::size_t at = 0;
   while (at < list.size() && list[at] != 0) {
     const auto end = std::find(list.begin() + static_cast<std::ptrdiff_t>(at), list.end(), 0);
-    if (end == list.end()) break;
+    if (end == list.end()) break; // a name running past the value: refused below
     const std::string_view name(reinterpret_cast<const char*>(list.data()) + at,
                                 static_cast<std::size_t>(end - list.begin()) - at);
     if (previous && name <= *previous) { // char_traits order: bytes as unsigned, as strcmp
@@ -161,7 +161,7 @@ void check_exr_channel_list(std::span<const std::uint8_t> list, const std::files
     previous = name;
     at += name.size() + 1 + 16; // pixel type, pLinear, reserved, x and y sampling
   }
-  if (at + 1 != list.size()) {
+  if (at + 1 != list.size() || list[at] != 0) {
     fail(path, "corrupt EXR: the channel list does not end at its declared size of " +
                    std::to_string(list.size()) + " bytes");
   }

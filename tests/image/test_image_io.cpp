@@ -882,6 +882,10 @@ TEST(Exr, AttributeValuesTheLibraryWouldReadOtherwiseAreRefused) {
   for (int i = 0; i < 4; ++i) list.u32(0);
   list.u8(0);
   for (int i = 0; i < 5; ++i) list.u32(7);
+  LeBytes unterminated; // one channel, then a name that runs to the value's end (no terminator)
+  unterminated.str("Z");
+  for (const std::uint32_t v : {2U, 0U, 1U, 1U}) unterminated.u32(v);
+  unterminated.u8(5);
   const std::vector<std::pair<std::string, Bytes>> cases = {
       {"declares", value("float", Bytes(8, 0))},
       {"declares", value("box2i", Bytes(4, 0))},
@@ -889,6 +893,7 @@ TEST(Exr, AttributeValuesTheLibraryWouldReadOtherwiseAreRefused) {
       {"string longer", value("stringvector", long_string.bytes)},
       {"pixels", value("preview", preview.bytes)},
       {"channel list does not end", value("chlist", list.bytes)},
+      {"channel list does not end", value("chlist", unterminated.bytes)},
   };
   int index = 0;
   for (const auto& [needle, type_and_value] : cases) {
