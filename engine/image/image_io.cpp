@@ -746,8 +746,6 @@ Framebuffer read_png(const std::filesystem::path& path) {
     fail(path, "not a PNG file (wrong signature)");
   }
   if (bytes.size() > static_cast<std::size_t>(INT_MAX)) fail(path, "PNG file larger than 2 GiB");
-  const auto* data = bytes.data();
-  const int length = static_cast<int>(bytes.size());
 
   // The size is read from IHDR here rather than through stb, which reports an oversized image
   // only as "unknown image type"; checked before decoding, so a forged IHDR cannot make stb
@@ -764,6 +762,10 @@ Framebuffer read_png(const std::filesystem::path& path) {
   // buffer to a chunk's declared length before reading the chunk, so a 93-byte file declaring a
   // 1 GiB IDAT cost 1 GiB (a fuzzer finding, tests/data/fuzz-regressions/png/). Length, type,
   // data, CRC; lengths at most 2^31 - 1 (ISO 15948 §5.3); the walk ends at IEND.
+  // Empty IDAT chunks (legal) are dropped from the copy stb decodes: stb_image copies an empty
+  // chunk's zero bytes into its still-null IDAT buffer, memcpy(NULL, …, 0), which is undefined
+  // behaviour (a fuzzer finding under UBSan, tests/data/fuzz-regressions/png/).
+  std::string without_empty_idat;
   for (std::size_t at = kPngSignature.size(); at < bytes.size();) {
     if (bytes.size() - at < 12) fail(path, "truncated PNG: a chunk is cut short");
     const std::uint64_t chunk_length = be32(at);
@@ -773,9 +775,18 @@ Framebuffer read_png(const std::filesystem::path& path) {
                      std::to_string(chunk_length) + " bytes, more than the " +
                      std::to_string(bytes.size() - at - 12) + " left in the file");
     }
+    if (type == "IDAT" && chunk_length == 0 && without_empty_idat.empty()) {
+      without_empty_idat.assign(file_bytes, 0, at); // the first one: copy what came before it
+    } else if (!without_empty_idat.empty() && !(type == "IDAT" && chunk_length == 0)) {
+      without_empty_idat.append(file_bytes, at, 12 + static_cast<std::size_t>(chunk_length));
+    }
     at += 12 + static_cast<std::size_t>(chunk_length);
     if (type == "IEND") break;
   }
+  const std::span<const std::uint8_t> decoded_bytes =
+      without_empty_idat.empty() ? bytes : as_bytes(without_empty_idat);
+  const auto* data = decoded_bytes.data();
+  const int length = static_cast<int>(decoded_bytes.size());
   const std::uint64_t ihdr_width = be32(16);
   const std::uint64_t ihdr_height = be32(20);
   if (ihdr_width == 0 || ihdr_height == 0 || ihdr_width > kMaxFramebufferSide ||

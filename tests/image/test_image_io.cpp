@@ -188,6 +188,26 @@ TEST(Png, ChunkLengthsBeyondTheFileAreRefusedBeforeDecoding) {
   }
 }
 
+// Empty IDAT chunks are legal; stb_image would copy one into its still-null buffer (undefined
+// behaviour under UBSan, a fuzzer finding). They are dropped before decoding: same pixels.
+TEST(Png, EmptyIdatChunksDecodeLikeTheFileWithoutThem) {
+  TempDir dir;
+  const Framebuffer image = test::random_image(16, 8, 11);
+  write_png(image, dir.file("plain.png"));
+  const Bytes plain = test::read_bytes(dir.file("plain.png"));
+  Bytes with_empty(plain.begin(), plain.begin() + 33); // signature and IHDR
+  test::put_chunk(with_empty, "IDAT", {});
+  with_empty.insert(with_empty.end(), plain.begin() + 33, plain.end() - 12);
+  test::put_chunk(with_empty, "IDAT", {});
+  with_empty.insert(with_empty.end(), plain.end() - 12, plain.end()); // IEND
+  test::write_bytes(dir.file("empty_idat.png"), with_empty);
+  const Framebuffer a = read_png(dir.file("plain.png"));
+  const Framebuffer b = read_png(dir.file("empty_idat.png"));
+  ASSERT_EQ(a.width(), b.width());
+  ASSERT_EQ(a.height(), b.height());
+  for (std::size_t i = 0; i < a.pixels().size(); ++i) EXPECT_EQ(a.pixels()[i], b.pixels()[i]) << i;
+}
+
 TEST(Png, WriteToMissingFolderThrowsNamingThePath) {
   TempDir dir;
   const auto path = dir.file("no_such_folder") / "out.png";
