@@ -179,14 +179,7 @@ TEST_P(LargeWorld, ARebaseRendersLikeAFreshStart) {
                {2.0f, start.position, start.look_at}};
   flying.registry.emplace<CameraPath>(cam, path);
 
-  RenderJob job;
-  job.backend = backend;
-  job.settings.mode = mode;
-  job.settings.max_depth = flying.settings.max_depth;
-  job.settings.background = flying.settings.background;
-  job.settings.threads = 2;
-  job.image = Framebuffer(kSize, kSize);
-  prepare_rendering(flying.registry, std::move(job));
+  test::prepare_scene_render(flying, mode, backend, kSize, kSize);
   Schedule schedule;
   schedule.tick(flying.registry, 0.0); // at the start: the first sync puts the origin there
   schedule.tick(flying.registry, 1.0); // 5000 away: past kRebaseDistance

@@ -153,11 +153,10 @@ inline std::string test_name(std::string backend) {
   return backend;
 }
 
-/// One frame of `scene` at width × height through the schedule, on the named backend, with the
-/// scene's depth and background, on 2 threads. The registry keeps the frame's resources
-/// (RenderJob, SceneLayer, ActiveTracer) for the caller to inspect.
-inline Framebuffer render_scene(Scene& scene, TraceMode mode, const std::string& backend,
-                                std::uint32_t width, std::uint32_t height) {
+/// Sets up `scene` to render at width × height on the named backend, with the scene's depth and
+/// background, on 2 threads; each Schedule::tick then renders a frame.
+inline void prepare_scene_render(Scene& scene, TraceMode mode, const std::string& backend,
+                                 std::uint32_t width, std::uint32_t height) {
   RenderJob job;
   job.backend = backend;
   job.settings.mode = mode;
@@ -166,6 +165,13 @@ inline Framebuffer render_scene(Scene& scene, TraceMode mode, const std::string&
   job.settings.threads = 2;
   job.image = Framebuffer(width, height);
   prepare_rendering(scene.registry, std::move(job));
+}
+
+/// One frame of `scene` (prepare_scene_render, then one tick). The registry keeps the frame's resources
+/// (RenderJob, SceneLayer, ActiveTracer) for the caller to inspect.
+inline Framebuffer render_scene(Scene& scene, TraceMode mode, const std::string& backend,
+                                std::uint32_t width, std::uint32_t height) {
+  prepare_scene_render(scene, mode, backend, width, height);
   Schedule schedule;
   schedule.tick(scene.registry, 0.0);
   return scene.registry.resource<RenderJob>().image;
