@@ -167,8 +167,8 @@ inline void prepare_scene_render(Scene& scene, TraceMode mode, const std::string
   prepare_rendering(scene.registry, std::move(job));
 }
 
-/// One frame of `scene` (prepare_scene_render, then one tick). The registry keeps the frame's resources
-/// (RenderJob, SceneLayer, ActiveTracer) for the caller to inspect.
+/// One frame of `scene` (prepare_scene_render, then one tick). The registry keeps the frame's
+/// resources (RenderJob, SceneLayer, ActiveTracer) for the caller to inspect.
 inline Framebuffer render_scene(Scene& scene, TraceMode mode, const std::string& backend,
                                 std::uint32_t width, std::uint32_t height) {
   prepare_scene_render(scene, mode, backend, width, height);
