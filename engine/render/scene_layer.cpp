@@ -135,6 +135,7 @@ const SceneDelta& SceneLayer::sync(ecs::Registry& registry) {
   // Mesh records freed in this sync become reusable only now: a consumer removes them after
   // adding the new ones (SceneDelta's order), so a record must not be both in one delta.
   for (const std::uint32_t r : delta_.meshes_removed) free_meshes_.push_back(r);
+  if (syncs_ == 0 || !delta_.empty()) emitters_.build(tables_);
 
   version_mesh_ = registry.version<Mesh>();
   version_transform_ = registry.version<WorldTransform>();

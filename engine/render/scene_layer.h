@@ -14,6 +14,7 @@
 
 #include "specula/core/math.h"
 #include "specula/ecs/registry.h"
+#include "specula/render/emitters.h"
 #include "specula/geometry/triangle_mesh.h"
 #include "specula/shared/scene_layout.h"
 
@@ -111,6 +112,9 @@ public:
   [[nodiscard]] const SceneTables& tables() const { return tables_; }
   [[nodiscard]] const SceneDelta& delta() const { return delta_; }
   [[nodiscard]] const SceneLayerStats& stats() const { return stats_; }
+  /// The area lights of the tables and the scene's features, rebuilt by every sync whose delta
+  /// is not empty.
+  [[nodiscard]] const EmitterTable& emitters() const { return emitters_; }
   /// The instance slot of a live entity, if it is one.
   [[nodiscard]] std::optional<std::uint32_t> instance_of(ecs::Entity entity) const;
   /// Number of syncs so far (0: never synced).
@@ -172,6 +176,7 @@ private:
   void relayout(ecs::Registry& registry, bool rebake);
 
   SceneTables tables_;
+  EmitterTable emitters_;
   SceneDelta delta_;
   SceneLayerStats stats_;
   std::vector<Slot> slots_;

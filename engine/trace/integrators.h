@@ -28,6 +28,8 @@ struct FrameInputs {
   std::span<vec3> pixels; ///< the image, row-major
   std::uint32_t width;
   bool lookups = false; ///< hook->wants_lookups() at frame start
+  const EmitterTable* emitters = nullptr; ///< the layer's area lights and scene features
+  GuideBuffers* guides = nullptr;         ///< path, shadow: primary-hit guides (sized), or none
 };
 
 /// A ray of a Whitted tree: one per primary hit and one per reflection or refraction ray. Its
@@ -114,6 +116,16 @@ void cast_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& sc
 /// next wave). Leaving rays are delivered to frame.hook after the last wave.
 void whitted_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& scratch,
                   RayCounts& counts);
+
+/// Path tracing (trace/path_integrator.cpp): settings.spp paths per pixel from the tile's primary
+/// hits, each a chain of waves, with next-event estimation and MIS; writes their mean.
+void path_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& scratch,
+               RayCounts& counts);
+
+/// The shadow caster (trace/shadow_integrator.cpp): primary visibility, one shadow ray per point
+/// light and settings.shadow_samples stratified samples of the area lights, local shading only.
+void shadow_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& scratch,
+                 RayCounts& counts);
 
 /// The Whitted radiance along arbitrary rays, each the root of its tree at depth `depth` (1: a
 /// ray leaving a primary hit). Hits on instance `skip` are passed through (a ray-cache cube's

@@ -96,6 +96,25 @@ const char* trace_mode_name(TraceMode mode) {
   return "unknown";
 }
 
+std::optional<LightSampling> parse_light_sampling(std::string_view name) {
+  if (name == "mis") return LightSampling::Mis;
+  if (name == "bsdf") return LightSampling::Bsdf;
+  if (name == "light") return LightSampling::Light;
+  return std::nullopt;
+}
+
+const char* light_sampling_name(LightSampling sampling) {
+  switch (sampling) {
+  case LightSampling::Mis:
+    return "mis";
+  case LightSampling::Bsdf:
+    return "bsdf";
+  case LightSampling::Light:
+    return "light";
+  }
+  return "unknown";
+}
+
 std::uint64_t trace_primary_frame(const Tracer& tracer, const Camera& camera, std::uint32_t width,
                                   std::uint32_t height, const TraceSettings& settings,
                                   const dvec3& render_origin) {
@@ -113,25 +132,43 @@ std::uint64_t trace_primary_frame(const Tracer& tracer, const Camera& camera, st
 }
 
 FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Camera& camera,
-                        const TraceSettings& settings, Framebuffer& out, RadianceHook* hook) {
-  if (settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow)
-    throw UnavailableError(std::string("mode '") + trace_mode_name(settings.mode) +
-                           "' is not available yet");
+                        const TraceSettings& settings, Framebuffer& out, RadianceHook* hook,
+                        GuideBuffers* guides) {
+  const bool stochastic = settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow;
+  if (guides != nullptr) guides->resize(std::size_t(out.width()) * out.height());
   const auto start = std::chrono::steady_clock::now();
   const CameraRays camera_rays(camera, out.width(), out.height(), layer.render_origin());
   if (hook != nullptr) hook->begin_frame(out.width(), out.height());
   const bool lookups = hook != nullptr && settings.mode == TraceMode::Whitted && hook->wants_lookups();
-  const detail::FrameInputs frame{tracer, layer.tables(), settings,   camera_rays,
-                                  hook,   out.pixels(),   out.width(), lookups};
+  const detail::FrameInputs frame{tracer,
+                                  layer.tables(),
+                                  settings,
+                                  camera_rays,
+                                  hook,
+                                  out.pixels(),
+                                  out.width(),
+                                  lookups,
+                                  &layer.emitters(),
+                                  stochastic ? guides : nullptr};
   tbb::combinable<RayCounts> counts;
-  const bool whitted = settings.mode == TraceMode::Whitted;
+  const TraceMode mode = settings.mode;
   for_each_tile(out.width(), out.height(), settings.tile_size, settings.threads,
                 tracer.packet_width(), [&](detail::TileScratch& scratch, const PacketTile& tile) {
                   tracer.intersect_camera(camera_rays, tile, scratch.primary);
-                  if (whitted)
-                    detail::whitted_tile(frame, tile, scratch, counts.local());
-                  else
+                  switch (mode) {
+                  case TraceMode::Cast:
                     detail::cast_tile(frame, tile, scratch, counts.local());
+                    break;
+                  case TraceMode::Whitted:
+                    detail::whitted_tile(frame, tile, scratch, counts.local());
+                    break;
+                  case TraceMode::Path:
+                    detail::path_tile(frame, tile, scratch, counts.local());
+                    break;
+                  case TraceMode::Shadow:
+                    detail::shadow_tile(frame, tile, scratch, counts.local());
+                    break;
+                  }
                 });
   FrameStats stats;
   counts.combine_each([&](const RayCounts& c) { stats.rays += c; });
@@ -147,7 +184,8 @@ RayCounts trace_radiance(const Tracer& tracer, const SceneLayer& layer,
                          std::uint32_t depth, std::uint32_t skip, std::span<RadianceSample> out) {
   if (out.size() != rays.size()) throw Error("trace_radiance", "out and rays differ in size");
   const CameraRays camera(Camera{}, 1, 1); // unused: the roots are given
-  const detail::FrameInputs frame{tracer, layer.tables(), settings, camera, nullptr, {}, 0, false};
+  const detail::FrameInputs frame{tracer, layer.tables(), settings,          camera, nullptr,
+                                  {},     0,              false,    &layer.emitters()};
   tbb::combinable<RayCounts> counts;
   tbb::enumerable_thread_specific<detail::TileScratch> scratch;
   constexpr std::size_t kChunk = 256;

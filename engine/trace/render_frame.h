@@ -9,6 +9,7 @@
 /// entity it leaves). Pixels are independent and nothing is random, so the image is bit-identical
 /// whatever the thread count, tile size or packet width.
 
+#include "specula/image/denoise.h"
 #include "specula/image/framebuffer.h"
 #include "specula/render/scene_layer.h"
 #include "specula/scene/components/camera.h"
@@ -27,6 +28,13 @@ enum class TraceMode { Cast, Whitted, Path, Shadow };
 [[nodiscard]] std::optional<TraceMode> parse_trace_mode(std::string_view name);
 [[nodiscard]] const char* trace_mode_name(TraceMode mode);
 
+/// How path mode reaches area lights: multiple importance sampling of both strategies (power
+/// heuristic), BSDF sampling only (emitters found by chance), or light sampling only (next-event
+/// estimation; emitters hit by BSDF-sampled rays after a diffuse bounce add nothing).
+enum class LightSampling : std::uint8_t { Mis, Bsdf, Light };
+[[nodiscard]] std::optional<LightSampling> parse_light_sampling(std::string_view name);
+[[nodiscard]] const char* light_sampling_name(LightSampling sampling);
+
 struct TraceSettings {
   TraceMode mode = TraceMode::Whitted;
   /// Longest chain of reflection/refraction bounces after the primary hit.
@@ -40,6 +48,15 @@ struct TraceSettings {
   bool shadows = true;
   std::uint32_t tile_size = 16;
   std::uint32_t threads = 0; ///< 0: every hardware thread
+  // The stochastic modes (path, shadow). A pixel's samples are positions in its own
+  // low-discrepancy sequence (trace/sampler.h): this frame uses [sample_offset, sample_offset +
+  // spp) (path) or [sample_offset, sample_offset + shadow_samples) (shadow), so frames that
+  // advance the offset continue one sequence and the image never depends on threads or tiles.
+  std::uint32_t spp = 1;            ///< path: samples per pixel in this frame
+  std::uint32_t shadow_samples = 1; ///< shadow: area-light samples per pixel in this frame
+  LightSampling sampling = LightSampling::Mis;
+  std::uint32_t seed = 0;          ///< scrambles every pixel's sequence
+  std::uint32_t sample_offset = 0; ///< index of this frame's first sample in each sequence
 };
 
 /// Most secondary rays one pixel may spawn in a frame (a bound on memory for pathological
@@ -49,11 +66,13 @@ inline constexpr std::uint32_t kMaxRaysPerPixel = 4096;
 /// Renders one frame of the scene layer's tables into `out` (its size is the image size) with
 /// `tracer`, whose structures must be up to date with `layer`. `camera` is in world space; its
 /// rays are made relative to the layer's render origin. Leaving rays go to `hook` when one
-/// is given. Returns the ray counts (FrameStats::trace_ms and ms are left to the caller).
+/// is given. Path and shadow modes write the mean of the frame's samples, and, when `guides` is
+/// given, the primary hits' albedo, normal and depth for the denoiser (resized to the image).
+/// Returns the ray counts (FrameStats::trace_ms and ms are left to the caller).
 /// Throws UnavailableError for modes this build does not have.
 FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Camera& camera,
                         const TraceSettings& settings, Framebuffer& out,
-                        RadianceHook* hook = nullptr);
+                        RadianceHook* hook = nullptr, GuideBuffers* guides = nullptr);
 
 /// What a ray brought back (trace_radiance).
 struct RadianceSample {

@@ -1,0 +1,68 @@
+#pragma once
+/// \file
+/// Sampling the scene's area lights (render/emitters.h) from a shading point: a triangle picked
+/// power-proportionally, a point uniform on it, the density converted to solid angle at the
+/// shading point (pdf_A · d² / |cos θ_light|); and the same density for a point a BSDF-sampled ray
+/// happened to hit, for multiple importance sampling.
+
+#include "specula/render/emitters.h"
+
+#include <cmath>
+#include <limits>
+
+namespace specula {
+
+struct AreaLightSample {
+  vec3 position{0.0f};   ///< on the light, render space
+  vec3 normal{0.0f};     ///< the triangle's unit normal (emission is two-sided)
+  vec3 emission{0.0f};   ///< radiance leaving the light towards the point
+  vec3 to_light{0.0f};   ///< unit, from the shading point
+  float distance = 0.0f; ///< from the shading point
+  float pdf = 0.0f;      ///< solid angle at the shading point; 0: no usable sample
+  std::uint32_t triangle = EmitterTable::kNone;
+};
+
+/// Solid-angle density of sampling light point `q` with normal `n` on triangle `e` from `p`.
+[[nodiscard]] inline float area_light_pdf(const EmitterTriangle& e, const vec3& p, const vec3& q) {
+  const vec3 d = q - p;
+  const float dist2 = glm::dot(d, d);
+  if (!(dist2 > 0.0f)) return 0.0f;
+  const float cos_l = std::abs(glm::dot(e.normal, d)) / std::sqrt(dist2);
+  if (!(cos_l > 0.0f)) return 0.0f;
+  return e.pick / e.area * dist2 / cos_l;
+}
+
+/// A light point for shading point p from three uniform numbers: u_pick picks the triangle,
+/// (u1, u2) the point on it (uniform by area: the square-root map).
+[[nodiscard]] inline AreaLightSample sample_area_light(const EmitterTable& table, const vec3& p,
+                                                       float u_pick, float u1, float u2) {
+  AreaLightSample s;
+  if (table.empty()) return s;
+  const std::uint32_t k = table.pick(u_pick);
+  const EmitterTriangle& e = table.triangles()[k];
+  const float r = std::sqrt(u1);
+  const float b1 = 1.0f - r, b2 = u2 * r;
+  s.position = e.p0 + b1 * e.e1 + b2 * e.e2;
+  s.normal = e.normal;
+  s.emission = e.emission;
+  s.triangle = k;
+  const vec3 d = s.position - p;
+  const float dist = glm::length(d);
+  if (!(dist > 0.0f) || !std::isfinite(dist)) return s;
+  s.distance = dist;
+  s.to_light = d / dist;
+  const float cos_l = std::abs(glm::dot(e.normal, s.to_light));
+  if (!(cos_l > 0.0f)) return s;
+  s.pdf = e.pick / e.area * dist * dist / cos_l;
+  if (!std::isfinite(s.pdf)) s.pdf = 0.0f;
+  return s;
+}
+
+/// The power heuristic (β = 2) weight of a strategy with density `a` against one with `b`.
+[[nodiscard]] inline float power_heuristic(float a, float b) {
+  const float a2 = a * a, b2 = b * b;
+  if (std::isinf(a2)) return 1.0f;
+  return a2 + b2 > 0.0f ? a2 / (a2 + b2) : 0.0f;
+}
+
+} // namespace specula

@@ -1,0 +1,123 @@
+#pragma once
+/// \file
+/// Low-discrepancy samples for the stochastic integrators (path, shadow): 4-D Sobol points
+/// (Joe & Kuo 2008 direction numbers) with Owen scrambling by hashing (Burley, "Practical
+/// Hash-based Owen Scrambling", JCGT 2020, with Vegdahl's permutation hash), shuffled by
+/// scrambling the index too. A pixel gets its own scrambling seed; a sample of it is a position
+/// in the pixel's sequence (frame × spp + s), so a progressive render continues one sequence
+/// across frames, every 2^k samples starting at a multiple of 2^k form a scrambled (0,k,4)-net
+/// (stratified: the shadow caster's area-light samples), and nothing depends on the thread or
+/// tile that draws it. Each use (camera, light, BSDF, roulette) at each bounce reads its own
+/// "set" of 4 dimensions, decorrelated by hashing the set number into the seed.
+
+#include "specula/core/math.h"
+
+#include <array>
+#include <cstdint>
+
+namespace specula {
+
+namespace sobol_detail {
+
+/// Direction numbers of one dimension: dimension 0 is van der Corput; the others follow Joe &
+/// Kuo's recurrence for primitive polynomial degree s, coefficients a and initial m.
+struct Primitive {
+  std::uint32_t s, a;
+  std::array<std::uint32_t, 3> m;
+};
+
+constexpr std::array<std::uint32_t, 32> directions(const Primitive& p, bool van_der_corput) {
+  std::array<std::uint32_t, 32> v{};
+  if (van_der_corput) {
+    for (std::uint32_t i = 0; i < 32; ++i) v[i] = 1u << (31 - i);
+    return v;
+  }
+  for (std::uint32_t i = 0; i < p.s; ++i) v[i] = p.m[i] << (31 - i);
+  for (std::uint32_t i = p.s; i < 32; ++i) {
+    v[i] = v[i - p.s] ^ (v[i - p.s] >> p.s);
+    for (std::uint32_t k = 1; k < p.s; ++k)
+      if (((p.a >> (p.s - 1 - k)) & 1u) != 0) v[i] ^= v[i - k];
+  }
+  return v;
+}
+
+inline constexpr std::array<std::array<std::uint32_t, 32>, 4> kDirections{
+    directions({0, 0, {0, 0, 0}}, true),
+    directions({1, 0, {1, 0, 0}}, false),
+    directions({2, 1, {1, 3, 0}}, false),
+    directions({3, 1, {1, 3, 1}}, false),
+};
+
+constexpr std::uint32_t reverse_bits(std::uint32_t x) {
+  x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+  x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);
+  x = ((x >> 8) & 0x00FF00FFu) | ((x & 0x00FF00FFu) << 8);
+  return (x >> 16) | (x << 16);
+}
+
+/// Burley's nested uniform scramble: a hash that only propagates bits upwards, applied to the
+/// bit-reversed value, permutes every dyadic interval within its parent (Owen scrambling).
+constexpr std::uint32_t owen_scramble(std::uint32_t x, std::uint32_t seed) {
+  x = reverse_bits(x);
+  x ^= x * 0x3d20adeau;
+  x += seed;
+  x *= (seed >> 16) | 1u;
+  x ^= x * 0x05526c56u;
+  x ^= x * 0x53a22864u;
+  return reverse_bits(x);
+}
+
+} // namespace sobol_detail
+
+/// A 32-bit integer hash (lowbias32, Wellons) for seeds.
+[[nodiscard]] constexpr std::uint32_t hash_u32(std::uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x7feb352du;
+  x ^= x >> 15;
+  x *= 0x846ca68bu;
+  x ^= x >> 16;
+  return x;
+}
+
+[[nodiscard]] constexpr std::uint32_t hash_combine(std::uint32_t seed, std::uint32_t v) {
+  return hash_u32(seed ^ (v + 0x9e3779b9u + (seed << 6) + (seed >> 2)));
+}
+
+/// Unscrambled Sobol point `index`, dimension d ∈ [0, 4), as a 32-bit fraction.
+[[nodiscard]] constexpr std::uint32_t sobol_u32(std::uint32_t index, std::uint32_t d) {
+  std::uint32_t x = 0;
+  for (std::uint32_t bit = 0; index != 0; ++bit, index >>= 1)
+    if ((index & 1u) != 0) x ^= sobol_detail::kDirections[d][bit];
+  return x;
+}
+
+/// A 32-bit fraction as a float in [0, 1) (24 bits: never rounds up to 1).
+[[nodiscard]] constexpr float to_unit_float(std::uint32_t x) {
+  return float(x >> 8) * (1.0f / 16777216.0f);
+}
+
+/// The samples of one pixel (or any stream keyed by an integer) of one render.
+class PixelSampler {
+public:
+  /// `stream`: the pixel's index in the image; `seed`: the render's seed (TraceSettings::seed).
+  constexpr PixelSampler(std::uint32_t stream, std::uint32_t seed)
+      : seed_(hash_combine(hash_u32(seed), stream)) {}
+
+  /// Dimensions 4·set … 4·set+3 of the pixel's sample `index`: an Owen-scrambled, shuffled 4-D
+  /// Sobol point, each set scrambled with its own seed.
+  [[nodiscard]] constexpr vec4 get4(std::uint32_t index, std::uint32_t set) const {
+    const std::uint32_t set_seed = hash_combine(seed_, set);
+    const std::uint32_t shuffled = sobol_detail::owen_scramble(index, set_seed);
+    vec4 r(0.0f);
+    for (std::uint32_t d = 0; d < 4; ++d)
+      r[int(d)] = to_unit_float(
+          sobol_detail::owen_scramble(sobol_u32(shuffled, d), hash_combine(set_seed, d + 1)));
+    return r;
+  }
+
+private:
+  std::uint32_t seed_;
+};
+
+} // namespace specula
