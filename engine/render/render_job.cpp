@@ -15,7 +15,7 @@ void prepare_rendering(ecs::Registry& registry, RenderJob job) {
                                        ", got " + std::to_string(job.settings.max_depth));
   if (job.settings.tile_size == 0 || job.settings.tile_size > 1024)
     throw Error("render settings", "tile size must be 1 to 1024");
-  if (job.settings.mode == TraceMode::Path || job.settings.mode == TraceMode::Shadow)
+  if (job.settings.mode == TraceMode::Shadow)
     throw UnavailableError(std::string("mode '") + trace_mode_name(job.settings.mode) +
                            "' is not available yet (it lands with the streaming ray tracer)");
   std::unique_ptr<Tracer> tracer =

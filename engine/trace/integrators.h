@@ -27,7 +27,7 @@ struct FrameInputs {
   RadianceHook* hook;
   std::span<vec3> pixels; ///< the image, row-major
   std::uint32_t width;
-  bool lookups = false; ///< hook->wants_lookups() at frame start
+  bool lookups = false;                   ///< hook->wants_lookups() at frame start
   const EmitterTable* emitters = nullptr; ///< the layer's area lights and scene features
   GuideBuffers* guides = nullptr;         ///< path, shadow: primary-hit guides (sized), or none
 };
@@ -46,10 +46,10 @@ struct WhittedNode {
   std::uint32_t depth;
   std::uint32_t from; ///< instance the ray leaves (kNoInstance for primaries)
   RayKind kind;
-  bool exits;          ///< it leaves `from` outwards (LeavingRadiance::exits)
-  CacheAnswer answer;  ///< how the hook served it
-  vec3 cached;         ///< Verify: the value the hook offered
-  float hit_t;         ///< its first hit (+inf: none)
+  bool exits;               ///< it leaves `from` outwards (LeavingRadiance::exits)
+  CacheAnswer answer;       ///< how the hook served it
+  vec3 cached;              ///< Verify: the value the hook offered
+  float hit_t;              ///< its first hit (+inf: none)
   std::uint32_t hit_entity; ///< entity index of its first hit (kNoInstance: none)
   std::uint32_t seen;       ///< entity_bit of everything its subtree hit
   std::uint32_t rays;       ///< rays traced for it and its subtree (itself and shadow rays too)
@@ -71,6 +71,32 @@ struct CastWave {
     for (auto* a : {&px, &py, &pz, &sx, &sy, &sz, &gx, &gy, &gz, &lr, &lg, &lb}) a->resize(n);
     flags.resize(n);
   }
+};
+
+/// One path of path mode's waves: where it goes next and what it carries. The ray itself is kept
+/// beside it (PathWave::rays), ready for the tracer.
+struct Path {
+  vec3 throughput;      ///< product of BSDF·cos / pdf (and roulette) so far
+  float bsdf_pdf;       ///< solid-angle density of the ray's direction (0: camera or specular)
+  vec3 previous;        ///< the vertex the ray leaves (MIS: light-sampling density from there)
+  std::uint32_t slot;   ///< its sample's radiance entry (PathWave::radiance)
+  std::uint32_t pixel;  ///< image index: the sampler's stream
+  std::uint32_t sample; ///< index in the pixel's sequence
+};
+
+/// Path mode's waves: the live paths and their rays (compacted every wave), the hits, one
+/// radiance per sample of the batch, the wave's shadow rays.
+struct PathWave {
+  std::vector<std::uint32_t> pixel; ///< image index of each tile pixel, in trace order
+  std::vector<vec3> sum;            ///< per tile pixel: sum of its finished samples
+  std::vector<vec3> radiance;       ///< per sample of the batch
+  std::vector<Path> paths, wave_paths, hit_paths;
+  std::vector<Ray> rays, wave_rays;
+  std::vector<Hit> hits;
+  std::vector<Ray> shadow_rays;
+  std::vector<std::uint32_t> shadow_slot;
+  std::vector<vec3> shadow_value;
+  std::vector<std::uint8_t> blocked;
 };
 
 /// A worker's scratch, reused from tile to tile.
@@ -95,6 +121,7 @@ struct TileScratch {
   std::vector<Ray> confirm_rays;
   std::vector<std::uint32_t> confirm_node;
   std::vector<std::uint8_t> confirm_blocked;
+  PathWave path;
 };
 
 /// What a pixel (or a sample) receives: the radiance, or 0 when it is Inf or NaN, counted in

@@ -92,6 +92,37 @@ constexpr std::uint32_t owen_scramble(std::uint32_t x, std::uint32_t seed) {
   return x;
 }
 
+namespace sobol_detail {
+
+/// sobol_u32 by bytes: entry [d][k][b] is the XOR of dimension d's direction numbers selected by
+/// byte value b at byte k of the index, so a point costs four lookups instead of a loop over up
+/// to 32 bits (scrambled indices use all of them) with a data-dependent branch per bit.
+using ByteTable = std::array<std::array<std::array<std::uint32_t, 256>, 4>, 4>;
+
+constexpr ByteTable byte_table() {
+  ByteTable table{};
+  for (std::uint32_t d = 0; d < 4; ++d)
+    for (std::uint32_t k = 0; k < 4; ++k)
+      for (std::uint32_t b = 0; b < 256; ++b) {
+        std::uint32_t x = 0;
+        for (std::uint32_t bit = 0; bit < 8; ++bit)
+          if (((b >> bit) & 1u) != 0) x ^= kDirections[d][8 * k + bit];
+        table[d][k][b] = x;
+      }
+  return table;
+}
+
+inline constexpr ByteTable kByteTable = byte_table();
+
+} // namespace sobol_detail
+
+/// sobol_u32 from the byte table (equal for every index and dimension).
+[[nodiscard]] constexpr std::uint32_t sobol_u32_fast(std::uint32_t index, std::uint32_t d) {
+  const auto& t = sobol_detail::kByteTable[d];
+  return t[0][index & 0xFFu] ^ t[1][(index >> 8) & 0xFFu] ^ t[2][(index >> 16) & 0xFFu] ^
+         t[3][index >> 24];
+}
+
 /// A 32-bit fraction as a float in [0, 1) (24 bits: never rounds up to 1).
 [[nodiscard]] constexpr float to_unit_float(std::uint32_t x) {
   return float(x >> 8) * (1.0f / 16777216.0f);
@@ -112,7 +143,7 @@ public:
     vec4 r(0.0f);
     for (std::uint32_t d = 0; d < 4; ++d)
       r[int(d)] = to_unit_float(
-          sobol_detail::owen_scramble(sobol_u32(shuffled, d), hash_combine(set_seed, d + 1)));
+          sobol_detail::owen_scramble(sobol_u32_fast(shuffled, d), hash_combine(set_seed, d + 1)));
     return r;
   }
 
