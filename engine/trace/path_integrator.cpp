@@ -239,8 +239,9 @@ private:
       // BSDF strategy would need a ray beyond the depth limit).
       if constexpr (kArea) {
         if (!last && settings_.sampling != LightSampling::Bsdf) {
-          const vec4 u = sampler.get4(p.sample, set + kSetLight);
-          const AreaLightSample ls = sample_area_light(emitters_, sp.position, u.x, u.y, u.z);
+          const SampleSet u = sampler.set(p.sample, set + kSetLight);
+          const AreaLightSample ls =
+              sample_area_light(emitters_, sp.position, u.dim(0), u.dim(1), u.dim(2));
           const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
           if (ls.pdf > 0.0f && glm::dot(ls.to_light, sp.geometric_normal) > 0.0f &&
               cos_theta > 0.0f && max_component(ls.emission) > 0.0f) {
@@ -257,12 +258,13 @@ private:
     if (last || !(total > 0.0f)) return;
 
     // The continuation: a lobe picked by its weight, the throughput divided by its probability.
-    const vec4 u = sampler.get4(p.sample, set + kSetBsdf);
+    // Dimensions: 0 the lobe, 1 reflect or refract, 2 and 3 the diffuse direction.
+    const SampleSet u = sampler.set(p.sample, set + kSetBsdf);
     Path next = p;
     Ray ray;
     RayKind kind = RayKind::Reflection;
-    if (!(kMirror || kDielectric) || u.x * total < diffuse) {
-      const vec3 wi = cosine_direction(sp.shading_normal, u.z, u.w);
+    if (!(kMirror || kDielectric) || u.dim(0) * total < diffuse) {
+      const vec3 wi = cosine_direction(sp.shading_normal, u.dim(2), u.dim(3));
       const float cos_theta = glm::dot(wi, sp.shading_normal);
       if (glm::dot(wi, sp.geometric_normal) <= 0.0f || !(cos_theta > 0.0f)) return;
       // f·cos / pdf = (diffuse·base/π·cos) / (p_diffuse·cos/π).
@@ -277,7 +279,7 @@ private:
       if constexpr (kDielectric) {
         const SpecularSplit split = split_specular(m, sp, d);
         const float both = split.reflect_weight + split.refract_weight;
-        reflect = u.y * both < split.reflect_weight;
+        reflect = u.dim(1) * both < split.reflect_weight;
         direction = reflect ? split.reflect_direction : split.refract_direction;
       } else {
         vec3 r = reflect_direction(d, sp.shading_normal);
@@ -291,7 +293,7 @@ private:
     }
     if (depth >= kRouletteDepth) {
       const float survival = std::clamp(max_component(next.throughput), 0.05f, 1.0f);
-      if (sampler.get4(p.sample, set + kSetRoulette).x >= survival) return;
+      if (sampler.set(p.sample, set + kSetRoulette).dim(0) >= survival) return;
       next.throughput /= survival;
     }
     if (!(max_component(next.throughput) > 0.0f)) return; // a black surface ends it

@@ -128,6 +128,21 @@ inline constexpr ByteTable kByteTable = byte_table();
   return float(x >> 8) * (1.0f / 16777216.0f);
 }
 
+/// One set of one sample (PixelSampler::set): its dimensions one at a time, for uses that need
+/// fewer than four (each costs a hash and a scramble). dim(d) equals get4(index, set)[d].
+class SampleSet {
+public:
+  constexpr SampleSet(std::uint32_t set_seed, std::uint32_t shuffled)
+      : set_seed_(set_seed), shuffled_(shuffled) {}
+  [[nodiscard]] constexpr float dim(std::uint32_t d) const {
+    return to_unit_float(
+        sobol_detail::owen_scramble(sobol_u32_fast(shuffled_, d), hash_combine(set_seed_, d + 1)));
+  }
+
+private:
+  std::uint32_t set_seed_, shuffled_;
+};
+
 /// The samples of one pixel (or any stream keyed by an integer) of one render.
 class PixelSampler {
 public:
@@ -138,13 +153,14 @@ public:
   /// Dimensions 4·set … 4·set+3 of the pixel's sample `index`: an Owen-scrambled, shuffled 4-D
   /// Sobol point, each set scrambled with its own seed.
   [[nodiscard]] constexpr vec4 get4(std::uint32_t index, std::uint32_t set) const {
+    const SampleSet s = this->set(index, set);
+    return vec4(s.dim(0), s.dim(1), s.dim(2), s.dim(3));
+  }
+
+  /// The same point, its dimensions drawn on demand.
+  [[nodiscard]] constexpr SampleSet set(std::uint32_t index, std::uint32_t set) const {
     const std::uint32_t set_seed = hash_combine(seed_, set);
-    const std::uint32_t shuffled = sobol_detail::owen_scramble(index, set_seed);
-    vec4 r(0.0f);
-    for (std::uint32_t d = 0; d < 4; ++d)
-      r[int(d)] = to_unit_float(
-          sobol_detail::owen_scramble(sobol_u32_fast(shuffled, d), hash_combine(set_seed, d + 1)));
-    return r;
+    return SampleSet(set_seed, sobol_detail::owen_scramble(index, set_seed));
   }
 
 private:
