@@ -162,7 +162,9 @@ TEST(PathFurnace, HalfAlbedoEverywhereGivesTheTruncatedGeometricSeries) {
 }
 
 /// A small closed Cornell-like box: diffuse walls, an emissive panel under the ceiling, a diffuse
-/// block, a mirror sphere and a glass sphere, and (optionally) a point light.
+/// block, a mirror sphere and a glass sphere, and (optionally) a point light. The panel is large
+/// (a third of the ceiling's width and more), so that BSDF sampling finds it often and both MIS
+/// weights matter: with a small panel a wrong MIS weight hides in the noise.
 struct SmallCornell {
   ecs::Registry reg;
   std::unique_ptr<test::TracedWorld> world;
@@ -173,8 +175,8 @@ struct SmallCornell {
   explicit SmallCornell(bool point_light = true, std::uint32_t packet_width = 16) {
     test::add_mesh(reg, test::primitive("box", 1.0f, vec3(4.0f)), test::at(vec3(0.0f)),
                    diffuse(vec3(0.7f, 0.6f, 0.5f)));
-    test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(1.0f)),
-                   test::at(vec3(0.0f, 1.9f, 0.0f)), diffuse(vec3(0.0f), vec3(6.0f, 5.0f, 4.0f)));
+    test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(2.5f)),
+                   test::at(vec3(0.0f, 1.9f, 0.0f)), diffuse(vec3(0.0f), vec3(1.5f, 1.25f, 1.0f)));
     test::add_mesh(reg, test::primitive("box", 1.0f, vec3(1.0f, 1.6f, 1.0f)),
                    test::at(vec3(-1.0f, -1.2f, -1.0f)), diffuse(vec3(0.3f, 0.6f, 0.3f)));
     Material mirror;
