@@ -27,7 +27,7 @@ struct FrameInputs {
   RadianceHook* hook;
   std::span<vec3> pixels; ///< the image, row-major
   std::uint32_t width;
-  bool lookups = false;                   ///< hook->wants_lookups() at frame start
+  bool lookups = false; ///< hook->wants_lookups() at frame start
   const EmitterTable* emitters = nullptr; ///< the layer's area lights and scene features
   GuideBuffers* guides = nullptr;         ///< path, shadow: primary-hit guides (sized), or none
 };
@@ -46,10 +46,10 @@ struct WhittedNode {
   std::uint32_t depth;
   std::uint32_t from; ///< instance the ray leaves (kNoInstance for primaries)
   RayKind kind;
-  bool exits;               ///< it leaves `from` outwards (LeavingRadiance::exits)
-  CacheAnswer answer;       ///< how the hook served it
-  vec3 cached;              ///< Verify: the value the hook offered
-  float hit_t;              ///< its first hit (+inf: none)
+  bool exits;          ///< it leaves `from` outwards (LeavingRadiance::exits)
+  CacheAnswer answer;  ///< how the hook served it
+  vec3 cached;         ///< Verify: the value the hook offered
+  float hit_t;         ///< its first hit (+inf: none)
   std::uint32_t hit_entity; ///< entity index of its first hit (kNoInstance: none)
   std::uint32_t seen;       ///< entity_bit of everything its subtree hit
   std::uint32_t rays;       ///< rays traced for it and its subtree (itself and shadow rays too)
