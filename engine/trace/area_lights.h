@@ -58,11 +58,19 @@ struct AreaLightSample {
   return s;
 }
 
-/// The power heuristic (β = 2) weight of a strategy with density `a` against one with `b`.
+/// The power heuristic (β = 2) weight of a strategy with density `a` against one with `b`:
+/// a² / (a² + b²), computed as 1 / (1 + (b/a)²) so that w(a, b) + w(b, a) = 1 for every pair,
+/// also where a² or b² would overflow to inf or underflow to 0 (a² / (a² + b²) gave 1 + 1 for two
+/// huge densities and 0 + 0 for two tiny ones). Equal densities (both 0 or both inf included)
+/// share ½ each; NaN or negative densities count as 0.
 [[nodiscard]] inline float power_heuristic(float a, float b) {
-  const float a2 = a * a, b2 = b * b;
-  if (std::isinf(a2)) return 1.0f;
-  return a2 + b2 > 0.0f ? a2 / (a2 + b2) : 0.0f;
+  a = a > 0.0f ? a : 0.0f;
+  b = b > 0.0f ? b : 0.0f;
+  if (a == b) return 0.5f;
+  if (a == 0.0f || std::isinf(b)) return 0.0f;
+  if (b == 0.0f || std::isinf(a)) return 1.0f;
+  const float r = b / a;
+  return 1.0f / (1.0f + r * r);
 }
 
 } // namespace specula

@@ -73,6 +73,32 @@ struct CastWave {
   }
 };
 
+/// One path of path mode's waves: where it goes next and what it carries. The ray itself is kept
+/// beside it (PathWave::rays), ready for the tracer.
+struct Path {
+  vec3 throughput;      ///< product of BSDF·cos / pdf (and roulette) so far
+  float bsdf_pdf;       ///< solid-angle density of the ray's direction (0: camera or specular)
+  vec3 previous;        ///< the vertex the ray leaves (MIS: light-sampling density from there)
+  std::uint32_t slot;   ///< its sample's radiance entry (PathWave::radiance)
+  std::uint32_t pixel;  ///< image index: the sampler's stream
+  std::uint32_t sample; ///< index in the pixel's sequence
+};
+
+/// Path mode's waves: the live paths and their rays (compacted every wave), the hits, one
+/// radiance per sample of the batch, the wave's shadow rays.
+struct PathWave {
+  std::vector<std::uint32_t> pixel; ///< image index of each tile pixel, in trace order
+  std::vector<vec3> sum;            ///< per tile pixel: sum of its finished samples
+  std::vector<vec3> radiance;       ///< per sample of the batch
+  std::vector<Path> paths, wave_paths, hit_paths;
+  std::vector<Ray> rays, wave_rays;
+  std::vector<Hit> hits;
+  std::vector<Ray> shadow_rays;
+  std::vector<std::uint32_t> shadow_slot;
+  std::vector<vec3> shadow_value;
+  std::vector<std::uint8_t> blocked;
+};
+
 /// A worker's scratch, reused from tile to tile.
 struct TileScratch {
   PrimaryHits primary;
@@ -95,6 +121,7 @@ struct TileScratch {
   std::vector<Ray> confirm_rays;
   std::vector<std::uint32_t> confirm_node;
   std::vector<std::uint8_t> confirm_blocked;
+  PathWave path;
 };
 
 /// What a pixel (or a sample) receives: the radiance, or 0 when it is Inf or NaN, counted in

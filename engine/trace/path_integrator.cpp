@@ -1,11 +1,368 @@
-#include "specula/core/error.h"
+// Unidirectional path tracing (Kajiya 1986) in waves (Purcell et al. 2002): every live path of a
+// tile is one entry of compact arrays; a wave traces all their rays in one intersect call, shades
+// the hits, batches the next-event shadow rays of the whole wave into one occluded call, and
+// compacts the survivors into the next wave. Direct lighting mixes light and BSDF sampling with
+// the power heuristic (Veach & Guibas 1995); paths end by Russian roulette or at the depth limit.
+// docs/design/path-tracing.md describes the estimator.
+
+#include "specula/trace/area_lights.h"
 #include "specula/trace/integrators.h"
+#include "specula/trace/lights.h"
+#include "specula/trace/sampler.h"
+#include "specula/trace/shading.h"
+
+#include <algorithm>
+#include <array>
+#include <limits>
+#include <numbers>
+#include <utility>
 
 namespace specula::detail {
+namespace {
 
-void path_tile(const FrameInputs& /*frame*/, const PacketTile& /*tile*/, TileScratch& /*scratch*/,
-               RayCounts& /*counts*/) {
-  throw UnavailableError("mode 'path' is not available yet");
+constexpr float kInvPi = std::numbers::inv_pi_v<float>;
+
+/// Most paths one wave holds: a tile's pixels × spp are run in sample batches of at most this
+/// many paths, which bounds the scratch memory whatever --spp asks.
+constexpr std::size_t kMaxPathsPerBatch = 8192;
+
+/// Vertices from this depth on (0: the primary hit) continue only by Russian roulette.
+constexpr std::uint32_t kRouletteDepth = 3;
+
+/// Sample sets (sampler.h) per vertex: the lobe choice and direction, the area-light sample, the
+/// roulette decision.
+constexpr std::uint32_t kSetsPerVertex = 3;
+constexpr std::uint32_t kSetBsdf = 0, kSetLight = 1, kSetRoulette = 2;
+
+/// A unit vector's orthonormal basis (Duff et al., "Building an Orthonormal Basis, Revisited",
+/// JCGT 2017): branch-free and continuous except at the sign flip.
+void orthonormal_basis(const vec3& n, vec3& t, vec3& b) {
+  const float sign = std::copysign(1.0f, n.z);
+  const float a = -1.0f / (sign + n.z);
+  const float c = n.x * n.y * a;
+  t = vec3(1.0f + sign * n.x * n.x * a, sign * c, -sign * n.x);
+  b = vec3(c, sign + n.y * n.y * a, -n.y);
+}
+
+/// A cosine-distributed direction about unit n from two uniform numbers (Malley's method).
+vec3 cosine_direction(const vec3& n, float u1, float u2) {
+  const float r = std::sqrt(u1);
+  const float phi = 2.0f * std::numbers::pi_v<float> * u2;
+  const float x = r * std::cos(phi), y = r * std::sin(phi);
+  const float z = std::sqrt(std::max(0.0f, 1.0f - u1));
+  vec3 t, b;
+  orthonormal_basis(n, t, b);
+  return glm::normalize(x * t + y * b + z * n);
+}
+
+/// The scene's features as template parameters: a loop instantiated without dielectrics or area
+/// lights has no branch for them.
+template <bool kArea, bool kPunctual, bool kMirror, bool kDielectric>
+class PathTile {
+public:
+  PathTile(const FrameInputs& frame, TileScratch& s, RayCounts& counts)
+      : frame_(frame), tables_(frame.tables), settings_(frame.settings), w_(s.path),
+        primary_(s.primary), counts_(counts), emitters_(*frame.emitters) {}
+
+  void run(const PacketTile& tile) {
+    const std::size_t n = primary_.size();
+    w_.pixel.clear();
+    tile.for_each_pixel(
+        [&](std::uint32_t x, std::uint32_t y) { w_.pixel.push_back(y * frame_.width + x); });
+    counts_[RayKind::Primary] += n;
+    if (frame_.guides != nullptr) write_guides();
+
+    const std::uint32_t spp = std::max(1u, settings_.spp);
+    w_.sum.assign(n, vec3(0.0f));
+    const std::uint32_t batch = std::uint32_t(
+        std::clamp<std::size_t>(kMaxPathsPerBatch / std::max<std::size_t>(n, 1), 1, spp));
+    for (std::uint32_t first = 0; first < spp; first += batch)
+      run_batch(first, std::min(batch, spp - first));
+    const float inv_spp = 1.0f / float(spp);
+    for (std::size_t i = 0; i < n; ++i)
+      frame_.pixels[w_.pixel[i]] = spp == 1 ? w_.sum[i] : w_.sum[i] * inv_spp;
+  }
+
+private:
+  /// Samples [first, first + count) of every pixel: path (i, s) owns radiance slot i·count + s,
+  /// so each sample sums its own contributions in its own order, whatever else is in the wave.
+  void run_batch(std::uint32_t first, std::uint32_t count) {
+    const std::size_t n = primary_.size();
+    w_.radiance.assign(n * count, vec3(0.0f));
+    w_.paths.clear();
+    w_.rays.clear();
+    // Wave 0: the primary hits, shaded once per pixel and continued by each of its samples.
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const Hit hit = primary_.hit(i);
+      const vec3 d = primary_.direction(i);
+      for (std::uint32_t s = 0; s < count; ++s) {
+        Path p;
+        p.throughput = vec3(1.0f);
+        p.bsdf_pdf = 0.0f;
+        p.previous = vec3(0.0f);
+        p.slot = i * count + s;
+        p.pixel = w_.pixel[i];
+        p.sample = settings_.sample_offset + first + s;
+        w_.hit_paths.push_back(p);
+      }
+      shade_pixel(hit, d, count);
+    }
+    trace_shadows();
+    for (std::uint32_t depth = 1; !w_.paths.empty(); ++depth) {
+      w_.wave_paths.swap(w_.paths);
+      w_.wave_rays.swap(w_.rays);
+      w_.paths.clear();
+      w_.rays.clear();
+      w_.hits.resize(w_.wave_rays.size());
+      frame_.tracer.intersect(w_.wave_rays, w_.hits);
+      for (std::size_t k = 0; k < w_.wave_paths.size(); ++k)
+        shade(w_.wave_paths[k], w_.hits[k], w_.wave_rays[k].direction, depth);
+      trace_shadows();
+    }
+    for (std::uint32_t i = 0; i < n; ++i)
+      for (std::uint32_t s = 0; s < count; ++s)
+        w_.sum[i] += finite_or_counted(w_.radiance[i * count + s], counts_);
+  }
+
+  void write_guides() {
+    GuideBuffers& g = *frame_.guides;
+    for (std::uint32_t i = 0; i < primary_.size(); ++i) {
+      const std::uint32_t pixel = w_.pixel[i];
+      const Hit hit = primary_.hit(i);
+      if (!hit.hit()) {
+        g.albedo[pixel] = vec3(1.0f);
+        g.normal[pixel] = vec3(0.0f);
+        g.depth[pixel] = std::numeric_limits<float>::infinity();
+        continue;
+      }
+      const gpu::GpuMaterial& m = material(hit);
+      const float diffuse = std::max(0.0f, 1.0f - m.reflectivity - m.transmission);
+      // Specular lobes pass the light through untinted: they count as white.
+      g.albedo[pixel] = diffuse * m.base_color + (1.0f - diffuse);
+      g.normal[pixel] = shading_point(tables_, hit, primary_.direction(i), false).shading_normal;
+      g.depth[pixel] = hit.t;
+    }
+  }
+
+  [[nodiscard]] const gpu::GpuMaterial& material(const Hit& hit) const {
+    return tables_.materials[tables_.instances[hit.instance].material];
+  }
+
+  /// The primary hit of one pixel for the `count` paths last pushed to w_.hit_paths.
+  void shade_pixel(const Hit& hit, const vec3& d, std::uint32_t count) {
+    if (!hit.hit()) {
+      for (const Path& p : w_.hit_paths) w_.radiance[p.slot] += p.throughput * settings_.background;
+      w_.hit_paths.clear();
+      return;
+    }
+    const Vertex v = vertex(hit, d);
+    for (std::uint32_t s = 0; s < count; ++s) shade_vertex(w_.hit_paths[s], v, d, 0);
+    w_.hit_paths.clear();
+  }
+
+  void shade(const Path& p, const Hit& hit, const vec3& d, std::uint32_t depth) {
+    if (!hit.hit()) {
+      w_.radiance[p.slot] += p.throughput * settings_.background;
+      return;
+    }
+    shade_vertex(p, vertex(hit, d), d, depth);
+  }
+
+  /// What a hit's shading needs, computed once per hit.
+  struct Vertex {
+    ShadingPoint sp;
+    const gpu::GpuMaterial* m;
+    std::uint32_t instance, primitive;
+  };
+
+  [[nodiscard]] Vertex vertex(const Hit& hit, const vec3& d) const {
+    return Vertex{shading_point(tables_, hit, d, true), &material(hit), hit.instance,
+                  hit.primitive};
+  }
+
+  /// Emission (weighted against light sampling where the ray was BSDF-sampled at a diffuse
+  /// vertex), next-event estimation of every light at the diffuse part, then, below the depth
+  /// limit, the sampled continuation.
+  void shade_vertex(const Path& p, const Vertex& v, const vec3& d, std::uint32_t depth) {
+    const gpu::GpuMaterial& m = *v.m;
+    const ShadingPoint& sp = v.sp;
+    vec3& radiance = w_.radiance[p.slot];
+    if constexpr (kArea) {
+      if (m.emission != vec3(0.0f)) {
+        float weight = 1.0f;
+        // bsdf_pdf 0: seen by the camera or through a specular bounce, which light sampling
+        // cannot reach.
+        if (p.bsdf_pdf > 0.0f) {
+          if (settings_.sampling == LightSampling::Light) {
+            weight = 0.0f;
+          } else if (settings_.sampling == LightSampling::Mis) {
+            const std::uint32_t e = emitters_.find(v.instance, v.primitive);
+            if (e != EmitterTable::kNone)
+              weight = power_heuristic(
+                  p.bsdf_pdf, area_light_pdf(emitters_.triangles()[e], p.previous, sp.position));
+          }
+        }
+        if (weight > 0.0f) radiance += p.throughput * m.emission * weight;
+      }
+    }
+
+    const float diffuse = std::max(0.0f, 1.0f - m.reflectivity - m.transmission);
+    const float specular =
+        (kMirror ? m.reflectivity : 0.0f) + (kDielectric ? m.transmission : 0.0f);
+    const float total = diffuse + specular;
+    // Probability of the diffuse lobe: with it, the mixture's density of a direction.
+    const float p_diffuse = total > 0.0f ? diffuse / total : 0.0f;
+    const bool last = depth >= settings_.max_depth;
+    const PixelSampler sampler(p.pixel, settings_.seed);
+    const std::uint32_t set = depth * kSetsPerVertex;
+
+    vec3 origin(0.0f);
+    if (diffuse > 0.0f) {
+      origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
+      const vec3 f = m.base_color * (diffuse * kInvPi);
+      if constexpr (kPunctual) {
+        // As Whitted's: the same tests and tfar, so that with nothing else the images agree.
+        for (const gpu::GpuLight& light : tables_.lights) {
+          const LightSample ls = sample_light(light, sp.position);
+          if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) continue;
+          const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
+          if (cos_theta <= 0.0f || max_component(ls.irradiance) <= 0.0f) continue;
+          const float tfar =
+              std::isinf(ls.distance)
+                  ? ls.distance
+                  : float(glm::length(glm::dvec3(light.position - origin)) * (1.0 - 1e-5));
+          add_shadow(Ray{origin, 0.0f, ls.to_light, tfar}, p.slot,
+                     p.throughput * (f * ls.irradiance * cos_theta));
+        }
+      }
+      // Area lights are sampled towards the next vertex, which the last one does not have (the
+      // BSDF strategy would need a ray beyond the depth limit).
+      if constexpr (kArea) {
+        if (!last && settings_.sampling != LightSampling::Bsdf) {
+          const SampleSet u = sampler.set(p.sample, set + kSetLight);
+          const AreaLightSample ls =
+              sample_area_light(emitters_, sp.position, u.dim(0), u.dim(1), u.dim(2));
+          const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
+          if (ls.pdf > 0.0f && glm::dot(ls.to_light, sp.geometric_normal) > 0.0f &&
+              cos_theta > 0.0f && max_component(ls.emission) > 0.0f) {
+            const float weight = settings_.sampling == LightSampling::Mis
+                                     ? power_heuristic(ls.pdf, p_diffuse * cos_theta * kInvPi)
+                                     : 1.0f;
+            // Stop short of the light point, relatively: its own triangle must not block it.
+            add_shadow(Ray{origin, 0.0f, ls.to_light, ls.distance * (1.0f - 1e-4f)}, p.slot,
+                       p.throughput * f * ls.emission * (cos_theta * weight / ls.pdf));
+          }
+        }
+      }
+    }
+    if (last || !(total > 0.0f)) return;
+
+    // The continuation: a lobe picked by its weight, the throughput divided by its probability.
+    // Dimensions: 0 the lobe, 1 reflect or refract, 2 and 3 the diffuse direction.
+    const SampleSet u = sampler.set(p.sample, set + kSetBsdf);
+    Path next = p;
+    Ray ray;
+    RayKind kind = RayKind::Reflection;
+    if (!(kMirror || kDielectric) || u.dim(0) * total < diffuse) {
+      const vec3 wi = cosine_direction(sp.shading_normal, u.dim(2), u.dim(3));
+      const float cos_theta = glm::dot(wi, sp.shading_normal);
+      if (glm::dot(wi, sp.geometric_normal) <= 0.0f || !(cos_theta > 0.0f)) return;
+      // f·cos / pdf = (diffuse·base/π·cos) / (p_diffuse·cos/π).
+      next.throughput *= m.base_color * total;
+      next.bsdf_pdf = p_diffuse * cos_theta * kInvPi;
+      ray = Ray{origin, 0.0f, wi, std::numeric_limits<float>::infinity()};
+    } else {
+      next.bsdf_pdf = 0.0f;
+      next.throughput *= total;
+      bool reflect = true;
+      vec3 direction;
+      if constexpr (kDielectric) {
+        const SpecularSplit split = split_specular(m, sp, d);
+        const float both = split.reflect_weight + split.refract_weight;
+        reflect = u.dim(1) * both < split.reflect_weight;
+        direction = reflect ? split.reflect_direction : split.refract_direction;
+      } else {
+        vec3 r = reflect_direction(d, sp.shading_normal);
+        if (glm::dot(r, sp.geometric_normal) <= 0.0f) r = reflect_direction(d, sp.geometric_normal);
+        direction = glm::normalize(r);
+      }
+      kind = reflect ? RayKind::Reflection : RayKind::Refraction;
+      ray = Ray{offset_ray_origin(sp.spawn_point, sp.spawn_error,
+                                  reflect ? sp.geometric_normal : -sp.geometric_normal),
+                0.0f, direction, std::numeric_limits<float>::infinity()};
+    }
+    if (depth >= kRouletteDepth) {
+      const float survival = std::clamp(max_component(next.throughput), 0.05f, 1.0f);
+      if (sampler.set(p.sample, set + kSetRoulette).dim(0) >= survival) return;
+      next.throughput /= survival;
+    }
+    if (!(max_component(next.throughput) > 0.0f)) return; // a black surface ends it
+    next.previous = sp.position;
+    ++counts_[kind];
+    w_.paths.push_back(next);
+    w_.rays.push_back(ray);
+  }
+
+  void add_shadow(const Ray& ray, std::uint32_t slot, const vec3& value) {
+    w_.shadow_rays.push_back(ray);
+    w_.shadow_slot.push_back(slot);
+    w_.shadow_value.push_back(value);
+  }
+
+  /// The wave's shadow rays in one batch; each unblocked one adds its value to its sample, in
+  /// the order they were emitted.
+  void trace_shadows() {
+    if (w_.shadow_rays.empty()) return;
+    w_.blocked.resize(w_.shadow_rays.size());
+    if (settings_.shadows) {
+      counts_[RayKind::Shadow] += w_.shadow_rays.size();
+      frame_.tracer.occluded(w_.shadow_rays, w_.blocked);
+    } else {
+      std::fill(w_.blocked.begin(), w_.blocked.end(), std::uint8_t{0});
+    }
+    for (std::size_t k = 0; k < w_.shadow_rays.size(); ++k)
+      if (w_.blocked[k] == 0) w_.radiance[w_.shadow_slot[k]] += w_.shadow_value[k];
+    w_.shadow_rays.clear();
+    w_.shadow_slot.clear();
+    w_.shadow_value.clear();
+  }
+
+  const FrameInputs& frame_;
+  const SceneTables& tables_;
+  const TraceSettings& settings_;
+  PathWave& w_;
+  const PrimaryHits& primary_;
+  RayCounts& counts_;
+  const EmitterTable& emitters_;
+};
+
+template <bool kArea, bool kPunctual, bool kMirror, bool kDielectric>
+void run_path_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& scratch,
+                   RayCounts& counts) {
+  PathTile<kArea, kPunctual, kMirror, kDielectric>(frame, scratch, counts).run(tile);
+}
+
+using PathTileFn = void (*)(const FrameInputs&, const PacketTile&, TileScratch&, RayCounts&);
+
+/// The instantiation for a scene's features, indexed by area | punctual << 1 | mirror << 2 |
+/// dielectric << 3.
+template <std::size_t... I>
+constexpr std::array<PathTileFn, sizeof...(I)> path_tile_table(std::index_sequence<I...>) {
+  return {&run_path_tile<(I & 1) != 0, (I & 2) != 0, (I & 4) != 0, (I & 8) != 0>...};
+}
+constexpr auto kPathTiles = path_tile_table(std::make_index_sequence<16>{});
+
+} // namespace
+
+void path_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& scratch,
+               RayCounts& counts) {
+  const EmitterTable empty;
+  FrameInputs inputs = frame;
+  if (inputs.emitters == nullptr) inputs.emitters = &empty;
+  const SceneFeatures& f = inputs.emitters->features();
+  const bool punctual = f.punctual_lights || !frame.tables.lights.empty();
+  kPathTiles[std::size_t(f.area_lights) | std::size_t(punctual) << 1 | std::size_t(f.mirrors) << 2 |
+             std::size_t(f.dielectrics) << 3](inputs, tile, scratch, counts);
 }
 
 } // namespace specula::detail

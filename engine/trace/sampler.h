@@ -92,10 +92,56 @@ constexpr std::uint32_t owen_scramble(std::uint32_t x, std::uint32_t seed) {
   return x;
 }
 
+namespace sobol_detail {
+
+/// sobol_u32 by bytes: entry [d][k][b] is the XOR of dimension d's direction numbers selected by
+/// byte value b at byte k of the index, so a point costs four lookups instead of a loop over up
+/// to 32 bits (scrambled indices use all of them) with a data-dependent branch per bit.
+using ByteTable = std::array<std::array<std::array<std::uint32_t, 256>, 4>, 4>;
+
+constexpr ByteTable byte_table() {
+  ByteTable table{};
+  for (std::uint32_t d = 0; d < 4; ++d)
+    for (std::uint32_t k = 0; k < 4; ++k)
+      for (std::uint32_t b = 0; b < 256; ++b) {
+        std::uint32_t x = 0;
+        for (std::uint32_t bit = 0; bit < 8; ++bit)
+          if (((b >> bit) & 1u) != 0) x ^= kDirections[d][8 * k + bit];
+        table[d][k][b] = x;
+      }
+  return table;
+}
+
+inline constexpr ByteTable kByteTable = byte_table();
+
+} // namespace sobol_detail
+
+/// sobol_u32 from the byte table (equal for every index and dimension).
+[[nodiscard]] constexpr std::uint32_t sobol_u32_fast(std::uint32_t index, std::uint32_t d) {
+  const auto& t = sobol_detail::kByteTable[d];
+  return t[0][index & 0xFFu] ^ t[1][(index >> 8) & 0xFFu] ^ t[2][(index >> 16) & 0xFFu] ^
+         t[3][index >> 24];
+}
+
 /// A 32-bit fraction as a float in [0, 1) (24 bits: never rounds up to 1).
 [[nodiscard]] constexpr float to_unit_float(std::uint32_t x) {
   return float(x >> 8) * (1.0f / 16777216.0f);
 }
+
+/// One set of one sample (PixelSampler::set): its dimensions one at a time, for uses that need
+/// fewer than four (each costs a hash and a scramble). dim(d) equals get4(index, set)[d].
+class SampleSet {
+public:
+  constexpr SampleSet(std::uint32_t set_seed, std::uint32_t shuffled)
+      : set_seed_(set_seed), shuffled_(shuffled) {}
+  [[nodiscard]] constexpr float dim(std::uint32_t d) const {
+    return to_unit_float(
+        sobol_detail::owen_scramble(sobol_u32_fast(shuffled_, d), hash_combine(set_seed_, d + 1)));
+  }
+
+private:
+  std::uint32_t set_seed_, shuffled_;
+};
 
 /// The samples of one pixel (or any stream keyed by an integer) of one render.
 class PixelSampler {
@@ -107,13 +153,14 @@ public:
   /// Dimensions 4·set … 4·set+3 of the pixel's sample `index`: an Owen-scrambled, shuffled 4-D
   /// Sobol point, each set scrambled with its own seed.
   [[nodiscard]] constexpr vec4 get4(std::uint32_t index, std::uint32_t set) const {
+    const SampleSet s = this->set(index, set);
+    return vec4(s.dim(0), s.dim(1), s.dim(2), s.dim(3));
+  }
+
+  /// The same point, its dimensions drawn on demand.
+  [[nodiscard]] constexpr SampleSet set(std::uint32_t index, std::uint32_t set) const {
     const std::uint32_t set_seed = hash_combine(seed_, set);
-    const std::uint32_t shuffled = sobol_detail::owen_scramble(index, set_seed);
-    vec4 r(0.0f);
-    for (std::uint32_t d = 0; d < 4; ++d)
-      r[int(d)] = to_unit_float(
-          sobol_detail::owen_scramble(sobol_u32(shuffled, d), hash_combine(set_seed, d + 1)));
-    return r;
+    return SampleSet(set_seed, sobol_detail::owen_scramble(index, set_seed));
   }
 
 private:

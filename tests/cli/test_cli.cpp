@@ -246,7 +246,6 @@ TEST(Cli, BackendsAndModesNotBuiltYetExitTwo) {
   const std::string scene =
       (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
   std::vector<std::vector<std::string>> unavailable = {{"--backend", "vulkan"},
-                                                             {"--mode", "path"},
                                                              {"--mode", "shadow"}};
   if (!specula::backend_info("embree").available) unavailable.push_back({"--backend", "embree"});
   for (const auto& extra : unavailable) {
