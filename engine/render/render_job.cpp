@@ -15,7 +15,12 @@ void prepare_rendering(ecs::Registry& registry, RenderJob job) {
                                        ", got " + std::to_string(job.settings.max_depth));
   if (job.settings.tile_size == 0 || job.settings.tile_size > 1024)
     throw Error("render settings", "tile size must be 1 to 1024");
-  if (job.settings.mode == TraceMode::Path || job.settings.mode == TraceMode::Shadow)
+  // A tile's shadow rays are one batch: the bound keeps it in memory (16² pixels × 4096 rays).
+  if (job.settings.shadow_samples == 0 || job.settings.shadow_samples > kMaxShadowSamples)
+    throw Error("render settings", "shadow samples must be 1 to " +
+                                       std::to_string(kMaxShadowSamples) + ", got " +
+                                       std::to_string(job.settings.shadow_samples));
+  if (job.settings.mode == TraceMode::Path)
     throw UnavailableError(std::string("mode '") + trace_mode_name(job.settings.mode) +
                            "' is not available yet (it lands with the streaming ray tracer)");
   std::unique_ptr<Tracer> tracer =

@@ -210,8 +210,7 @@ TEST(Cli, BackendsAndModesNotBuiltYetExitTwo) {
   const std::string scene =
       (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
   std::vector<std::vector<std::string>> unavailable = {{"--backend", "vulkan"},
-                                                             {"--mode", "path"},
-                                                             {"--mode", "shadow"}};
+                                                             {"--mode", "path"}};
   if (!specula::backend_info("embree").available) unavailable.push_back({"--backend", "embree"});
   for (const auto& extra : unavailable) {
     std::vector<std::string> args = {"render", scene, "--width", "16", "--height", "16"};
