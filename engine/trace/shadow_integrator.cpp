@@ -23,11 +23,12 @@ namespace {
 constexpr std::uint32_t kAreaLightSet = 0;
 
 /// A light point from one sample (sample_area_light, with the pick dimension reused).
-AreaLightSample area_light_point(const EmitterTable& table, const vec3& p, const vec4& u) {
-  const EmitterTriangle& e = table.triangles()[table.pick(u.x)];
+AreaLightSample area_light_point(const EmitterTable& table, const vec3& p, const vec2& u) {
+  const std::uint32_t k = table.pick(u.x);
+  const EmitterTriangle& e = table.triangles()[k];
   const float below = e.cdf - e.pick;
   const float reused = std::clamp((u.x - below) / e.pick, 0.0f, 0x1.fffffep-1f);
-  return sample_area_light(table, p, u.x, reused, u.y);
+  return sample_emitter_triangle(table, k, p, reused, u.y);
 }
 
 template <bool kAreaLights>
@@ -83,7 +84,7 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
     if constexpr (kAreaLights) {
       const PixelSampler sampler(pixel, settings.seed);
       for (std::uint32_t n = 0; n < samples; ++n) {
-        const vec4 u = sampler.get4(settings.sample_offset + n, kAreaLightSet);
+        const vec2 u = sampler.get2(settings.sample_offset + n, kAreaLightSet);
         const AreaLightSample ls = area_light_point(*frame.emitters, sp.position, u);
         if (!(ls.pdf > 0.0f)) continue;
         if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) continue; // behind the surface

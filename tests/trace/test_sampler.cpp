@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <random>
 #include <set>
 #include <vector>
 
@@ -66,7 +67,11 @@ TEST(Sampler, TheSameArgumentsGiveTheSameSamples) {
   constexpr vec4 first = a.get4(3, 2); // usable at compile time: nothing hidden in it
   const PixelSampler b(9, 1);
   EXPECT_EQ(b.get4(3, 2), first);
-  for (std::uint32_t k = 0; k < 256; ++k) EXPECT_EQ(a.get4(k, 1), b.get4(k, 1));
+  for (std::uint32_t k = 0; k < 256; ++k) {
+    EXPECT_EQ(a.get4(k, 1), b.get4(k, 1));
+    const vec4 u = a.get4(k, 3);
+    EXPECT_EQ(a.get2(k, 3), vec2(u.x, u.y)) << "get2 is get4's first two dimensions";
+  }
 }
 
 TEST(Sampler, PixelsSetsAndSeedsGetDifferentSequences) {
@@ -118,6 +123,23 @@ TEST(Sampler, DirectionNumbersAreJoeAndKuos) {
     for (std::uint32_t i = 0; i < 8; ++i)
       EXPECT_EQ(to_unit_float(sobol_u32(i, d)), kPoints[d][i])
           << "dimension " << d << " point " << i;
+}
+
+TEST(Sampler, TheByteTablesAreTheGeneratorMatrices) {
+  // sobol_u32 reads the matrices a byte at a time; the definition is bit at a time.
+  const auto by_bits = [](std::uint32_t index, std::uint32_t d) {
+    std::uint32_t x = 0;
+    for (std::uint32_t bit = 0; bit < 32; ++bit)
+      if (((index >> bit) & 1u) != 0) x ^= sobol_detail::kDirections[d][bit];
+    return x;
+  };
+  std::mt19937 rng(11);
+  for (int k = 0; k < 20000; ++k) {
+    const std::uint32_t index = k < 1024 ? std::uint32_t(k) : std::uint32_t(rng());
+    for (std::uint32_t d = 0; d < 4; ++d) ASSERT_EQ(sobol_u32(index, d), by_bits(index, d));
+  }
+  for (std::uint32_t d = 0; d < 4; ++d)
+    EXPECT_EQ(sobol_u32(0xFFFFFFFFu, d), by_bits(0xFFFFFFFFu, d));
 }
 
 } // namespace
