@@ -5,6 +5,7 @@
 #include "specula/render/render_job.h"
 #include "specula/systems/schedule.h"
 #include "specula/trace/camera_rays.h"
+#include "specula/trace/render_frame.h"
 #include "specula/trace/shading.h"
 
 #include <gtest/gtest.h>
@@ -244,6 +245,45 @@ TEST(Shadow, ImagesAreBitIdenticalWhateverTheThreadCountTileOrPacketWidth) {
       << "no secondary rays";
   EXPECT_EQ(rays.count[int(RayKind::Primary)], 64u * 48u);
   EXPECT_GT(rays.count[int(RayKind::Shadow)], 64u * 48u);
+}
+
+TEST(Shadow, GuidesHoldThePrimaryHitsAlbedoNormalAndDepth) {
+  ecs::Registry reg;
+  Material half_mirror;
+  half_mirror.base_color = vec3(0.2f, 0.4f, 0.6f);
+  half_mirror.reflectivity = 0.5f;
+  test::add_mesh(reg, test::primitive("sphere", 1.0f, vec3(1), 32, 16), test::at(vec3(0)),
+                 half_mirror);
+  test::add_point_light(reg, vec3(2, 3, 4), 10.0f);
+  const ecs::Entity cam = test::add_camera(reg, vec3(0, 0, 4), vec3(0), 40.0f);
+  const test::TracedWorld w(reg);
+  TraceSettings s = shadow_settings(1);
+  s.threads = 2;
+  Framebuffer image(24, 20);
+  GuideBuffers guides;
+  render_frame(*w.tracer, w.layer, reg.get<Camera>(cam), s, image, nullptr, &guides);
+  ASSERT_EQ(guides.size(), image.pixel_count());
+  const CameraRays rays(reg.get<Camera>(cam), 24, 20, w.layer.render_origin());
+  int hits = 0, misses = 0;
+  for (std::uint32_t y = 0; y < 20; ++y)
+    for (std::uint32_t x = 0; x < 24; ++x) {
+      const std::size_t i = std::size_t(y) * 24 + x;
+      const Hit hit = w.intersect(rays.ray(x, y));
+      if (!hit.hit()) {
+        ++misses;
+        EXPECT_EQ(guides.albedo[i], vec3(1.0f));
+        EXPECT_EQ(guides.normal[i], vec3(0.0f));
+        EXPECT_TRUE(std::isinf(guides.depth[i]));
+        continue;
+      }
+      ++hits;
+      EXPECT_NEAR(guides.depth[i], hit.t, 1e-4f * hit.t);
+      EXPECT_NEAR(glm::length(guides.normal[i]), 1.0f, 1e-5f);
+      EXPECT_LT(glm::dot(guides.normal[i], rays.ray(x, y).direction), 0.0f) << "facing the eye";
+      EXPECT_NEAR(glm::distance(guides.albedo[i], vec3(0.6f, 0.7f, 0.8f)), 0.0f, 1e-6f);
+    }
+  EXPECT_GT(hits, 50);
+  EXPECT_GT(misses, 50);
 }
 
 /// Mean over pixels of the squared difference (red channel: the scene is grey).
