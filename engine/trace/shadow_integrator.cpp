@@ -19,7 +19,8 @@ namespace {
 /// The sampler set of the area-light samples: dimension 0 picks the triangle and, rescaled to its
 /// interval of the CDF, places the point along with dimension 1. Dimensions (0, 1) of a pixel's
 /// first 2^m samples form a (0,m,2)-net, so the light points of a pixel are stratified over the
-/// whole emitting area, not only within each triangle.
+/// CDF's order of triangles and within them: over the whole area for a light of a few triangles
+/// (a quad), over rows of triangles for one of many (docs/design/shadow-caster.md).
 constexpr std::uint32_t kAreaLightSet = 0;
 
 /// A light point from one sample (sample_area_light, with the pick dimension reused).
