@@ -23,7 +23,7 @@ struct EmitterTriangle {
   float cdf = 0.0f; ///< picking probability of this and every earlier triangle
   vec3 e2;          ///< p2 − p0
   float pick = 0.0f; ///< its own picking probability (power / total power)
-  vec3 normal;      ///< unit, along e1 × e2
+  vec3 normal{0.0f}; ///< unit, along e1 × e2 (zero for a degenerate triangle)
   std::uint32_t instance = 0;
   vec3 emission;
   std::uint32_t primitive = 0;

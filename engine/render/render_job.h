@@ -24,8 +24,6 @@ namespace specula {
 
 /// Most samples per pixel one path-mode frame may take (`--spp`).
 inline constexpr std::uint32_t kMaxSpp = 65536;
-/// Most area-light samples per pixel one shadow-mode frame may take (`--shadow-samples`).
-inline constexpr std::uint32_t kMaxShadowSamples = 4096;
 
 struct RenderJob {
   /// The backend asked for (`auto` or a name, see render/tracer_factory.h); prepare_rendering

@@ -24,6 +24,7 @@ struct AreaLightSample {
 
 /// Solid-angle density of sampling light point `q` with normal `n` on triangle `e` from `p`.
 [[nodiscard]] inline float area_light_pdf(const EmitterTriangle& e, const vec3& p, const vec3& q) {
+  if (!(e.area > 0.0f)) return 0.0f; // a degenerate triangle (never picked): not 0 / 0
   const vec3 d = q - p;
   const float dist2 = glm::dot(d, d);
   if (!(dist2 > 0.0f)) return 0.0f;
@@ -32,13 +33,12 @@ struct AreaLightSample {
   return e.pick / e.area * dist2 / cos_l;
 }
 
-/// A light point for shading point p from three uniform numbers: u_pick picks the triangle,
-/// (u1, u2) the point on it (uniform by area: the square-root map).
-[[nodiscard]] inline AreaLightSample sample_area_light(const EmitterTable& table, const vec3& p,
-                                                       float u_pick, float u1, float u2) {
+/// A light point on emitter triangle `k` for shading point p: (u1, u2) place it uniformly by area
+/// (the square-root map); the density includes the triangle's picking probability.
+[[nodiscard]] inline AreaLightSample sample_emitter_triangle(const EmitterTable& table,
+                                                             std::uint32_t k, const vec3& p,
+                                                             float u1, float u2) {
   AreaLightSample s;
-  if (table.empty()) return s;
-  const std::uint32_t k = table.pick(u_pick);
   const EmitterTriangle& e = table.triangles()[k];
   const float r = std::sqrt(u1);
   const float b1 = 1.0f - r, b2 = u2 * r;
@@ -56,6 +56,14 @@ struct AreaLightSample {
   s.pdf = e.pick / e.area * dist * dist / cos_l;
   if (!std::isfinite(s.pdf)) s.pdf = 0.0f;
   return s;
+}
+
+/// A light point for shading point p from three uniform numbers: u_pick picks the triangle,
+/// (u1, u2) the point on it (uniform by area: the square-root map).
+[[nodiscard]] inline AreaLightSample sample_area_light(const EmitterTable& table, const vec3& p,
+                                                       float u_pick, float u1, float u2) {
+  if (table.empty()) return AreaLightSample{};
+  return sample_emitter_triangle(table, table.pick(u_pick), p, u1, u2);
 }
 
 /// The power heuristic (β = 2) weight of a strategy with density `a` against one with `b`:

@@ -59,6 +59,9 @@ struct TraceSettings {
   std::uint32_t sample_offset = 0; ///< index of this frame's first sample in each sequence
 };
 
+/// Most area-light samples per pixel a shadow-mode frame may take (prepare_rendering checks it).
+inline constexpr std::uint32_t kMaxShadowSamples = 4096;
+
 /// Most secondary rays one pixel may spawn in a frame (a bound on memory for pathological
 /// scenes, e.g. facing glass with no weight cut-off); rays beyond it are counted as dropped.
 inline constexpr std::uint32_t kMaxRaysPerPixel = 4096;

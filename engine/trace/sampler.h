@@ -48,6 +48,25 @@ inline constexpr std::array<std::array<std::uint32_t, 32>, 4> kDirections{
     directions({3, 1, {1, 3, 1}}, false),
 };
 
+/// The generator matrices a byte of the index at a time: kByteTables[d][b][v] is the XOR of the
+/// direction numbers of dimension d selected by byte value v in byte b of the index. A scrambled
+/// index has all 32 bits set at random, so the bit-at-a-time loop ran 32 unpredictable branches
+/// per dimension (most of the shadow caster's time); four table lookups do the same work.
+constexpr std::array<std::array<std::array<std::uint32_t, 256>, 4>, 4> byte_tables() {
+  std::array<std::array<std::array<std::uint32_t, 256>, 4>, 4> t{};
+  for (std::uint32_t d = 0; d < 4; ++d)
+    for (std::uint32_t b = 0; b < 4; ++b)
+      for (std::uint32_t v = 0; v < 256; ++v) {
+        std::uint32_t x = 0;
+        for (std::uint32_t bit = 0; bit < 8; ++bit)
+          if (((v >> bit) & 1u) != 0) x ^= kDirections[d][8 * b + bit];
+        t[d][b][v] = x;
+      }
+  return t;
+}
+
+inline constexpr auto kByteTables = byte_tables();
+
 constexpr std::uint32_t reverse_bits(std::uint32_t x) {
   x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
   x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
@@ -86,39 +105,7 @@ constexpr std::uint32_t owen_scramble(std::uint32_t x, std::uint32_t seed) {
 
 /// Unscrambled Sobol point `index`, dimension d ∈ [0, 4), as a 32-bit fraction.
 [[nodiscard]] constexpr std::uint32_t sobol_u32(std::uint32_t index, std::uint32_t d) {
-  std::uint32_t x = 0;
-  for (std::uint32_t bit = 0; index != 0; ++bit, index >>= 1)
-    if ((index & 1u) != 0) x ^= sobol_detail::kDirections[d][bit];
-  return x;
-}
-
-namespace sobol_detail {
-
-/// sobol_u32 by bytes: entry [d][k][b] is the XOR of dimension d's direction numbers selected by
-/// byte value b at byte k of the index, so a point costs four lookups instead of a loop over up
-/// to 32 bits (scrambled indices use all of them) with a data-dependent branch per bit.
-using ByteTable = std::array<std::array<std::array<std::uint32_t, 256>, 4>, 4>;
-
-constexpr ByteTable byte_table() {
-  ByteTable table{};
-  for (std::uint32_t d = 0; d < 4; ++d)
-    for (std::uint32_t k = 0; k < 4; ++k)
-      for (std::uint32_t b = 0; b < 256; ++b) {
-        std::uint32_t x = 0;
-        for (std::uint32_t bit = 0; bit < 8; ++bit)
-          if (((b >> bit) & 1u) != 0) x ^= kDirections[d][8 * k + bit];
-        table[d][k][b] = x;
-      }
-  return table;
-}
-
-inline constexpr ByteTable kByteTable = byte_table();
-
-} // namespace sobol_detail
-
-/// sobol_u32 from the byte table (equal for every index and dimension).
-[[nodiscard]] constexpr std::uint32_t sobol_u32_fast(std::uint32_t index, std::uint32_t d) {
-  const auto& t = sobol_detail::kByteTable[d];
+  const auto& t = sobol_detail::kByteTables[d];
   return t[0][index & 0xFFu] ^ t[1][(index >> 8) & 0xFFu] ^ t[2][(index >> 16) & 0xFFu] ^
          t[3][index >> 24];
 }
@@ -136,7 +123,7 @@ public:
       : set_seed_(set_seed), shuffled_(shuffled) {}
   [[nodiscard]] constexpr float dim(std::uint32_t d) const {
     return to_unit_float(
-        sobol_detail::owen_scramble(sobol_u32_fast(shuffled_, d), hash_combine(set_seed_, d + 1)));
+        sobol_detail::owen_scramble(sobol_u32(shuffled_, d), hash_combine(set_seed_, d + 1)));
   }
 
 private:
@@ -161,6 +148,13 @@ public:
   [[nodiscard]] constexpr SampleSet set(std::uint32_t index, std::uint32_t set) const {
     const std::uint32_t set_seed = hash_combine(seed_, set);
     return SampleSet(set_seed, sobol_detail::owen_scramble(index, set_seed));
+  }
+
+  /// Dimensions 4·set and 4·set+1 alone: get4(index, set)'s x and y, for uses that need two
+  /// (half the work).
+  [[nodiscard]] constexpr vec2 get2(std::uint32_t index, std::uint32_t set) const {
+    const SampleSet s = this->set(index, set);
+    return vec2(s.dim(0), s.dim(1));
   }
 
 private:

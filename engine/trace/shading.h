@@ -6,10 +6,12 @@
 #include "specula/geometry/ray.h"
 #include "specula/geometry/ray_offset.h"
 #include "specula/render/scene_layer.h"
+#include "specula/trace/lights.h"
 #include "specula/trace/optics.h"
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 namespace specula {
 
@@ -137,6 +139,36 @@ struct SpecularSplit {
 
 [[nodiscard]] inline float max_component(const vec3& v) {
   return std::max(v.x, std::max(v.y, v.z));
+}
+
+/// The weight of a material's diffuse (Lambert) part: what reflection and transmission leave.
+[[nodiscard]] inline float diffuse_weight(const gpu::GpuMaterial& m) {
+  return std::max(0.0f, 1.0f - m.reflectivity - m.transmission);
+}
+
+/// A shadow ray towards a punctual light and the radiance it brings when nothing blocks it.
+struct PunctualShadowRay {
+  Ray ray;
+  vec3 value; ///< albedo × irradiance × cos θ
+};
+
+/// The shadow ray from shading point `sp` (leaving from `origin`, its offset spawn point) towards
+/// `light`, for a diffuse part of reflectance `albedo` (base colour × diffuse weight / π); none
+/// when the light cannot light it (behind the surface, at or past grazing, or black). Whitted's
+/// and the shadow caster's local shading both use it, so that they give the same bits.
+[[nodiscard]] inline std::optional<PunctualShadowRay>
+punctual_shadow_ray(const gpu::GpuLight& light, const ShadingPoint& sp, const vec3& origin,
+                    const vec3& albedo) {
+  const LightSample ls = sample_light(light, sp.position);
+  if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) return std::nullopt; // behind
+  const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
+  if (cos_theta <= 0.0f || max_component(ls.irradiance) <= 0.0f) return std::nullopt;
+  // Stop just short of the light: a light placed on a surface must not shadow itself.
+  const float tfar = std::isinf(ls.distance)
+                         ? ls.distance
+                         : float(glm::length(glm::dvec3(light.position - origin)) * (1.0 - 1e-5));
+  return PunctualShadowRay{Ray{origin, 0.0f, ls.to_light, tfar},
+                           albedo * ls.irradiance * cos_theta};
 }
 
 } // namespace specula

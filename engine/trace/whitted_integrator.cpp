@@ -233,23 +233,17 @@ private:
     const ShadingPoint sp = shading_point(tables_, hit, d, true);
     s_.nodes[index].radiance = m.emission;
 
-    const float diffuse = std::max(0.0f, 1.0f - m.reflectivity - m.transmission);
+    const float diffuse = diffuse_weight(m);
     if (diffuse > 0.0f && !tables_.lights.empty()) {
       const vec3 albedo = m.base_color * (diffuse * kInvPi);
       const vec3 origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
       for (const gpu::GpuLight& light : tables_.lights) {
-        const LightSample ls = sample_light(light, sp.position);
-        if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) continue; // behind the surface
-        const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
-        if (cos_theta <= 0.0f || max_component(ls.irradiance) <= 0.0f) continue;
-        // Stop just short of the light: a light placed on a surface must not shadow itself.
-        const float tfar =
-            std::isinf(ls.distance)
-                ? ls.distance
-                : float(glm::length(glm::dvec3(light.position - origin)) * (1.0 - 1e-5));
-        s_.shadow_rays.push_back(Ray{origin, 0.0f, ls.to_light, tfar});
+        const std::optional<PunctualShadowRay> shadow =
+            punctual_shadow_ray(light, sp, origin, albedo);
+        if (!shadow) continue;
+        s_.shadow_rays.push_back(shadow->ray);
         s_.shadow_node.push_back(index);
-        s_.shadow_value.push_back(albedo * ls.irradiance * cos_theta);
+        s_.shadow_value.push_back(shadow->value);
       }
     }
     if (node.depth >= settings_.max_depth) return;

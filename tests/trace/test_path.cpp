@@ -399,14 +399,6 @@ TEST(PathPointLights, ASceneWithPointLightsOnlyMatchesWhittedAtDepthZero) {
   }
 }
 
-TEST(PathSampler, TheByteTableSobolEqualsTheBitLoop) {
-  std::mt19937 rng(3);
-  for (int i = 0; i < 10000; ++i) {
-    const std::uint32_t index = i < 256 ? std::uint32_t(i) : std::uint32_t(rng());
-    for (std::uint32_t d = 0; d < 4; ++d) ASSERT_EQ(sobol_u32_fast(index, d), sobol_u32(index, d));
-  }
-}
-
 TEST(PathCounts, RaysAreCountedByKind) {
   SmallCornell scene;
   Framebuffer image(16, 12);
