@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <set>
 #include <string>
 
@@ -46,6 +47,11 @@ struct Options {
   std::string reference_dir;
   /// The target check's accumulation budget (wall-clock ms).
   double path_budget_ms = 1000.0;
+  /// The à-trous denoiser's settings in the path sections (NaN / 0: DenoiseSettings' defaults).
+  double denoise_sigma_color = std::numeric_limits<double>::quiet_NaN();
+  double denoise_sigma_normal = std::numeric_limits<double>::quiet_NaN();
+  double denoise_sigma_depth = std::numeric_limits<double>::quiet_NaN();
+  std::uint32_t denoise_levels = 0;
 };
 
 /// Wall-clock milliseconds of f().

@@ -328,6 +328,10 @@ Rgb sampling_colour(LightSampling s, bool denoised) {
 DenoiseSettings denoise_settings(const Options& o) {
   DenoiseSettings d;
   d.threads = o.threads;
+  if (!std::isnan(o.denoise_sigma_color)) d.sigma_color = float(o.denoise_sigma_color);
+  if (!std::isnan(o.denoise_sigma_normal)) d.sigma_normal = float(o.denoise_sigma_normal);
+  if (!std::isnan(o.denoise_sigma_depth)) d.sigma_depth = float(o.denoise_sigma_depth);
+  if (o.denoise_levels > 0) d.iterations = o.denoise_levels;
   return d;
 }
 

@@ -360,6 +360,12 @@ int main(int argc, char** argv) {
   app.add_option("--path-budget-ms", o.path_budget_ms,
                  "Accumulation time of the target check (ms)")
       ->check(CLI::Range(1.0, 1e6));
+  app.add_option("--denoise-sigma-color", o.denoise_sigma_color,
+                 "À-trous colour σ of the path sections (default: DenoiseSettings')");
+  app.add_option("--denoise-sigma-normal", o.denoise_sigma_normal, "À-trous normal σ");
+  app.add_option("--denoise-sigma-depth", o.denoise_sigma_depth, "À-trous relative depth σ");
+  app.add_option("--denoise-levels", o.denoise_levels, "À-trous levels (0: the default)")
+      ->check(CLI::Range(0u, 12u));
   app.add_option("--cache-max-resolution", o.cache_max_resolution,
                  "Largest cube face resolution the cache sections try")
       ->check(CLI::Range(1u, 4096u));
