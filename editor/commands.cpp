@@ -2,6 +2,7 @@
 
 #include "specula/core/error.h"
 #include "specula/core/memory_budget.h"
+#include "specula/image/denoise.h"
 #include "specula/image/image_io.h"
 #include "specula/render/render_job.h"
 #include "specula/render/tracer_factory.h"
@@ -72,7 +73,8 @@ std::string shown(const std::string& text) { return printable(text, 4096); }
 } // namespace
 
 std::uint64_t render_memory_bytes(std::uint32_t width, std::uint32_t height, std::uint32_t frames,
-                                  std::optional<ImageFormat> out, bool stats) {
+                                  std::optional<ImageFormat> out, bool stats, bool stochastic,
+                                  bool accumulate, bool denoise) {
   const std::uint64_t pixels = std::uint64_t{width} * height;
   // The PNG: sRGB bytes (3 per pixel), then stb's filtered rows (3), its deflate output (at most
   // 9/8 of that, in a buffer grown by doubling) and the PNG it is copied into. The EXR is
@@ -81,7 +83,12 @@ std::uint64_t render_memory_bytes(std::uint32_t width, std::uint32_t height, std
   if (out == ImageFormat::Png) writing = pixels * 14;
   if (out == ImageFormat::Exr) writing = std::uint64_t{16} * width * sizeof(vec3) * 4;
   const std::uint64_t per_frame = sizeof(FrameStats) + (stats ? 2048 : 0);
-  return pixels * sizeof(vec3) + writing + std::uint64_t{frames} * per_frame +
+  // Accumulation: the double sum and the frame; denoising: the guides (albedo, normal, depth),
+  // the noisy mean and two framebuffers for the filter's passes.
+  std::uint64_t progressive = 0;
+  if (stochastic && accumulate) progressive += sizeof(dvec3) + sizeof(vec3);
+  if (stochastic && denoise) progressive += 2 * sizeof(vec3) + sizeof(float) + 3 * sizeof(vec3);
+  return pixels * (sizeof(vec3) + progressive) + writing + std::uint64_t{frames} * per_frame +
          (std::uint64_t{64} << 20);
 }
 
@@ -146,6 +153,23 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
                                 "], got " + std::to_string(options.frames));
   const std::optional<TraceMode> mode = parse_trace_mode(options.mode);
   if (!mode) throw Error("--mode", "unknown mode '" + printable(options.mode) + "'");
+  if (options.spp < 1 || options.spp > kMaxSpp)
+    throw Error("--spp", "expected a whole number in [1 - " + std::to_string(kMaxSpp) +
+                             "], got " + std::to_string(options.spp));
+  if (options.shadow_samples < 1 || options.shadow_samples > kMaxShadowSamples)
+    throw Error("--shadow-samples", "expected a whole number in [1 - " +
+                                        std::to_string(kMaxShadowSamples) + "], got " +
+                                        std::to_string(options.shadow_samples));
+  const std::optional<LightSampling> sampling = parse_light_sampling(options.sampling);
+  if (!sampling)
+    throw Error("--sampling",
+                "expected mis, bsdf or light, got '" + printable(options.sampling) + "'");
+  if (options.accumulate != "on" && options.accumulate != "off")
+    throw Error("--accumulate", "expected on or off, got '" + printable(options.accumulate) + "'");
+  const bool stochastic = stochastic_mode(*mode);
+  if (options.denoise && !stochastic)
+    throw Error("--denoise", "filters the noise of --mode path and shadow; mode '" +
+                                 options.mode + "' has none");
   // The output paths too: a render of an hour must not end with "unsupported extension".
   std::optional<ImageFormat> out_format;
   if (!options.out.empty())
@@ -163,8 +187,16 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   job.settings.threads = options.threads;
   const std::uint32_t width = options.width ? options.width : scene.settings.width;
   const std::uint32_t height = options.height ? options.height : scene.settings.height;
+  job.settings.spp = options.spp;
+  job.settings.shadow_samples = options.shadow_samples;
+  job.settings.sampling = *sampling;
+  job.settings.seed = options.seed;
+  job.accumulate = options.accumulate == "on";
+  if (options.denoise) job.denoise = DenoiseSettings{};
+  const std::optional<DenoiseSettings> denoise = job.denoise;
   check_memory(
-      render_memory_bytes(width, height, options.frames, out_format, !options.stats.empty()),
+      render_memory_bytes(width, height, options.frames, out_format, !options.stats.empty(),
+                          stochastic, job.accumulate, options.denoise),
       budget, options.scene,
       "rendering " + std::to_string(options.frames) + " frame(s) of " + std::to_string(width) +
           "x" + std::to_string(height));
@@ -183,6 +215,18 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   stats.settings.cache_fill_budget = cache_settings.fill_budget;
   stats.settings.cache_prefill = cache_settings.prefill;
   stats.settings.max_error_db = cache_settings.max_error_db;
+  stats.settings.spp = options.spp;
+  stats.settings.shadow_samples = options.shadow_samples;
+  stats.settings.sampling = light_sampling_name(*sampling);
+  stats.settings.seed = options.seed;
+  stats.settings.accumulate = options.accumulate == "on";
+  if (denoise) {
+    stats.settings.denoise = true;
+    stats.settings.denoise_iterations = denoise->iterations;
+    stats.settings.denoise_sigma_color = denoise->sigma_color;
+    stats.settings.denoise_sigma_normal = denoise->sigma_normal;
+    stats.settings.denoise_sigma_depth = denoise->sigma_depth;
+  }
   Schedule schedule;
   const Clock::time_point start = Clock::now();
   bool progress_shown = false;
@@ -235,6 +279,22 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
     for (const CubeReport& r : c.cubes)
       out << "    cube of entity " << r.entity << " (" << r.resolution << "²): " << r.mode << " — "
           << r.reason << "\n";
+  }
+  if (stochastic) {
+    std::uint64_t restarts = 0;
+    std::vector<double> denoise_ms;
+    for (const FrameStats& f : stats.frames) {
+      restarts += f.accumulation_restarted ? 1 : 0;
+      denoise_ms.push_back(f.denoise_ms);
+    }
+    out << "  samples per pixel: " << last.accumulated_samples << " in the image ("
+        << (*mode == TraceMode::Path ? options.spp : options.shadow_samples) << " per frame, "
+        << (options.accumulate == "on" ? "accumulated" : "not accumulated") << ", "
+        << restarts << " restart(s)), " << options.sampling << " sampling, seed " << options.seed
+        << "\n";
+    if (options.denoise)
+      out << "  denoised: à-trous, " << denoise->iterations << " levels, median "
+          << median(denoise_ms) << " ms per frame\n";
   }
   if (last.rays.dropped > 0)
     out << "  dropped rays: " << last.rays.dropped << " (per-pixel ray budget)\n";

@@ -35,6 +35,12 @@ struct RenderOptions {
   std::uint32_t cache_fill = 0;       ///< texels written per frame, 0: no limit
   bool cache_prefill = false;
   double max_error_db = 40.0;
+  std::uint32_t spp = 1;            ///< path: samples per pixel per frame
+  std::uint32_t shadow_samples = 1; ///< shadow: area-light samples per pixel per frame
+  std::string sampling = "mis";     ///< mis | bsdf | light
+  std::uint32_t seed = 0;
+  std::string accumulate = "on"; ///< on | off
+  bool denoise = false;
   std::string out;           ///< .png or .exr path, empty: none
   std::string stats;         ///< stats JSON path, empty: none
   /// A size such as "4G" (core/memory_budget.h); empty: default_memory_budget().
@@ -49,9 +55,14 @@ int run_info(const InfoOptions& options, std::ostream& out);
 /// structures and ray-cache cubes: the framebuffer (12 bytes per pixel), writing the image in
 /// `out`'s format (none: not written), every frame's statistics (and their JSON when `stats`),
 /// and 64 MiB for the rest of the program.
+/// In path and shadow modes (`stochastic`) it adds the accumulation's buffers (a double sum and
+/// the frame: 36 bytes per pixel when `accumulate`) and, when `denoise`, the guides, the noisy
+/// mean and two framebuffers for the denoiser's passes (64 bytes per pixel).
 [[nodiscard]] std::uint64_t render_memory_bytes(std::uint32_t width, std::uint32_t height,
                                                 std::uint32_t frames,
-                                                std::optional<ImageFormat> out, bool stats);
+                                                std::optional<ImageFormat> out, bool stats,
+                                                bool stochastic = false, bool accumulate = true,
+                                                bool denoise = false);
 
 /// Renders options.frames ticks of the scene. Before loading the scene, checks the options and
 /// the output path (check_image_output_path); before allocating the framebuffer, checks

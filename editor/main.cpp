@@ -6,6 +6,7 @@
 #include "compare_command.h"
 #include "specula/core/error.h"
 #include "specula/core/memory_budget.h"
+#include "specula/render/render_job.h"
 #include "specula/render/tracer_factory.h"
 #include "specula/scene/scene.h"
 
@@ -140,6 +141,34 @@ int main(int argc, char** argv) {
   render_cmd->add_option("--mode", render.mode, "Integrator")
       ->check(one_of({"cast", "whitted", "path", "shadow"}))
       ->capture_default_str();
+  render_cmd->add_option("--spp", render.spp, "Path mode: samples per pixel per frame")
+      ->transform(whole_number(1, kMaxSpp))
+      ->capture_default_str();
+  render_cmd
+      ->add_option("--shadow-samples", render.shadow_samples,
+                   "Shadow mode: area-light samples per pixel per frame")
+      ->transform(whole_number(1, kMaxShadowSamples))
+      ->capture_default_str();
+  render_cmd
+      ->add_option("--sampling", render.sampling,
+                   "Path mode: how area lights are reached (multiple importance sampling, BSDF "
+                   "sampling only, light sampling only)")
+      ->check(one_of({"mis", "bsdf", "light"}))
+      ->capture_default_str();
+  render_cmd
+      ->add_option("--seed", render.seed,
+                   "Path and shadow modes: scrambles every pixel's sample sequence")
+      ->transform(whole_number(0, UINT32_MAX))
+      ->capture_default_str();
+  render_cmd
+      ->add_option("--accumulate", render.accumulate,
+                   "Path and shadow modes: average frames while nothing changes (off: each "
+                   "frame shown alone)")
+      ->check(one_of({"on", "off"}))
+      ->capture_default_str();
+  render_cmd->add_flag("--denoise", render.denoise,
+                       "Path and shadow modes: filter the image with the edge-aware à-trous "
+                       "denoiser");
   render_cmd->add_option("--width", render.width, "Image width (default: the scene's)")
       ->transform(whole_number(1, kMaxImageSide));
   render_cmd->add_option("--height", render.height, "Image height (default: the scene's)")

@@ -16,8 +16,7 @@ void render_system(ecs::Registry& registry, const FrameContext& /*ctx*/) {
   const Tracer& tracer = *registry.resource<ActiveTracer>().tracer;
   const SceneLayer& layer = registry.resource<SceneLayer>();
   const auto start = std::chrono::steady_clock::now();
-  FrameStats stats =
-      render_frame(tracer, layer, *camera, job->settings, job->image, job->hook.get());
+  FrameStats stats = render_job_frame(*job, tracer, layer, *camera);
   stats.trace_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   stats.accel = job->last.accel; // written by the acceleration system this tick

@@ -105,7 +105,17 @@ std::string stats_to_json(const RunStats& stats) {
                                         {"resolution", s.cache_resolution},
                                         {"fill_budget", s.cache_fill_budget},
                                         {"prefill", s.cache_prefill},
-                                        {"max_error_db", s.max_error_db}}}};
+                                        {"max_error_db", s.max_error_db}}},
+                   {"spp", s.spp},
+                   {"shadow_samples", s.shadow_samples},
+                   {"sampling", s.sampling},
+                   {"seed", s.seed},
+                   {"accumulate", s.accumulate},
+                   {"denoise", s.denoise ? json{{"iterations", s.denoise_iterations},
+                                                {"sigma_color", s.denoise_sigma_color},
+                                                {"sigma_normal", s.denoise_sigma_normal},
+                                                {"sigma_depth", s.denoise_sigma_depth}}
+                                         : json(false)}};
   json frames = json::array();
   double total_ms = 0.0;
   double total_trace_ms = 0.0;
@@ -137,7 +147,10 @@ std::string stats_to_json(const RunStats& stats) {
                         {"blas_builds", f.accel.blas_builds},
                         {"refits", f.accel.refits},
                         {"restructures", f.accel.restructures},
-                        {"hidden_instances", f.accel.hidden_instances}}}});
+                        {"hidden_instances", f.accel.hidden_instances}}},
+                      {"accumulated_samples", f.accumulated_samples},
+                      {"accumulation_restarted", f.accumulation_restarted},
+                      {"denoise_ms", f.denoise_ms}});
     total_ms += f.ms;
     total_trace_ms += f.trace_ms;
     total_rays += f.rays;
@@ -154,7 +167,8 @@ std::string stats_to_json(const RunStats& stats) {
       {"mrays_per_s",
        total_trace_ms > 0.0 ? double(total_rays.total()) / (total_trace_ms * 1e3) : 0.0},
       {"cache_hit_rate",
-       total_cache.lookups > 0 ? double(total_cache.hits) / double(total_cache.lookups) : 0.0}};
+       total_cache.lookups > 0 ? double(total_cache.hits) / double(total_cache.lookups) : 0.0},
+      {"accumulated_samples", stats.frames.empty() ? 0 : stats.frames.back().accumulated_samples}};
   return json{{"settings", settings}, {"frames", frames}, {"summary", summary}}.dump(2) + "\n";
 }
 
@@ -191,6 +205,25 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
     // Files from before the cubes landed gave a bare resolution.
     s.cache_resolution = read<std::uint32_t>(settings, "cache", name, "settings");
     s.cache_policy = s.cache_resolution == 0 ? "off" : "auto";
+  }
+  // The stochastic modes' settings arrived with issue 9: older files have none.
+  read_optional(settings, "spp", s.spp, name, "settings");
+  read_optional(settings, "shadow_samples", s.shadow_samples, name, "settings");
+  read_optional(settings, "sampling", s.sampling, name, "settings");
+  read_optional(settings, "seed", s.seed, name, "settings");
+  read_optional(settings, "accumulate", s.accumulate, name, "settings");
+  if (settings.contains("denoise")) {
+    const json denoise = settings.at("denoise");
+    if (denoise.is_object()) {
+      const std::string at = "settings.denoise";
+      s.denoise = true;
+      s.denoise_iterations = read<std::uint32_t>(denoise, "iterations", name, at);
+      s.denoise_sigma_color = read<float>(denoise, "sigma_color", name, at);
+      s.denoise_sigma_normal = read<float>(denoise, "sigma_normal", name, at);
+      s.denoise_sigma_depth = read<float>(denoise, "sigma_depth", name, at);
+    } else if (denoise != json(false)) {
+      throw Error(name, "settings.denoise", "must be false or an object");
+    }
   }
   const json frames = read<json>(root, "frames", name, "");
   if (!frames.is_array()) throw Error(name, "frames", "must be an array");
@@ -254,6 +287,10 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
       // Arrived with issue 13's degenerate-instance handling: older files have none.
       read_optional(a, "hidden_instances", f.accel.hidden_instances, name, where);
     }
+    // Arrived with issue 9's accumulation: older files have none.
+    read_optional(frames[i], "accumulated_samples", f.accumulated_samples, name, at);
+    read_optional(frames[i], "accumulation_restarted", f.accumulation_restarted, name, at);
+    read_optional(frames[i], "denoise_ms", f.denoise_ms, name, at);
     stats.frames.push_back(f);
   }
   return stats;

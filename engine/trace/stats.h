@@ -86,6 +86,13 @@ struct FrameStats {
   RayCounts rays;
   CacheCounts cache;
   AccelStats accel;
+  /// Path and shadow modes: samples per pixel in the image shown (this frame's included); 0 in
+  /// the deterministic modes, which accumulate nothing.
+  std::uint64_t accumulated_samples = 0;
+  /// Path and shadow modes: the running mean was cleared before this frame (the first frame, or
+  /// the scene, camera or settings changed).
+  bool accumulation_restarted = false;
+  double denoise_ms = 0.0; ///< of trace_ms, the denoiser's part (0: not denoised)
   friend bool operator==(const FrameStats&, const FrameStats&) = default;
 };
 
@@ -106,6 +113,17 @@ struct RunSettings {
   std::uint32_t cache_fill_budget = 0;
   bool cache_prefill = false;
   double max_error_db = 40.0;
+  // The stochastic modes (files from before them have none: readers take these defaults).
+  std::uint32_t spp = 1;
+  std::uint32_t shadow_samples = 1;
+  std::string sampling = "mis"; ///< mis | bsdf | light
+  std::uint32_t seed = 0;
+  bool accumulate = true;
+  bool denoise = false; ///< the denoiser's settings below apply only when set
+  std::uint32_t denoise_iterations = 5;
+  float denoise_sigma_color = 0.6f;
+  float denoise_sigma_normal = 0.1f;
+  float denoise_sigma_depth = 0.1f;
   friend bool operator==(const RunSettings&, const RunSettings&) = default;
 };
 

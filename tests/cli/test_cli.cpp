@@ -158,6 +158,42 @@ TEST(Cli, BadOptionsExitOne) {
   }
 }
 
+TEST(Cli, BadSamplingOptionsExitOneNamingTheOption) {
+  const std::string scene =
+      (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
+  struct Case {
+    std::vector<std::string> extra;
+    std::string said; ///< in the message
+  };
+  const std::string spp = "--spp: expected a whole number in [1 - 65536]";
+  const std::string shadow = "--shadow-samples: expected a whole number in [1 - 4096]";
+  const std::string seed = "--seed: expected a whole number in [0 - 4294967295]";
+  for (const Case& c : std::vector<Case>{
+           {{"--mode", "path", "--spp", "0"}, spp + ", got 0"},
+           {{"--mode", "path", "--spp", "65537"}, spp},
+           {{"--mode", "path", "--spp", "1.5"}, "--spp: expected a whole number"},
+           {{"--mode", "path", "--spp", "many"}, "--spp: expected a number"},
+           {{"--mode", "shadow", "--shadow-samples", "0"}, shadow},
+           {{"--mode", "shadow", "--shadow-samples", "4097"}, shadow},
+           {{"--mode", "path", "--sampling", "foo"},
+            "--sampling: expected one of mis, bsdf, light, got 'foo'"},
+           {{"--mode", "path", "--seed", "-1"}, seed},
+           {{"--mode", "path", "--seed", "4294967296"}, seed},
+           {{"--mode", "path", "--accumulate", "maybe"},
+            "--accumulate: expected one of on, off, got 'maybe'"},
+           {{"--mode", "whitted", "--denoise"},
+            "--denoise: filters the noise of --mode path and shadow"},
+           {{"--mode", "cast", "--denoise"}, "mode 'cast' has none"}}) {
+    std::vector<std::string> args = {"render", scene, "--width", "8", "--height", "8"};
+    args.insert(args.end(), c.extra.begin(), c.extra.end());
+    const Result r = run(args);
+    ASSERT_TRUE(r.exited);
+    EXPECT_EQ(r.code, 1) << c.said << "\n" << r.err;
+    EXPECT_EQ(r.err.rfind("specula: error: ", 0), 0u) << r.err;
+    EXPECT_NE(r.err.find(c.said), std::string::npos) << r.err;
+  }
+}
+
 /// The CPU backends this build has.
 std::vector<std::string> cpu_backends() {
   std::vector<std::string> names;
@@ -223,6 +259,47 @@ TEST(Cli, BackendsAndModesNotBuiltYetExitTwo) {
     EXPECT_NE(r.err.find(extra[1]), std::string::npos)
         << "the message names what is missing: " << r.err;
   }
+}
+
+TEST(Cli, PathAndShadowModesAccumulateFramesAndSayHowManySamples) {
+  const std::string scene =
+      (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
+  const fs::path stats = fs::temp_directory_path() /
+                         ("specula_cli_accumulate_" + std::to_string(::getpid()) + ".json");
+  for (const char* mode : {"path", "shadow"}) {
+    SCOPED_TRACE(mode);
+    const Result r = run({"render", scene, "--mode", mode, "--width", "16", "--height", "16",
+                          "--frames", "3", "--spp", "2", "--shadow-samples", "2", "--sampling",
+                          "light", "--seed", "9", "--stats", stats.string()});
+    ASSERT_TRUE(r.exited);
+    if (r.code == 2) {
+      EXPECT_NE(r.err.find("not available"), std::string::npos) << r.err;
+      continue; // the integrator has not landed in this build
+    }
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_NE(r.out.find("samples per pixel: 6 in the image (2 per frame, accumulated, 1 "
+                         "restart(s)), light sampling, seed 9"),
+              std::string::npos)
+        << r.out;
+    const auto j = nlohmann::json::parse(slurp(stats));
+    EXPECT_EQ(j.at("settings").at("spp"), 2);
+    EXPECT_EQ(j.at("settings").at("sampling"), "light");
+    EXPECT_EQ(j.at("settings").at("seed"), 9);
+    EXPECT_EQ(j.at("settings").at("accumulate"), true);
+    EXPECT_EQ(j.at("settings").at("denoise"), false);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_EQ(j.at("frames").at(k).at("accumulated_samples"), 2 * (k + 1)) << k;
+      EXPECT_EQ(j.at("frames").at(k).at("accumulation_restarted"), k == 0) << k;
+    }
+    const Result off = run({"render", scene, "--mode", mode, "--width", "16", "--height", "16",
+                            "--frames", "3", "--spp", "2", "--shadow-samples", "2",
+                            "--accumulate", "off"});
+    ASSERT_EQ(off.code, 0) << off.err;
+    EXPECT_NE(off.out.find("samples per pixel: 2 in the image (2 per frame, not accumulated"),
+              std::string::npos)
+        << off.out;
+  }
+  fs::remove(stats);
 }
 
 TEST(Cli, AutoIsTheDefaultBackendAndSaysWhichItPicked) {

@@ -15,6 +15,14 @@ RunStats sample_stats() {
   s.settings.cache_tau_deg = 0.25f;
   s.settings.cache_fill_budget = 1000;
   s.settings.max_error_db = 35.0;
+  s.settings.spp = 4;
+  s.settings.shadow_samples = 16;
+  s.settings.sampling = "light";
+  s.settings.seed = 1234;
+  s.settings.accumulate = false;
+  s.settings.denoise = true;
+  s.settings.denoise_iterations = 3;
+  s.settings.denoise_sigma_color = 0.25f;
   for (int i = 0; i < 3; ++i) {
     FrameStats f;
     f.ms = 10.0 + i;
@@ -41,6 +49,9 @@ RunStats sample_stats() {
     cube.estimated_psnr_db = 41.5;
     cube.saved_ms = 0.25;
     f.cache.cubes.push_back(cube);
+    f.accumulated_samples = 4u * unsigned(i + 1);
+    f.accumulation_restarted = i == 0;
+    f.denoise_ms = 0.5 + i;
     s.frames.push_back(f);
   }
   return s;
@@ -76,6 +87,47 @@ TEST(Stats, ReadsFilesFromBeforeTheCacheFields) {
   EXPECT_EQ(s.settings.cache_policy, "auto");
   EXPECT_EQ(s.frames[0].cache.lookups, 5u);
   EXPECT_TRUE(s.frames[0].cache.cubes.empty());
+}
+
+TEST(Stats, WritesTheSamplingSettingsAndEachFramesAccumulation) {
+  const auto j = nlohmann::json::parse(stats_to_json(sample_stats()));
+  const auto& settings = j.at("settings");
+  EXPECT_EQ(settings.at("spp"), 4);
+  EXPECT_EQ(settings.at("shadow_samples"), 16);
+  EXPECT_EQ(settings.at("sampling"), "light");
+  EXPECT_EQ(settings.at("seed"), 1234);
+  EXPECT_EQ(settings.at("accumulate"), false);
+  EXPECT_EQ(settings.at("denoise").at("iterations"), 3);
+  EXPECT_EQ(j.at("frames").at(1).at("accumulated_samples"), 8);
+  EXPECT_EQ(j.at("frames").at(0).at("accumulation_restarted"), true);
+  EXPECT_EQ(j.at("frames").at(1).at("accumulation_restarted"), false);
+  EXPECT_DOUBLE_EQ(j.at("frames").at(2).at("denoise_ms").get<double>(), 2.5);
+  EXPECT_EQ(j.at("summary").at("accumulated_samples"), 12);
+  // Without the denoiser the field is false, not an object of unused settings.
+  RunStats plain = sample_stats();
+  plain.settings.denoise = false;
+  EXPECT_EQ(nlohmann::json::parse(stats_to_json(plain)).at("settings").at("denoise"), false);
+}
+
+TEST(Stats, ReadsFilesFromBeforeTheStochasticModes) {
+  auto j = nlohmann::json::parse(stats_to_json(sample_stats()));
+  for (const char* k : {"spp", "shadow_samples", "sampling", "seed", "accumulate", "denoise"})
+    j["settings"].erase(k);
+  for (auto& f : j["frames"])
+    for (const char* k : {"accumulated_samples", "accumulation_restarted", "denoise_ms"})
+      f.erase(k);
+  const RunStats s = stats_from_json(j.dump(), "old.json");
+  EXPECT_EQ(s.settings.spp, 1u);
+  EXPECT_EQ(s.settings.shadow_samples, 1u);
+  EXPECT_EQ(s.settings.sampling, "mis");
+  EXPECT_EQ(s.settings.seed, 0u);
+  EXPECT_TRUE(s.settings.accumulate);
+  EXPECT_FALSE(s.settings.denoise);
+  EXPECT_EQ(s.frames[1].accumulated_samples, 0u);
+  EXPECT_FALSE(s.frames[0].accumulation_restarted);
+  EXPECT_EQ(s.frames[0].denoise_ms, 0.0);
+  j["settings"]["denoise"] = "yes";
+  EXPECT_THROW((void)stats_from_json(j.dump(), "bad.json"), Error);
 }
 
 TEST(Stats, DerivedRatesFollowFromCountsAndTime) {
