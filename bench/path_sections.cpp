@@ -523,9 +523,7 @@ fs::path out_dir(const Options& o) {
   return dir;
 }
 
-} // namespace
-
-void section_path_reference(const Options& o) {
+void path_reference(const Options& o) {
   Report out;
   out("\n## Path tracing: converged references (MIS, %u spp, %ux%u, %u threads)\n\n",
       o.reference_spp, path_width(o), path_height(o), o.threads);
@@ -535,7 +533,7 @@ void section_path_reference(const Options& o) {
   }
 }
 
-void section_path_error(const Options& o) {
+void path_error(const Options& o) {
   Report out;
   const fs::path dir = out_dir(o);
   const DenoiseSettings d = denoise_settings(o);
@@ -593,6 +591,24 @@ void section_path_error(const Options& o) {
   for (const std::string& row : summary_rows) out("%s", row.c_str());
   out.save(dir / "path-error.md");
   out("\nWrote %s and path-error-*.png there.\n", (dir / "path-error.md").string().c_str());
+}
+
+} // namespace
+
+void section_path_reference(const Options& o) {
+  try {
+    path_reference(o);
+  } catch (const UnavailableError& e) {
+    std::printf("\npath-reference skipped: %s\n", e.what()); // a build without path mode
+  }
+}
+
+void section_path_error(const Options& o) {
+  try {
+    path_error(o);
+  } catch (const UnavailableError& e) {
+    std::printf("\npath-error skipped: %s\n", e.what());
+  }
 }
 
 } // namespace specula::bench
