@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <set>
 #include <string>
 
@@ -36,6 +37,21 @@ struct Options {
   int cache_frames = 3;
   int cache_repetitions = 3;
   std::string source_dir = SPECULA_SOURCE_DIR;
+  /// The path sections' scenes (samples/scenes/NAME.json), comma-separated.
+  std::string path_scenes = "cornell_box,area_lights";
+  /// path-error accumulates 1-spp frames up to this many samples.
+  std::uint32_t path_spp = 256;
+  /// Samples per pixel of the converged references.
+  std::uint32_t reference_spp = 4096;
+  /// Where the references are cached (empty: BUILD_DIR/references).
+  std::string reference_dir;
+  /// The target check's accumulation budget (wall-clock ms).
+  double path_budget_ms = 1000.0;
+  /// The à-trous denoiser's settings in the path sections (NaN / 0: DenoiseSettings' defaults).
+  double denoise_sigma_color = std::numeric_limits<double>::quiet_NaN();
+  double denoise_sigma_normal = std::numeric_limits<double>::quiet_NaN();
+  double denoise_sigma_depth = std::numeric_limits<double>::quiet_NaN();
+  std::uint32_t denoise_levels = 0;
 };
 
 /// Wall-clock milliseconds of f().
@@ -58,5 +74,9 @@ void section_paper(const Options& o);
 // Ray-cache cubes (cache_sections.cpp): speed against error, and the paper's experiments.
 void section_cache(const Options& o);
 void section_cache_paper(const Options& o);
+
+// Path tracing (path_sections.cpp): cached converged references, speed against error.
+void section_path_reference(const Options& o);
+void section_path_error(const Options& o);
 
 } // namespace specula::bench

@@ -14,6 +14,10 @@
 //   cache, cache-paper  ray-cache cubes (cache_sections.cpp; not in the default list): speed
 //            against error per lookup mode and resolution, and the paper's experiments; they
 //            also write Markdown and PNG plots under --out-dir.
+//   path-reference, path-error  path tracing (path_sections.cpp; not in the default list):
+//            cached converged references, and RMSE / FLIP against samples and wall time for BSDF,
+//            light and MIS sampling with and without the à-trous denoiser (Markdown and log-log
+//            PNGs under --out-dir).
 
 #include "bench_common.h"
 #include "specula/accel/embree/embree_tracer.h"
@@ -341,10 +345,27 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 6));
   app.add_option("--sections", o.sections,
                  "Comma-separated: primary,tiles,whitted,depth,build,refit,native,paper,cache,"
-                 "cache-paper");
+                 "cache-paper,path-reference,path-error");
   app.add_option("--out-dir", o.out_dir,
-                 "Where cache and cache-paper write Markdown and PNGs (default: "
-                 "SOURCE_DIR/docs/cache-report)");
+                 "Where cache, cache-paper and path-error write Markdown and PNGs (default: "
+                 "SOURCE_DIR/docs/cache-report, SOURCE_DIR/docs/path-report)");
+  app.add_option("--path-scenes", o.path_scenes,
+                 "Comma-separated sample scenes of the path sections");
+  app.add_option("--path-spp", o.path_spp, "Samples path-error accumulates (1-spp frames)")
+      ->check(CLI::Range(1u, 1u << 20));
+  app.add_option("--reference-spp", o.reference_spp, "Samples per pixel of the references")
+      ->check(CLI::Range(1u, 1u << 24));
+  app.add_option("--reference-dir", o.reference_dir,
+                 "Where references are cached (default: BUILD_DIR/references)");
+  app.add_option("--path-budget-ms", o.path_budget_ms,
+                 "Accumulation time of the target check (ms)")
+      ->check(CLI::Range(1.0, 1e6));
+  app.add_option("--denoise-sigma-color", o.denoise_sigma_color,
+                 "À-trous colour σ of the path sections (default: DenoiseSettings')");
+  app.add_option("--denoise-sigma-normal", o.denoise_sigma_normal, "À-trous normal σ");
+  app.add_option("--denoise-sigma-depth", o.denoise_sigma_depth, "À-trous relative depth σ");
+  app.add_option("--denoise-levels", o.denoise_levels, "À-trous levels (0: the default)")
+      ->check(CLI::Range(0u, 12u));
   app.add_option("--cache-max-resolution", o.cache_max_resolution,
                  "Largest cube face resolution the cache sections try")
       ->check(CLI::Range(1u, 4096u));
@@ -388,6 +409,8 @@ int main(int argc, char** argv) {
     if (has("paper")) section_paper(o);
     if (has("cache")) section_cache(o);
     if (has("cache-paper")) section_cache_paper(o);
+    if (has("path-reference")) section_path_reference(o);
+    if (has("path-error")) section_path_error(o);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "specula_bench: %s\n", e.what());
     return 1;

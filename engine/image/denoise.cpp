@@ -2,11 +2,308 @@
 
 #include "specula/core/error.h"
 
-namespace specula {
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
-void atrous_denoise(const Framebuffer& /*noisy*/, const GuideBuffers& /*guides*/,
-                    const DenoiseSettings& /*settings*/, Framebuffer& /*out*/) {
-  throw UnavailableError("the à-trous denoiser is not implemented yet");
+#include <emmintrin.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <string>
+#include <thread>
+#include <utility>
+
+namespace specula {
+namespace {
+
+/// Most levels: at 12 the footprint (4·(2^12 − 1) + 1 pixels) already spans the largest
+/// framebuffer.
+constexpr std::uint32_t kMaxIterations = 12;
+
+/// Albedo channels below this are not divided out (a black surface's lighting is unknown, and
+/// dividing by almost nothing would turn its noise into fireflies): filtered as they are.
+constexpr float kMinAlbedo = 1e-3f;
+
+/// Taps whose exponent exceeds this weigh less than e^−30 ≈ 1e−13 against the centre's
+/// kernel weight 9/64: they get weight 0 (and the exponential never sees a huge argument).
+constexpr float kMaxExponent = 30.0f;
+
+/// The B3-spline scaling function of the à-trous transform, per axis (the 5×5 kernel is the
+/// outer product).
+constexpr std::array<float, 5> kB3 = {1.0f / 16.0f, 1.0f / 4.0f, 3.0f / 8.0f, 1.0f / 4.0f,
+                                      1.0f / 16.0f};
+
+/// Pixels per SIMD step (SSE2, the x86-64 baseline).
+constexpr std::uint32_t kLanes = 4;
+
+bool finite(const vec3& v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+
+/// The albedo a channel is divided by: itself, or 1 where it is (nearly) black or not finite.
+float demodulator(float albedo) {
+  return albedo >= kMinAlbedo && std::isfinite(albedo) ? albedo : 1.0f;
+}
+vec3 demodulator(const vec3& albedo) {
+  return vec3(demodulator(albedo.x), demodulator(albedo.y), demodulator(albedo.z));
+}
+
+void check_sigma(float sigma, const char* name) {
+  // +inf is allowed: it turns the weight off (exp(−d²/∞) = 1).
+  if (!(sigma > 0.0f))
+    throw Error(std::string("atrous_denoise: ") + name + " must be positive, got " +
+                std::to_string(sigma));
+}
+
+/// One float per pixel, rows `stride` apart, each row with `pad` columns of zeros on either side:
+/// every tap of the widest level lands inside the buffer, and a padding tap is never usable.
+struct Plane {
+  std::vector<float> data;
+  float* row(std::size_t y, std::size_t stride, std::size_t pad) {
+    return data.data() + y * stride + pad;
+  }
+  [[nodiscard]] const float* row(std::size_t y, std::size_t stride, std::size_t pad) const {
+    return data.data() + y * stride + pad;
+  }
+};
+
+/// The per-pixel state the levels share (guides, in planes), and the colour planes they
+/// ping-pong between.
+struct Planes {
+  std::size_t width = 0, height = 0, stride = 0, pad = 0;
+  /// 1 for a hit with a finite colour and normal (filtered and used as a tap), else 0; the other
+  /// planes hold 0 there, so a weight of 0 times them is 0, never NaN.
+  Plane usable;
+  Plane nx, ny, nz;
+  Plane depth;
+  /// The centre's expected depth change per pixel, per axis: of the two one-sided differences to
+  /// usable neighbours, the smaller in magnitude, so a pixel beside an edge takes its own
+  /// surface's slope.
+  Plane slope_x, slope_y;
+  /// 1 / (σ_depth · depth): depth differences are relative to the centre's depth.
+  Plane inv_depth_scale;
+  std::array<Plane, 3> colour, next;
+
+  void allocate(std::size_t w, std::size_t h, std::size_t padding) {
+    width = w;
+    height = h;
+    pad = padding;
+    stride = pad + (w + kLanes - 1) / kLanes * kLanes + pad;
+    for (Plane* p : {&usable, &nx, &ny, &nz, &depth, &slope_x, &slope_y, &inv_depth_scale,
+                     &colour[0], &colour[1], &colour[2], &next[0], &next[1], &next[2]})
+      p->data.assign(stride * h, 0.0f);
+  }
+  float& at(Plane& p, std::size_t x, std::size_t y) const { return p.row(y, stride, pad)[x]; }
+  [[nodiscard]] float at(const Plane& p, std::size_t x, std::size_t y) const {
+    return p.row(y, stride, pad)[x];
+  }
+};
+
+/// exp(−e) for e in [0, kMaxExponent], within 2·10⁻⁴ relative: 2^t split into an integer power
+/// (written into the float's exponent) and 2^g, g in (0, 1], by its degree-5 Taylor polynomial.
+/// The weights need a smooth fall-off, not libm's last bit; this is what makes them cheap.
+inline __m128 exp_neg(__m128 e) {
+  const __m128 t = _mm_mul_ps(e, _mm_set1_ps(-1.44269504f)); // log2(e) · −e, in [−43.3, 0]
+  const __m128i n = _mm_cvttps_epi32(t);                     // toward zero: t − n in (−1, 0]
+  const __m128 g = _mm_add_ps(_mm_sub_ps(t, _mm_cvtepi32_ps(n)), _mm_set1_ps(1.0f));
+  __m128 p = _mm_set1_ps(1.3333558e-3f);
+  p = _mm_add_ps(_mm_mul_ps(p, g), _mm_set1_ps(9.6181291e-3f));
+  p = _mm_add_ps(_mm_mul_ps(p, g), _mm_set1_ps(5.5504109e-2f));
+  p = _mm_add_ps(_mm_mul_ps(p, g), _mm_set1_ps(2.4022651e-1f));
+  p = _mm_add_ps(_mm_mul_ps(p, g), _mm_set1_ps(6.9314718e-1f));
+  p = _mm_add_ps(_mm_mul_ps(p, g), _mm_set1_ps(1.0f));
+  // 2^(n − 1): the exponent field n − 1 + 127 ≥ 83, a normal float.
+  const __m128i bits = _mm_slli_epi32(_mm_add_epi32(n, _mm_set1_epi32(126)), 23);
+  return _mm_mul_ps(p, _mm_castsi128_ps(bits));
+}
+
+inline __m128 square(__m128 a) { return _mm_mul_ps(a, a); }
+
+/// One level of the edge-avoiding à-trous transform over rows [y0, y1): taps `step` pixels
+/// apart, four pixels at a time. Every lane does the same operations in the same order, so a
+/// pixel's value does not depend on which rows a thread was given.
+void filter_level(Planes& px, std::uint32_t step, float inv_sigma_color2, float inv_sigma_normal2,
+                  std::size_t y0, std::size_t y1) {
+  const std::size_t stride = px.stride, pad = px.pad;
+  const auto s = std::ptrdiff_t(step);
+  const __m128 ic = _mm_set1_ps(inv_sigma_color2);
+  const __m128 in = _mm_set1_ps(inv_sigma_normal2);
+  const __m128 max_exponent = _mm_set1_ps(kMaxExponent);
+  // The centre weighs its kernel weight alone (all distances 0), so the weight sum ≥ 9/64.
+  const __m128 centre_weight = _mm_set1_ps(kB3[2] * kB3[2]);
+  for (std::size_t y = y0; y < y1; ++y) {
+    const auto row = [&](const Plane& p) { return p.row(y, stride, pad); };
+    for (std::size_t x = 0; x < px.width; x += kLanes) {
+      const __m128 cr = _mm_loadu_ps(row(px.colour[0]) + x);
+      const __m128 cg = _mm_loadu_ps(row(px.colour[1]) + x);
+      const __m128 cb = _mm_loadu_ps(row(px.colour[2]) + x);
+      const __m128 cnx = _mm_loadu_ps(row(px.nx) + x);
+      const __m128 cny = _mm_loadu_ps(row(px.ny) + x);
+      const __m128 cnz = _mm_loadu_ps(row(px.nz) + x);
+      const __m128 cd = _mm_loadu_ps(row(px.depth) + x);
+      const __m128 cgx = _mm_loadu_ps(row(px.slope_x) + x);
+      const __m128 cgy = _mm_loadu_ps(row(px.slope_y) + x);
+      const __m128 cis = _mm_loadu_ps(row(px.inv_depth_scale) + x);
+      __m128 sr = _mm_mul_ps(centre_weight, cr);
+      __m128 sg = _mm_mul_ps(centre_weight, cg);
+      __m128 sb = _mm_mul_ps(centre_weight, cb);
+      __m128 sw = centre_weight;
+      for (std::ptrdiff_t j = -2; j <= 2; ++j) {
+        const std::ptrdiff_t qy = std::ptrdiff_t(y) + j * s;
+        if (qy < 0 || qy >= std::ptrdiff_t(px.height)) continue;
+        const auto tap_row = [&](const Plane& p) {
+          return p.row(std::size_t(qy), stride, pad) + std::ptrdiff_t(x);
+        };
+        const float* tr = tap_row(px.colour[0]);
+        const float* tg = tap_row(px.colour[1]);
+        const float* tb = tap_row(px.colour[2]);
+        const float* tnx = tap_row(px.nx);
+        const float* tny = tap_row(px.ny);
+        const float* tnz = tap_row(px.nz);
+        const float* td = tap_row(px.depth);
+        const float* tu = tap_row(px.usable);
+        // The depth the centre's slope predicts at the tap, row part.
+        const __m128 cd_row = _mm_add_ps(cd, _mm_mul_ps(cgy, _mm_set1_ps(float(j * s))));
+        for (std::ptrdiff_t i = -2; i <= 2; ++i) {
+          if (i == 0 && j == 0) continue;
+          const std::ptrdiff_t ox = i * s;
+          // A tap beyond the padding is farther than the image is wide: outside for every lane.
+          if (ox > std::ptrdiff_t(pad) || -ox > std::ptrdiff_t(pad)) continue;
+          const __m128 qr = _mm_loadu_ps(tr + ox);
+          const __m128 qg = _mm_loadu_ps(tg + ox);
+          const __m128 qb = _mm_loadu_ps(tb + ox);
+          const __m128 dc =
+              _mm_add_ps(_mm_add_ps(square(_mm_sub_ps(qr, cr)), square(_mm_sub_ps(qg, cg))),
+                         square(_mm_sub_ps(qb, cb)));
+          const __m128 dn = _mm_add_ps(_mm_add_ps(square(_mm_sub_ps(_mm_loadu_ps(tnx + ox), cnx)),
+                                                  square(_mm_sub_ps(_mm_loadu_ps(tny + ox), cny))),
+                                       square(_mm_sub_ps(_mm_loadu_ps(tnz + ox), cnz)));
+          const __m128 predicted = _mm_add_ps(cd_row, _mm_mul_ps(cgx, _mm_set1_ps(float(ox))));
+          const __m128 dd = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(td + ox), predicted), cis);
+          const __m128 e =
+              _mm_add_ps(_mm_add_ps(_mm_mul_ps(dc, ic), _mm_mul_ps(dn, in)), square(dd));
+          // NaN (∞ · 0 from a weight turned off) compares false: weight 0, as beyond the cut-off.
+          const __m128 near = _mm_cmplt_ps(e, max_exponent);
+          const __m128 kernel = _mm_set1_ps(kB3[std::size_t(i + 2)] * kB3[std::size_t(j + 2)]);
+          const __m128 wgt =
+              _mm_mul_ps(_mm_and_ps(near, _mm_mul_ps(kernel, exp_neg(_mm_min_ps(e, max_exponent)))),
+                         _mm_loadu_ps(tu + ox));
+          sr = _mm_add_ps(sr, _mm_mul_ps(wgt, qr));
+          sg = _mm_add_ps(sg, _mm_mul_ps(wgt, qg));
+          sb = _mm_add_ps(sb, _mm_mul_ps(wgt, qb));
+          sw = _mm_add_ps(sw, wgt);
+        }
+      }
+      const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), sw);
+      _mm_storeu_ps(px.next[0].row(y, stride, pad) + x, _mm_mul_ps(sr, inv));
+      _mm_storeu_ps(px.next[1].row(y, stride, pad) + x, _mm_mul_ps(sg, inv));
+      _mm_storeu_ps(px.next[2].row(y, stride, pad) + x, _mm_mul_ps(sb, inv));
+    }
+  }
+}
+
+/// Of the one-sided depth differences towards usable neighbours, the smaller in magnitude.
+float slope(float before, bool has_before, float centre, float after, bool has_after) {
+  const float b = centre - before, a = after - centre;
+  if (has_before && has_after) return std::abs(b) <= std::abs(a) ? b : a;
+  return has_before ? b : has_after ? a : 0.0f;
+}
+
+} // namespace
+
+void atrous_denoise(const Framebuffer& noisy, const GuideBuffers& guides,
+                    const DenoiseSettings& settings, Framebuffer& out) {
+  const std::uint32_t width = noisy.width();
+  const std::uint32_t height = noisy.height();
+  const std::size_t n = noisy.pixel_count();
+  const auto check_size = [&](std::size_t size, const char* name) {
+    if (size != n)
+      throw Error(std::string("atrous_denoise: the ") + name + " guide has " +
+                  std::to_string(size) + " pixels, the image " + std::to_string(width) + "×" +
+                  std::to_string(height) + " = " + std::to_string(n));
+  };
+  check_size(guides.albedo.size(), "albedo");
+  check_size(guides.normal.size(), "normal");
+  check_size(guides.depth.size(), "depth");
+  if (settings.iterations > kMaxIterations)
+    throw Error("atrous_denoise: at most " + std::to_string(kMaxIterations) + " iterations, got " +
+                std::to_string(settings.iterations));
+  check_sigma(settings.sigma_color, "sigma_color");
+  check_sigma(settings.sigma_normal, "sigma_normal");
+  check_sigma(settings.sigma_depth, "sigma_depth");
+
+  // Everything is read out of `noisy` before `out` is written, so the two may be one image.
+  // Padding: the widest level's farthest tap (2 · 2^(levels−1)), rounded up to whole lanes;
+  // a tap farther than the image is wide is skipped instead.
+  const std::size_t reach =
+      settings.iterations == 0 ? 0 : std::size_t(2) << (settings.iterations - 1);
+  Planes px;
+  px.allocate(width, height, (std::min<std::size_t>(reach, width) + kLanes - 1) / kLanes * kLanes);
+  const std::span<const vec3> colour = noisy.pixels();
+  std::vector<vec3> demodulators(n);
+  std::vector<std::uint8_t> usable(n);
+  const float inv_sigma_depth = 1.0f / settings.sigma_depth;
+  for (std::size_t y = 0; y < height; ++y)
+    for (std::size_t x = 0; x < width; ++x) {
+      const std::size_t p = y * width + x;
+      usable[p] = std::isfinite(guides.depth[p]) && finite(colour[p]) && finite(guides.normal[p]);
+      if (usable[p] == 0) continue;
+      demodulators[p] = demodulator(guides.albedo[p]);
+      const vec3 lighting = colour[p] / demodulators[p];
+      px.at(px.usable, x, y) = 1.0f;
+      px.at(px.colour[0], x, y) = lighting.x;
+      px.at(px.colour[1], x, y) = lighting.y;
+      px.at(px.colour[2], x, y) = lighting.z;
+      px.at(px.nx, x, y) = guides.normal[p].x;
+      px.at(px.ny, x, y) = guides.normal[p].y;
+      px.at(px.nz, x, y) = guides.normal[p].z;
+      px.at(px.depth, x, y) = guides.depth[p];
+      px.at(px.inv_depth_scale, x, y) = inv_sigma_depth / std::max(guides.depth[p], 1e-20f);
+    }
+  for (std::size_t y = 0; y < height; ++y)
+    for (std::size_t x = 0; x < width; ++x) {
+      const std::size_t p = y * width + x;
+      if (usable[p] == 0) continue;
+      const float d = guides.depth[p];
+      const bool left = x > 0 && usable[p - 1] != 0, right = x + 1 < width && usable[p + 1] != 0;
+      const bool up = y > 0 && usable[p - width] != 0;
+      const bool down = y + 1 < height && usable[p + width] != 0;
+      px.at(px.slope_x, x, y) = slope(left ? guides.depth[p - 1] : 0.0f, left, d,
+                                      right ? guides.depth[p + 1] : 0.0f, right);
+      px.at(px.slope_y, x, y) = slope(up ? guides.depth[p - width] : 0.0f, up, d,
+                                      down ? guides.depth[p + width] : 0.0f, down);
+    }
+
+  const float inv_sigma_normal2 = 1.0f / (settings.sigma_normal * settings.sigma_normal);
+  const int workers = settings.threads > 0 ? int(settings.threads)
+                                           : int(std::max(1u, std::thread::hardware_concurrency()));
+  tbb::task_arena arena(workers);
+  for (std::uint32_t level = 0; level < settings.iterations; ++level) {
+    const float sigma_color = std::ldexp(settings.sigma_color, -int(level));
+    const float inv_sigma_color2 = 1.0f / (sigma_color * sigma_color);
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, height, 4),
+                        [&](const tbb::blocked_range<std::size_t>& rows) {
+                          filter_level(px, 1u << level, inv_sigma_color2, inv_sigma_normal2,
+                                       rows.begin(), rows.end());
+                        });
+    });
+    px.colour.swap(px.next);
+  }
+
+  Framebuffer result(width, height);
+  for (std::size_t y = 0; y < height; ++y)
+    for (std::size_t x = 0; x < width; ++x) {
+      const std::size_t p = y * width + x;
+      result.pixels()[p] = usable[p] == 0
+                               ? colour[p]
+                               : vec3(px.at(px.colour[0], x, y), px.at(px.colour[1], x, y),
+                                      px.at(px.colour[2], x, y)) *
+                                     demodulators[p];
+    }
+  out = std::move(result); // only now: `colour` may be out's own pixels
 }
 
 } // namespace specula

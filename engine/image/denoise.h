@@ -28,16 +28,30 @@ struct GuideBuffers {
   [[nodiscard]] std::size_t size() const { return depth.size(); }
 };
 
+/// The filter's knobs. Weights are exp(−d²/σ²) of the distance d between a tap and the centre, as
+/// Dammertz et al.; the three factors multiply.
 struct DenoiseSettings {
-  std::uint32_t iterations = 5; ///< filter levels: the footprint is (4·2^iterations + 1)²
-  float sigma_color = 0.6f;     ///< colour weight scale (halved at every level, as the paper)
-  float sigma_normal = 0.1f;    ///< normal weight scale
-  float sigma_depth = 0.1f;     ///< relative depth weight scale
-  std::uint32_t threads = 0;    ///< 0: every hardware thread
+  /// Filter levels (at most 12), level i with taps 2^i pixels apart: the footprint is
+  /// (4·(2^iterations − 1) + 1)² pixels.
+  std::uint32_t iterations = 5;
+  /// Colour weight scale, on the demodulated colour (colour ÷ albedo, i.e. the lighting), halved
+  /// at every level as the paper: the coarse levels, whose taps are already smooth, only average
+  /// what is alike. +inf turns the colour weight off.
+  float sigma_color = 0.6f;
+  float sigma_normal = 0.1f; ///< normal weight scale, on the distance between unit normals
+  /// Depth weight scale, relative to the centre's depth: the tap's depth is compared with what the
+  /// centre's depth gradient predicts at the tap's offset, so slanted planes are not cut apart.
+  float sigma_depth = 0.1f;
+  std::uint32_t threads = 0; ///< 0: every hardware thread
 };
 
-/// Filters `noisy` into `out` (resized to match). Guides must be noisy's size. Pixels without a
-/// hit (depth +inf) are copied through. Throws specula::Error on mismatched sizes.
+/// Filters `noisy` into `out` (assigned noisy's size; `out` may be `noisy` itself). The colour
+/// is divided by the albedo guide before filtering and multiplied back after (channels with an
+/// albedo below 1/1000 are filtered as they are), so textures stay sharp and only the lighting is
+/// smoothed. Guides must have noisy's pixel count. Pixels without a hit (depth +inf or NaN) or
+/// with a non-finite colour or normal are copied through and never used as taps; taps outside the
+/// image are left out. Every level reads only the previous one, so the result is the same whatever
+/// the thread count. Throws specula::Error on mismatched sizes or settings out of range.
 void atrous_denoise(const Framebuffer& noisy, const GuideBuffers& guides,
                     const DenoiseSettings& settings, Framebuffer& out);
 

@@ -113,7 +113,11 @@ DAabb world_bounds(ecs::Registry& registry) {
 void add_defaults(Scene& scene) {
   ecs::Registry& reg = scene.registry;
   const bool has_camera = reg.count<Camera>() > 0;
-  const bool has_light = reg.count<Light>() > 0;
+  // Emissive surfaces are area lights: a scene lit by them alone needs no default light.
+  bool has_light = reg.count<Light>() > 0;
+  reg.view<Mesh, Material>().each([&](const Mesh&, const Material& m) {
+    has_light = has_light || m.emission != vec3(0.0f);
+  });
   if (has_camera && has_light) return;
 
   DAabb bounds = world_bounds(reg);

@@ -56,7 +56,8 @@ struct DefaultTag {};
 
 /// When the scene has no Camera, adds one framing the world bounds: looking at the bounds' centre
 /// from the +Z side, raised 20° above it, at the distance where the bounding sphere fills the
-/// vertical field of view (45°), aspect from settings. When it has no Light, adds a point light
+/// vertical field of view (45°), aspect from settings. When it has no Light and no emissive
+/// mesh (an area light), adds a point light
 /// at the camera position with intensity distance² (so a surface at the bounds' centre facing it
 /// gets irradiance 1, at any scale). Both carry DefaultTag.
 void add_defaults(Scene& scene);

@@ -114,6 +114,19 @@ TEST(Scene, DefaultLightIsAddedOnlyWhenThereIsNone) {
   EXPECT_EQ(lit.registry.count<DefaultTag>(), 1u);
 }
 
+TEST(Scene, EmissiveMeshesCountAsLights) {
+  // A scene lit by an area light alone gets a default camera but no default point light.
+  Scene scene;
+  add_box(scene, vec3(0), vec3(1));
+  const ecs::Entity panel = add_box(scene, vec3(0, 3, 0), vec3(1, 0.1f, 1));
+  scene.registry.get<Material>(panel).emission = vec3(2.0f);
+  update_world_transforms(scene.registry, 0);
+  add_defaults(scene);
+  EXPECT_EQ(scene.registry.count<Light>(), 0u);
+  EXPECT_EQ(scene.registry.count<Camera>(), 1u);
+  EXPECT_EQ(scene.registry.count<DefaultTag>(), 1u);
+}
+
 TEST(Scene, DefaultLightGivesUnitIrradianceAtTheCentre) {
   Scene scene;
   add_box(scene, vec3(0), vec3(2));
