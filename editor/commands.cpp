@@ -103,6 +103,7 @@ int run_info(const InfoOptions& options, std::ostream& out) {
                         {"triangles", s.triangles},
                         {"materials", s.materials},
                         {"lights", s.lights},
+                        {"emissive_meshes", s.emissive_meshes},
                         {"cameras", s.cameras},
                         {"reflective", s.reflective},
                         {"refractive", s.refractive},
@@ -124,7 +125,7 @@ int run_info(const InfoOptions& options, std::ostream& out) {
       << "triangles:  " << s.triangles << "\n"
       << "materials:  " << s.materials << " (" << s.reflective << " reflective, " << s.refractive
       << " refractive entities)\n"
-      << "lights:     " << s.lights << "\n"
+      << "lights:     " << s.lights << " (+ " << s.emissive_meshes << " emissive meshes)\n"
       << "cameras:    " << s.cameras << "\n"
       << "ray caches: " << s.ray_cache_cubes << "\n"
       << "image:      " << scene.settings.width << "x" << scene.settings.height << "\n";

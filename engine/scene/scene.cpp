@@ -180,6 +180,7 @@ SceneSummary summarize(Scene& scene) {
         materials.push_back(*m);
       s.reflective += m->is_reflective() ? 1 : 0;
       s.refractive += m->is_refractive() ? 1 : 0;
+      s.emissive_meshes += glm::any(glm::greaterThan(m->emission, vec3(0.0f))) ? 1 : 0;
     }
   });
   s.unique_meshes = unique.size();

@@ -76,7 +76,8 @@ struct SceneSummary {
   std::size_t unique_meshes = 0;
   std::uint64_t triangles = 0; ///< placed (instanced meshes count once per entity)
   std::size_t materials = 0;   ///< distinct Material values
-  std::size_t lights = 0;
+  std::size_t lights = 0;          ///< punctual (Light components)
+  std::size_t emissive_meshes = 0; ///< mesh entities whose material emits (area lights)
   std::size_t cameras = 0;
   std::size_t reflective = 0; ///< entities with reflectivity > 0
   std::size_t refractive = 0; ///< entities with transmission > 0

@@ -93,7 +93,7 @@ TEST(Cli, InfoWorksOnEverySampleScene) {
     const auto j = nlohmann::json::parse(r.out, nullptr, false);
     ASSERT_FALSE(j.is_discarded()) << r.out;
     EXPECT_GT(j.at("triangles").get<long>(), 0) << scene;
-    EXPECT_GE(j.at("lights").get<long>(), 1) << scene;
+    EXPECT_GE(j.at("lights").get<long>() + j.at("emissive_meshes").get<long>(), 1) << scene;
     EXPECT_EQ(j.at("cameras").get<long>(), 1) << scene;
     EXPECT_TRUE(j.contains("bounds")) << scene;
   }
