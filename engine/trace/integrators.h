@@ -8,11 +8,14 @@
 #include "specula/trace/camera_rays.h"
 #include "specula/trace/packet_tile.h"
 #include "specula/trace/radiance_hook.h"
+#include "specula/trace/shading.h"
 #include "specula/trace/render_frame.h"
 #include "specula/trace/stats.h"
 #include "specula/trace/tracer.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <span>
 #include <vector>
 
@@ -131,6 +134,24 @@ struct TileScratch {
     return radiance;
   ++counts.nonfinite;
   return vec3(0.0f);
+}
+
+/// The denoiser's guides of a pixel (GuideBuffers): at a primary hit on material `m`, its albedo
+/// (the diffuse part's colour, specular parts counted as white: they pass light on untinted), the
+/// shading normal and the distance; a miss (m null) gets albedo 1, normal 0 and depth +inf.
+inline void write_guide(GuideBuffers& g, std::uint32_t pixel, const gpu::GpuMaterial* m,
+                        const vec3& shading_normal = vec3(0.0f),
+                        float t = std::numeric_limits<float>::infinity()) {
+  if (m == nullptr) {
+    g.albedo[pixel] = vec3(1.0f);
+    g.normal[pixel] = vec3(0.0f);
+    g.depth[pixel] = std::numeric_limits<float>::infinity();
+    return;
+  }
+  const float diffuse = diffuse_weight(*m);
+  g.albedo[pixel] = diffuse * m->base_color + (1.0f - diffuse);
+  g.normal[pixel] = shading_normal;
+  g.depth[pixel] = t;
 }
 
 /// Local shading of every primary hit: emission plus the diffuse term of every light, no shadow

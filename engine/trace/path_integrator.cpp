@@ -7,7 +7,6 @@
 
 #include "specula/trace/area_lights.h"
 #include "specula/trace/integrators.h"
-#include "specula/trace/lights.h"
 #include "specula/trace/sampler.h"
 #include "specula/trace/shading.h"
 
@@ -130,17 +129,11 @@ private:
       const std::uint32_t pixel = w_.pixel[i];
       const Hit hit = primary_.hit(i);
       if (!hit.hit()) {
-        g.albedo[pixel] = vec3(1.0f);
-        g.normal[pixel] = vec3(0.0f);
-        g.depth[pixel] = std::numeric_limits<float>::infinity();
+        write_guide(g, pixel, nullptr);
         continue;
       }
-      const gpu::GpuMaterial& m = material(hit);
-      const float diffuse = std::max(0.0f, 1.0f - m.reflectivity - m.transmission);
-      // Specular lobes pass the light through untinted: they count as white.
-      g.albedo[pixel] = diffuse * m.base_color + (1.0f - diffuse);
-      g.normal[pixel] = shading_point(tables_, hit, primary_.direction(i), false).shading_normal;
-      g.depth[pixel] = hit.t;
+      write_guide(g, pixel, &material(hit),
+                  shading_point(tables_, hit, primary_.direction(i), false).shading_normal, hit.t);
     }
   }
 
@@ -206,7 +199,7 @@ private:
       }
     }
 
-    const float diffuse = std::max(0.0f, 1.0f - m.reflectivity - m.transmission);
+    const float diffuse = diffuse_weight(m);
     const float specular =
         (kMirror ? m.reflectivity : 0.0f) + (kDielectric ? m.transmission : 0.0f);
     const float total = diffuse + specular;
@@ -221,19 +214,10 @@ private:
       origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
       const vec3 f = m.base_color * (diffuse * kInvPi);
       if constexpr (kPunctual) {
-        // As Whitted's: the same tests and tfar, so that with nothing else the images agree.
-        for (const gpu::GpuLight& light : tables_.lights) {
-          const LightSample ls = sample_light(light, sp.position);
-          if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) continue;
-          const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
-          if (cos_theta <= 0.0f || max_component(ls.irradiance) <= 0.0f) continue;
-          const float tfar =
-              std::isinf(ls.distance)
-                  ? ls.distance
-                  : float(glm::length(glm::dvec3(light.position - origin)) * (1.0 - 1e-5));
-          add_shadow(Ray{origin, 0.0f, ls.to_light, tfar}, p.slot,
-                     p.throughput * (f * ls.irradiance * cos_theta));
-        }
+        // Whitted's own shadow rays (shading.h), so that with nothing else the images agree.
+        for (const gpu::GpuLight& light : tables_.lights)
+          if (const auto shadow = punctual_shadow_ray(light, sp, origin, f))
+            add_shadow(shadow->ray, p.slot, p.throughput * shadow->value);
       }
       // Area lights are sampled towards the next vertex, which the last one does not have (the
       // BSDF strategy would need a ray beyond the depth limit).

@@ -55,22 +55,14 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
     const Hit hit = primary.hit(k);
     if (!hit.hit()) {
       frame.pixels[pixel] = settings.background;
-      if (guides != nullptr) {
-        guides->albedo[pixel] = vec3(1.0f);
-        guides->normal[pixel] = vec3(0.0f);
-        guides->depth[pixel] = std::numeric_limits<float>::infinity();
-      }
+      if (guides != nullptr) write_guide(*guides, pixel, nullptr);
       return;
     }
     const gpu::GpuMaterial& m = tables.materials[tables.instances[hit.instance].material];
     const ShadingPoint sp = shading_point(tables, hit, primary.direction(k), true);
     frame.pixels[pixel] = m.emission;
     const float diffuse = diffuse_weight(m);
-    if (guides != nullptr) {
-      guides->albedo[pixel] = diffuse * m.base_color + (1.0f - diffuse);
-      guides->normal[pixel] = sp.shading_normal;
-      guides->depth[pixel] = hit.t;
-    }
+    if (guides != nullptr) write_guide(*guides, pixel, &m, sp.shading_normal, hit.t);
     if (!(diffuse > 0.0f)) return;
     const vec3 albedo = m.base_color * (diffuse * kInvPi);
     const vec3 origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
