@@ -4,10 +4,15 @@
 #include "specula/geometry/triangle_mesh.h"
 #include "specula/scene/scene.h"
 
+#include <cstdarg>
 #include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <functional>
 #include <limits>
 #include <set>
+#include <stdexcept>
 #include <string>
 
 namespace specula::bench {
@@ -78,5 +83,28 @@ void section_cache_paper(const Options& o);
 // Path tracing (path_sections.cpp): cached converged references, speed against error.
 void section_path_reference(const Options& o);
 void section_path_error(const Options& o);
+
+/// A report section's Markdown: printed to stdout as it is written and kept to be saved.
+class Report {
+public:
+  void operator()(const char* fmt, ...) __attribute__((format(printf, 2, 3))) {
+    char buf[4096];
+    va_list args;
+    va_start(args, fmt);
+    std::vsnprintf(buf, sizeof buf, fmt, args);
+    va_end(args);
+    std::fputs(buf, stdout);
+    std::fflush(stdout);
+    text_ += buf;
+  }
+  void save(const std::filesystem::path& path) const {
+    std::ofstream out(path, std::ios::binary);
+    out << text_;
+    if (!out) throw std::runtime_error("cannot write the report " + path.string());
+  }
+
+private:
+  std::string text_;
+};
 
 } // namespace specula::bench

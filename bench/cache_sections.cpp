@@ -50,29 +50,6 @@ using cache::CachePolicy;
 using cache::CacheSettings;
 using cache::LookupMode;
 
-// --- Report: Markdown on stdout and into a file ------------------------------------------------
-
-class Report {
-public:
-  void operator()(const char* fmt, ...) __attribute__((format(printf, 2, 3))) {
-    char buf[4096];
-    va_list args;
-    va_start(args, fmt);
-    std::vsnprintf(buf, sizeof buf, fmt, args);
-    va_end(args);
-    std::fputs(buf, stdout);
-    std::fflush(stdout);
-    text_ += buf;
-  }
-  void save(const fs::path& path) const {
-    std::ofstream out(path, std::ios::binary);
-    out << text_;
-    if (!out) throw std::runtime_error("cannot write " + path.string());
-  }
-
-private:
-  std::string text_;
-};
 
 std::string db(double v) {
   if (std::isinf(v)) return "inf";

@@ -59,29 +59,6 @@ constexpr std::uint32_t kReferenceFrameSpp = 16;
 /// files are not taken for new ones. Integrator bug fixes need `rm -r <build>/references`.
 constexpr const char* kReferenceVersion = "specula-path-reference-1";
 
-// --- Report: Markdown on stdout and into a file ------------------------------------------------
-
-class Report {
-public:
-  void operator()(const char* fmt, ...) __attribute__((format(printf, 2, 3))) {
-    char buf[4096];
-    va_list args;
-    va_start(args, fmt);
-    std::vsnprintf(buf, sizeof buf, fmt, args);
-    va_end(args);
-    std::fputs(buf, stdout);
-    std::fflush(stdout);
-    text_ += buf;
-  }
-  void save(const fs::path& path) const {
-    std::ofstream out(path, std::ios::binary);
-    out << text_;
-    if (!out) throw Error(path.string(), "cannot write the report");
-  }
-
-private:
-  std::string text_;
-};
 
 // --- Scenes ------------------------------------------------------------------------------------
 
