@@ -4,14 +4,14 @@
 # Idempotent: a fast no-op when everything is present.
 set -euo pipefail
 
-# What the build, the tests and the demo use today. The Vulkan backend and the GLFW/ImGui editor
-# will add theirs (libvulkan-dev mesa-vulkan-drivers glslang-dev glslang-tools libglfw3-dev
-# libimgui-dev) when they land.
+# What the build, the tests and the demo use today (the Vulkan backend runs on Mesa's lavapipe
+# where there is no GPU). The GLFW/ImGui editor will add libglfw3-dev and libimgui-dev.
 packages=(
   build-essential cmake ninja-build pkg-config
   libembree-dev libtbb-dev libglm-dev libopenmesh-dev
   libtinygltf-dev libstb-dev nlohmann-json3-dev libcli11-dev
   libopenexr-dev
+  libvulkan-dev mesa-vulkan-drivers glslang-tools
   libgtest-dev
   clang-15 libfuzzer-15-dev
   assimp-testmodels

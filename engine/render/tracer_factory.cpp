@@ -9,15 +9,50 @@
 #if SPECULA_HAS_EMBREE
 #include "specula/accel/embree/embree_tracer.h"
 #endif
+#if SPECULA_HAS_VULKAN
+#include "specula/gpu/vulkan_tracer.h"
+#endif
 
 namespace specula {
+
+namespace {
+
+/// What the Vulkan loader offers, probed once per process (creating an instance costs
+/// milliseconds): whether any device can run the kernels, and whether one is a real GPU.
+struct VulkanProbe {
+  bool device = false;
+  bool gpu = false;
+  std::string reason;
+};
+
+const VulkanProbe& vulkan_probe() {
+  static const VulkanProbe probe = [] {
+    VulkanProbe p;
+#if SPECULA_HAS_VULKAN
+    std::string why;
+    for (const gpu::DeviceSummary& d : gpu::list_devices(&why)) {
+      if (!d.compute) continue;
+      p.device = true;
+      if (d.type != VK_PHYSICAL_DEVICE_TYPE_CPU) p.gpu = true;
+    }
+    if (!p.device) p.reason = "unavailable: " + (why.empty() ? std::string("no Vulkan compute device") : why);
+#else
+    p.reason = "not in this build (configured with SPECULA_WITH_VULKAN=OFF)";
+#endif
+    return p;
+  }();
+  return probe;
+}
+
+} // namespace
 
 std::vector<BackendInfo> backends() {
   std::vector<BackendInfo> list;
   // The order is auto's preference: a real GPU first (lavapipe, the software Vulkan device, is
   // slower than the CPU backends), then the CPU backends.
-  list.push_back(
-      {"vulkan", false, "not in this build yet (it lands with the Vulkan compute path)", true});
+  const VulkanProbe& vk = vulkan_probe();
+  list.push_back({"vulkan", vk.device, vk.reason, true});
+  list.push_back({"vulkan-grid", vk.device, vk.reason, true});
 #if SPECULA_HAS_EMBREE
   list.push_back({"embree", true, "", false});
 #else
@@ -94,7 +129,7 @@ std::string resolve_backend(std::string_view requested, SceneKind kind) {
   };
   if (requested == "auto") {
     // A real GPU first (lavapipe, the software Vulkan device, is slower than the CPU backends).
-    if (available("vulkan")) return "vulkan";
+    if (available("vulkan") && vulkan_probe().gpu) return "vulkan";
     for (const std::string_view name : cpu_preference(kind))
       if (available(name)) return std::string(name);
     throw UnavailableError("no tracing backend is available in this build");
@@ -119,6 +154,13 @@ std::unique_ptr<Tracer> make_tracer(std::string_view name, std::uint32_t packet_
   const std::string backend = resolve_backend(name, kind);
 #if SPECULA_HAS_EMBREE
   if (backend == "embree") return std::make_unique<EmbreeTracer>(packet_width);
+#endif
+#if SPECULA_HAS_VULKAN
+  if (backend == "vulkan" || backend == "vulkan-grid") {
+    gpu::VulkanOptions options;
+    if (backend == "vulkan-grid") options.structure = gpu::GpuStructure::grid;
+    return std::make_unique<gpu::VulkanTracer>(packet_width, options);
+  }
 #endif
   NativeOptions options;
   if (backend == "native-bvh") options.static_structure = StaticStructure::bvh;

@@ -134,6 +134,9 @@ std::uint64_t trace_primary_frame(const Tracer& tracer, const Camera& camera, st
 FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Camera& camera,
                         const TraceSettings& settings, Framebuffer& out, RadianceHook* hook,
                         GuideBuffers* guides) {
+  if (FrameStats device; tracer.render_frame_on_device(layer, camera, settings, out, hook, guides,
+                                                       device))
+    return device;
   const bool stochastic = settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow;
   if (guides != nullptr) guides->resize(std::size_t(out.width()) * out.height());
   const auto start = std::chrono::steady_clock::now();

@@ -19,6 +19,12 @@
 namespace specula {
 
 class SceneLayer;
+class Framebuffer;
+struct Camera;
+struct TraceSettings;
+struct FrameStats;
+struct GuideBuffers;
+class RadianceHook;
 
 /// A tile's primary hits in the tile's trace order (PacketTile), one array per field (SoA), so
 /// that shading runs over them as a wave. Directions are those of the camera rays traced.
@@ -109,6 +115,18 @@ public:
   /// order.
   virtual void intersect_camera(const CameraRays& camera, const PacketTile& tile,
                                 PrimaryHits& hits) const = 0;
+
+  /// Backends that render whole frames on their own device (the Vulkan path's streaming kernels)
+  /// do so here for the settings they support, fill `stats` and return true; render_frame then
+  /// runs no CPU integrator. Any other backend, and any settings a backend's kernels do not cover
+  /// (a mode without kernels, a radiance hook, guide buffers), returns false: the CPU integrators
+  /// run over this tracer's intersect/occluded.
+  virtual bool render_frame_on_device(const SceneLayer& /*layer*/, const Camera& /*camera*/,
+                                      const TraceSettings& /*settings*/, Framebuffer& /*out*/,
+                                      RadianceHook* /*hook*/, GuideBuffers* /*guides*/,
+                                      FrameStats& /*stats*/) const {
+    return false;
+  }
 
   /// Rays per coherent primary packet (1: single rays); the renderer orders primary rays to match.
   [[nodiscard]] virtual std::uint32_t packet_width() const = 0;

@@ -1,0 +1,264 @@
+#pragma once
+/// \file
+/// The Vulkan side of Specula at its lowest level: one instance, one device, one compute queue,
+/// buffers, compute pipelines over storage buffers, and a command recorder with timestamps. Plain
+/// Vulkan 1.3 C API; every failing call throws GpuError naming the call and the VkResult.
+///
+/// Device choice (Context::create): SPECULA_VK_DEVICE (or Options::device_name) picks the first
+/// device whose name contains it (case-insensitive); otherwise a discrete GPU, then an integrated
+/// one, then a virtual one, then a CPU device (lavapipe). Validation layers are enabled when asked
+/// (Options::validation, on by default in Debug builds, or SPECULA_VK_VALIDATION=1) and present.
+
+#include <vulkan/vulkan.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <initializer_list>
+#include <memory>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace specula::gpu {
+
+/// A Vulkan call failed. device_lost() tells the one failure a caller may recover from by
+/// recreating the context (or falling back to the CPU).
+class GpuError : public std::runtime_error {
+public:
+  GpuError(const std::string& what, VkResult result);
+  [[nodiscard]] VkResult result() const noexcept { return result_; }
+  [[nodiscard]] bool device_lost() const noexcept { return result_ == VK_ERROR_DEVICE_LOST; }
+
+private:
+  VkResult result_;
+};
+
+/// Throws GpuError("<call>: <result name>") unless r is VK_SUCCESS.
+void check(VkResult r, const char* call);
+[[nodiscard]] const char* result_name(VkResult r);
+
+struct DeviceInfo {
+  std::string name;
+  VkPhysicalDeviceType type = VK_PHYSICAL_DEVICE_TYPE_OTHER;
+  std::uint32_t api_version = 0;
+  std::string driver; ///< driverName (VkPhysicalDeviceVulkan12Properties)
+  double timestamp_period_ns = 1.0;
+  bool timestamps = false;    ///< the compute queue supports timestamp queries
+  bool float64 = false;       ///< shaderFloat64 (the watertight test's double fallback)
+  std::uint32_t subgroup_size = 0;
+  std::uint64_t max_storage_buffer_range = 0;
+  std::uint32_t max_workgroup_count_x = 0;
+  /// A software rasteriser (lavapipe, SwiftShader): slower than the CPU backends, never `auto`'s.
+  [[nodiscard]] bool is_cpu() const { return type == VK_PHYSICAL_DEVICE_TYPE_CPU; }
+  [[nodiscard]] const char* type_name() const;
+};
+
+/// Where a buffer lives: `device` (device-local; uploads and readbacks go through a staging
+/// buffer unless the memory is also host-visible, as on lavapipe and on resizable-BAR GPUs) or
+/// `host` (host-visible, coherent, persistently mapped: small uniform-like data and readbacks).
+enum class MemoryKind : std::uint8_t { device, host };
+
+class Context;
+
+/// A storage buffer with its memory. Move-only; destroyed with its context alive.
+class Buffer {
+public:
+  Buffer() = default;
+  ~Buffer();
+  Buffer(Buffer&& other) noexcept;
+  Buffer& operator=(Buffer&& other) noexcept;
+  Buffer(const Buffer&) = delete;
+  Buffer& operator=(const Buffer&) = delete;
+
+  [[nodiscard]] VkBuffer handle() const { return buffer_; }
+  [[nodiscard]] VkDeviceSize size() const { return size_; }
+  [[nodiscard]] bool valid() const { return buffer_ != VK_NULL_HANDLE; }
+  /// Mapped memory when host-visible, else nullptr.
+  [[nodiscard]] void* mapped() const { return mapped_; }
+
+  /// Copies bytes into the buffer at `offset` (a staging copy when not host-visible; waits).
+  void upload(const void* data, VkDeviceSize bytes, VkDeviceSize offset = 0);
+  template <class T> void upload(std::span<const T> data, VkDeviceSize offset = 0) {
+    upload(data.data(), data.size_bytes(), offset);
+  }
+  /// Copies bytes out of the buffer (a staging copy when not host-visible; waits).
+  void download(void* data, VkDeviceSize bytes, VkDeviceSize offset = 0) const;
+  template <class T> void download(std::span<T> data, VkDeviceSize offset = 0) const {
+    download(data.data(), data.size_bytes(), offset);
+  }
+
+private:
+  friend class Context;
+  Context* context_ = nullptr;
+  VkBuffer buffer_ = VK_NULL_HANDLE;
+  VkDeviceMemory memory_ = VK_NULL_HANDLE;
+  VkDeviceSize size_ = 0;
+  void* mapped_ = nullptr;
+  void release() noexcept;
+};
+
+/// A compute pipeline whose set 0 binds `storage_buffers` storage buffers at bindings
+/// 0..storage_buffers-1, with `push_constant_bytes` of push constants and the given
+/// specialization constants (constant_id i = values[i]).
+struct PipelineDesc {
+  std::span<const std::uint32_t> spirv;
+  std::uint32_t storage_buffers = 0;
+  std::uint32_t push_constant_bytes = 0;
+  std::vector<std::uint32_t> specialization; ///< constant_id i → value (as 32-bit words)
+  const char* debug_name = "compute";
+};
+
+class Pipeline {
+public:
+  Pipeline() = default;
+  ~Pipeline();
+  Pipeline(Pipeline&& other) noexcept;
+  Pipeline& operator=(Pipeline&& other) noexcept;
+  Pipeline(const Pipeline&) = delete;
+  Pipeline& operator=(const Pipeline&) = delete;
+
+  [[nodiscard]] bool valid() const { return pipeline_ != VK_NULL_HANDLE; }
+  [[nodiscard]] std::uint32_t storage_buffers() const { return bindings_; }
+  [[nodiscard]] std::uint32_t push_constant_bytes() const { return push_bytes_; }
+
+private:
+  friend class Context;
+  friend class Commands;
+  Context* context_ = nullptr;
+  VkShaderModule module_ = VK_NULL_HANDLE;
+  VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
+  VkPipelineLayout layout_ = VK_NULL_HANDLE;
+  VkPipeline pipeline_ = VK_NULL_HANDLE;
+  std::uint32_t bindings_ = 0;
+  std::uint32_t push_bytes_ = 0;
+  void release() noexcept;
+};
+
+/// One command buffer recorded and submitted at once: dispatches with their buffers bound,
+/// barriers between them, timestamps around them. submit() waits for completion and throws
+/// GpuError (device_lost() for a lost device). Descriptor sets are allocated per dispatch from a
+/// pool the recorder owns, freed when it is destroyed.
+class Commands {
+public:
+  explicit Commands(Context& context, std::uint32_t max_timestamps = 64);
+  ~Commands();
+  Commands(const Commands&) = delete;
+  Commands& operator=(const Commands&) = delete;
+
+  /// Binds `pipeline`, its buffers (one per binding, in order) and push constants, and
+  /// dispatches groups_x × groups_y × groups_z workgroups.
+  void dispatch(const Pipeline& pipeline, std::span<const Buffer* const> buffers,
+                const void* push_constants, std::uint32_t groups_x, std::uint32_t groups_y = 1,
+                std::uint32_t groups_z = 1);
+  void dispatch(const Pipeline& pipeline, std::initializer_list<const Buffer*> buffers,
+                const void* push_constants, std::uint32_t groups_x, std::uint32_t groups_y = 1,
+                std::uint32_t groups_z = 1) {
+    dispatch(pipeline, std::span<const Buffer* const>(buffers.begin(), buffers.size()),
+             push_constants, groups_x, groups_y, groups_z);
+  }
+  /// As dispatch, with the workgroup count read from `args` at `offset` (3 uints).
+  void dispatch_indirect(const Pipeline& pipeline, std::span<const Buffer* const> buffers,
+                         const void* push_constants, const Buffer& args, VkDeviceSize offset = 0);
+  /// Every shader write before is visible to every shader read/write and indirect read after.
+  void barrier();
+  void fill(const Buffer& buffer, std::uint32_t value, VkDeviceSize offset = 0,
+            VkDeviceSize bytes = VK_WHOLE_SIZE);
+  void copy(const Buffer& from, const Buffer& to, VkDeviceSize bytes, VkDeviceSize from_offset = 0,
+            VkDeviceSize to_offset = 0);
+  /// Writes a timestamp after all previous commands; returns its index (0, 1, ...). Without
+  /// timestamp support a no-op returning the index anyway (elapsed_ms then gives 0).
+  std::uint32_t timestamp();
+  /// Submits, waits, and resets for recording again (timestamps are kept until the next submit).
+  void submit();
+  /// Milliseconds between two timestamps of the last submit.
+  [[nodiscard]] double elapsed_ms(std::uint32_t from, std::uint32_t to) const;
+
+private:
+  void begin_if_needed();
+  Context& context_;
+  VkCommandBuffer cmd_ = VK_NULL_HANDLE;
+  VkFence fence_ = VK_NULL_HANDLE;
+  VkDescriptorPool pool_ = VK_NULL_HANDLE;
+  VkQueryPool queries_ = VK_NULL_HANDLE;
+  std::uint32_t max_timestamps_ = 0;
+  std::uint32_t timestamps_ = 0;
+  std::vector<std::uint64_t> results_;
+  bool recording_ = false;
+  std::vector<VkDescriptorPool> full_pools_;
+  VkDescriptorSet allocate_set(const Pipeline& pipeline);
+};
+
+class Context {
+public:
+  struct Options {
+    /// Substring of the device name to pick (case-insensitive); empty: SPECULA_VK_DEVICE, then the
+    /// preference order.
+    std::string device_name;
+    /// Enable VK_LAYER_KHRONOS_validation when present (also SPECULA_VK_VALIDATION=1).
+#ifdef NDEBUG
+    bool validation = false;
+#else
+    bool validation = true;
+#endif
+    /// Accept a CPU device (lavapipe). False: only a real GPU will do.
+    bool allow_cpu = true;
+  };
+
+  /// Creates the instance and device. Throws specula::UnavailableError with a one-line reason
+  /// when there is no loader, no device, or no device that fits.
+  static std::unique_ptr<Context> create(const Options& options);
+  static std::unique_ptr<Context> create() { return create(Options{}); }
+  ~Context();
+  Context(const Context&) = delete;
+  Context& operator=(const Context&) = delete;
+
+  [[nodiscard]] const DeviceInfo& info() const { return info_; }
+  [[nodiscard]] VkDevice device() const { return device_; }
+  [[nodiscard]] VkPhysicalDevice physical_device() const { return physical_; }
+  [[nodiscard]] VkQueue queue() const { return queue_; }
+  [[nodiscard]] std::uint32_t queue_family() const { return family_; }
+  [[nodiscard]] VkCommandPool command_pool() const { return command_pool_; }
+  [[nodiscard]] bool validation_enabled() const { return validation_; }
+
+  /// A storage buffer of `bytes` (at least 4) with transfer src/dst usage (and indirect).
+  [[nodiscard]] Buffer make_buffer(VkDeviceSize bytes, MemoryKind kind = MemoryKind::device);
+  [[nodiscard]] Pipeline make_pipeline(const PipelineDesc& desc);
+
+  /// For tests of the recovery paths: the next submit reports VK_ERROR_DEVICE_LOST (and every
+  /// later one, as a real lost device would) without touching the device.
+  void simulate_device_loss() { lost_ = true; }
+  [[nodiscard]] bool lost() const { return lost_; }
+
+  /// One-shot commands on the queue, waited for (uploads, readbacks).
+  void run_now(const std::function<void(VkCommandBuffer)>& record);
+
+private:
+  friend class Commands;
+  Context() = default;
+  VkInstance instance_ = VK_NULL_HANDLE;
+  VkDebugUtilsMessengerEXT messenger_ = VK_NULL_HANDLE;
+  VkPhysicalDevice physical_ = VK_NULL_HANDLE;
+  VkDevice device_ = VK_NULL_HANDLE;
+  VkQueue queue_ = VK_NULL_HANDLE;
+  std::uint32_t family_ = 0;
+  VkCommandPool command_pool_ = VK_NULL_HANDLE;
+  VkPhysicalDeviceMemoryProperties memory_{};
+  DeviceInfo info_;
+  bool validation_ = false;
+  bool lost_ = false;
+  [[nodiscard]] std::uint32_t memory_type(std::uint32_t bits, VkMemoryPropertyFlags want,
+                                          VkMemoryPropertyFlags avoid = 0) const;
+};
+
+/// Every Vulkan device the loader reports (empty when there is no loader or no device), for
+/// `specula info` and the backend factory's availability probe. Never throws.
+struct DeviceSummary {
+  std::string name;
+  VkPhysicalDeviceType type;
+  bool compute = false;
+};
+[[nodiscard]] std::vector<DeviceSummary> list_devices(std::string* why_none = nullptr);
+
+} // namespace specula::gpu

@@ -1,0 +1,93 @@
+#pragma once
+/// \file
+/// The Vulkan backend (`--backend vulkan`, `vulkan-grid`): Specula's own structures on the device
+/// (GpuScene), rays traced by compute kernels. Two ways to use it, both kept:
+///   - as a Tracer: intersect / occluded / intersect_camera upload a batch, dispatch
+///     trace_rays.comp and read the hits back, so every CPU integrator (cast, Whitted, path,
+///     shadow, the cache hook) runs over GPU traversal;
+///   - whole frames on the device (render_frame_on_device): the streaming kernels — eye rays,
+///     traversal + intersection, shadow rays, shading that emits secondary rays with weights —
+///     either as a wavefront (one dispatch per stage, ray queues between them) or as one kernel
+///     (VulkanOptions::execution), for the modes they cover.
+/// Loops are bounded for lavapipe (PLATFORM-NOTES): a ray that uses up its per-dispatch traversal
+/// budget is resumed in a further dispatch, and rays left pending (a driver cut) are counted.
+
+#include "specula/gpu/gpu_scene.h"
+#include "specula/gpu/vk_context.h"
+#include "specula/shared/trace_layout.h"
+#include "specula/trace/tracer.h"
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+namespace specula::gpu {
+
+/// How whole frames run on the device.
+enum class Execution : std::uint8_t {
+  wavefront,     ///< separate dispatches per stage with ray queues (the multi-pass way)
+  single_kernel, ///< one kernel per pixel, bounces in a loop (the branching way)
+};
+
+struct VulkanOptions {
+  GpuStructure structure = GpuStructure::bvh;
+  Execution execution = Execution::wavefront;
+  /// Grid resolution: target cells per triangle of the static set (accel::GridBuildOptions).
+  float grid_density = 4.0f;
+  /// Render cast and Whitted frames with the streaming kernels; false: the CPU integrators over
+  /// GPU traversal (every mode then).
+  bool device_frames = true;
+  Context::Options context;
+};
+
+/// Counters of the latest batch or frame (tests assert cut == 0).
+struct GpuTraceCounters {
+  std::uint64_t rays = 0;
+  std::uint64_t resumed = 0;    ///< rays that used up a dispatch's budget and were resumed
+  std::uint64_t cut = 0;        ///< rays the driver cut off (status still pending): must be 0
+  std::uint64_t dispatches = 0; ///< traversal dispatches
+  double gpu_ms = 0.0;          ///< timestamp time of the dispatches
+};
+
+class DeviceRenderer;
+
+class VulkanTracer final : public Tracer {
+public:
+  /// Opens a device (Context::create) and the kernels. Throws specula::UnavailableError when
+  /// there is no usable Vulkan device.
+  explicit VulkanTracer(std::uint32_t packet_width = 8, VulkanOptions options = {});
+  ~VulkanTracer() override;
+  VulkanTracer(const VulkanTracer&) = delete;
+  VulkanTracer& operator=(const VulkanTracer&) = delete;
+
+  [[nodiscard]] std::string_view name() const override { return name_; }
+  const TracerUpdateStats& update(const SceneLayer& layer) override;
+  [[nodiscard]] const TracerUpdateStats& last_update() const override;
+  void intersect(std::span<const Ray> rays, std::span<Hit> hits) const override;
+  void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded) const override;
+  void intersect_camera(const CameraRays& camera, const PacketTile& tile,
+                        PrimaryHits& hits) const override;
+  bool render_frame_on_device(const SceneLayer& layer, const Camera& camera,
+                              const TraceSettings& settings, Framebuffer& out, RadianceHook* hook,
+                              GuideBuffers* guides, FrameStats& stats) const override;
+  [[nodiscard]] std::uint32_t packet_width() const override { return packet_width_; }
+  void set_packet_width(std::uint32_t width) override;
+
+  [[nodiscard]] const VulkanOptions& options() const { return options_; }
+  [[nodiscard]] Context& context() const { return *context_; }
+  [[nodiscard]] const GpuScene& scene() const { return *scene_; }
+  [[nodiscard]] const GpuTraceCounters& counters() const { return counters_; }
+
+private:
+  struct Kernels;
+  std::uint32_t packet_width_;
+  VulkanOptions options_;
+  std::string name_;
+  std::unique_ptr<Context> context_;
+  std::unique_ptr<GpuScene> scene_;
+  std::unique_ptr<Kernels> kernels_;
+  std::unique_ptr<DeviceRenderer> renderer_;
+  mutable GpuTraceCounters counters_;
+};
+
+} // namespace specula::gpu

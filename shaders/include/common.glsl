@@ -1,0 +1,7 @@
+// Included first by every kernel, after `#version 460` and
+// `#extension GL_GOOGLE_include_directive : require`: the extensions Specula's GLSL uses.
+#ifndef SPECULA_COMMON_GLSL
+#define SPECULA_COMMON_GLSL
+#extension GL_EXT_scalar_block_layout : enable
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : enable
+#endif
