@@ -1,21 +1,336 @@
 #include "specula/gpu/device_renderer.h"
 
 #include "specula/core/error.h"
+#include "specula/gpu/shaders.h"
 #include "specula/gpu/vulkan_tracer.h"
+#include "specula/render/scene_layer.h"
+#include "specula/shared/frame_layout.h"
+#include "specula/trace/camera_rays.h"
 #include "specula/trace/render_frame.h"
 
+#include <algorithm>
+#include <chrono>
+#include <string>
+
 namespace specula::gpu {
+namespace {
+
+static_assert(sizeof(GpuHit) == 32 && sizeof(vec3) == 12);
+
+/// The push constants of every frame kernel (frame_wavefront.glsl's WavePush).
+struct WavePush {
+  std::uint32_t parity = 0;
+  std::uint32_t depth = 0;
+  std::uint32_t count = 0;
+};
+
+/// Waves recorded per submit beyond the max_depth + 1 a tree needs (its last shadow rays).
+constexpr std::uint32_t kExtraWaves = 1;
+/// A frame whose rays are still queued after this many waves (or single-kernel dispatches) is
+/// abandoned with an error: the traversal budget is too small for the scene.
+constexpr std::uint32_t kMaxWaves = 4096;
+/// Single kernel: dispatches per submit, and pixels per chunk (its stacks live in one buffer).
+constexpr std::uint32_t kSingleRounds = 4;
+constexpr std::uint32_t kChunkPixels = 16384;
+/// Wavefront: node slots per pixel (rays of its tree); a tree that needs more is cut, counted
+/// as dropped.
+constexpr std::uint32_t kNodesPerPixel = 8;
+
+std::uint32_t groups(std::uint32_t n) { return (n + 63) / 64; }
+
+template <class T>
+void upload_vector(Context& ctx, Buffer& buffer, const std::vector<T>& data) {
+  const VkDeviceSize bytes = std::max<VkDeviceSize>(16, data.size() * sizeof(T));
+  if (!buffer.valid() || buffer.size() < bytes) buffer = ctx.make_buffer(bytes);
+  if (!data.empty()) buffer.upload(data.data(), data.size() * sizeof(T));
+}
+
+void ensure_size(Context& ctx, Buffer& buffer, VkDeviceSize bytes,
+                 MemoryKind kind = MemoryKind::device) {
+  bytes = std::max<VkDeviceSize>(16, bytes);
+  if (!buffer.valid() || buffer.size() < bytes) buffer = ctx.make_buffer(bytes, kind);
+}
+
+} // namespace
+
+struct DeviceRenderer::Pipelines {
+  Features features;
+  Pipeline args, eye, trace, shade, shadow, fold, single;
+};
 
 DeviceRenderer::DeviceRenderer(Context& context, const GpuScene& scene, Execution execution)
     : context_(context), scene_(scene), execution_(execution) {}
 
 DeviceRenderer::~DeviceRenderer() = default;
 
-bool DeviceRenderer::supports(const TraceSettings&, bool, bool) const { return false; }
+bool DeviceRenderer::supports(const TraceSettings& settings, bool has_hook,
+                              bool has_guides) const {
+  return (settings.mode == TraceMode::Cast || settings.mode == TraceMode::Whitted) && !has_hook &&
+         !has_guides;
+}
 
-void DeviceRenderer::render(const SceneLayer&, const Camera&, const TraceSettings&, Framebuffer&,
-                            FrameStats&, GpuTraceCounters&) {
-  throw Error("vulkan", "device frames are not implemented yet");
+void DeviceRenderer::upload_tables(const SceneLayer& layer) {
+  const SceneTables& t = layer.tables();
+  const SceneDelta& d = layer.delta();
+  // The delta says what changed since the previous sync: trusted only when this renderer saw
+  // that one; otherwise (first frame, skipped syncs) everything goes up.
+  const bool all = tables_sync_ == 0 || layer.syncs() != tables_sync_ + 1;
+  if (tables_sync_ == layer.syncs()) return;
+  if (all || d.materials_changed || !d.instances_added.empty() || !d.instances_removed.empty() ||
+      d.static_rebuilt)
+    upload_vector(context_, materials_, t.materials);
+  if (all || d.lights_changed) upload_vector(context_, lights_, t.lights);
+  if (all || d.geometry_relocated || d.static_rebuilt || !d.meshes_added.empty() ||
+      !d.instances_added.empty() || !d.instances_deformed.empty())
+    upload_vector(context_, normals_, t.normals);
+  light_count_ = std::uint32_t(t.lights.size());
+  tables_sync_ = layer.syncs();
+}
+
+void DeviceRenderer::ensure_pipelines(const Features& f) {
+  if (pipelines_ && pipelines_->features == f) return;
+  auto p = std::make_unique<Pipelines>();
+  p->features = f;
+  const std::vector<std::uint32_t> spec = {f.whitted ? 1u : 0u, f.shadows ? 1u : 0u,
+                                           f.dielectrics ? 1u : 0u, f.specular ? 1u : 0u,
+                                           f.lights};
+  const auto make = [&](const char* name) {
+    return context_.make_pipeline(
+        {shader_spirv(name), kFrameBindings, sizeof(WavePush), spec, name});
+  };
+  if (execution_ == Execution::wavefront) {
+    p->args = make("frame_args");
+    p->eye = make("frame_eye");
+    p->trace = make("frame_trace");
+    p->shade = make("frame_shade");
+    p->shadow = make("frame_shadow");
+    p->fold = make("frame_fold");
+  } else {
+    p->single = make("frame_single");
+  }
+  pipelines_ = std::move(p);
+}
+
+void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
+  const VkDeviceSize range = context_.info().max_storage_buffer_range;
+  ensure_size(context_, params_, sizeof(GpuFrameParams), MemoryKind::host);
+  ensure_size(context_, counters_buffer_, sizeof(GpuFrameCounters), MemoryKind::host);
+  ensure_size(context_, image_, VkDeviceSize(pixels) * 16);
+  ensure_size(context_, primary_buffer_, VkDeviceSize(pixels) * 4);
+  if (execution_ == Execution::wavefront) {
+    const std::uint64_t per_pixel = f.whitted && f.specular ? kNodesPerPixel : 1;
+    node_capacity_ = std::uint32_t(std::min<std::uint64_t>(
+        std::uint64_t(pixels) * per_pixel, range / sizeof(GpuFrameNode)));
+    node_capacity_ = std::max(node_capacity_, pixels);
+    const std::uint64_t shadow_slots =
+        f.whitted ? std::uint64_t(node_capacity_) * std::max(1u, f.lights) : 1;
+    shadow_capacity_ =
+        std::uint32_t(std::min<std::uint64_t>(shadow_slots, range / sizeof(GpuShadowRay)));
+    ensure_size(context_, nodes_, VkDeviceSize(node_capacity_) * sizeof(GpuFrameNode));
+    ensure_size(context_, hits_, VkDeviceSize(node_capacity_) * sizeof(GpuHit));
+    ensure_size(context_, queues_, VkDeviceSize(node_capacity_) * 8);
+    ensure_size(context_, shadows_, VkDeviceSize(shadow_capacity_) * sizeof(GpuShadowRay));
+    ensure_size(context_, shadow_queues_, VkDeviceSize(shadow_capacity_) * 8);
+  } else {
+    chunk_pixels_ = std::min(pixels, kChunkPixels);
+    ensure_size(context_, nodes_,
+                VkDeviceSize(chunk_pixels_) * kStackFrames * sizeof(GpuStackFrame));
+    ensure_size(context_, queues_, VkDeviceSize(chunk_pixels_) * 4);
+    ensure_size(context_, hits_, 16);
+    ensure_size(context_, shadows_, 16);
+    ensure_size(context_, shadow_queues_, 16);
+  }
+}
+
+std::vector<const Buffer*> DeviceRenderer::bindings() const {
+  std::vector<const Buffer*> b(scene_.bindings().begin(), scene_.bindings().end());
+  for (const Buffer* own : {&params_, &materials_, &lights_, &normals_, &counters_buffer_, &image_,
+                            &primary_buffer_, &nodes_, &hits_, &queues_, &shadows_,
+                            &shadow_queues_})
+    b.push_back(own);
+  return b;
+}
+
+void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t pixels) {
+  const Pipelines& p = *pipelines_;
+  const std::vector<const Buffer*> buffers = bindings();
+  GpuFrameCounters init{};
+  init.node_count = pixels;
+  init.queue_count[0] = pixels;
+  counters_buffer_.upload(&init, sizeof init);
+
+  Commands cmd(context_, 8);
+  WavePush push;
+  const std::uint32_t t0 = cmd.timestamp();
+  cmd.dispatch(p.eye, buffers, &push, groups(pixels));
+  cmd.barrier();
+  ++dispatches_;
+  const std::uint32_t batch =
+      settings.mode == TraceMode::Cast ? 1 + kExtraWaves : settings.max_depth + 1 + kExtraWaves;
+  std::uint32_t parity = 0;
+  GpuFrameCounters c{};
+  for (std::uint32_t waves = 0;;) {
+    const std::uint32_t begin = waves == 0 ? t0 : cmd.timestamp();
+    for (std::uint32_t w = 0; w < batch; ++w, parity ^= 1u) {
+      push.parity = parity;
+      cmd.dispatch(p.args, buffers, &push, 1);
+      cmd.barrier();
+      cmd.dispatch_indirect(p.trace, buffers, &push, counters_buffer_,
+                            offsetof(GpuFrameCounters, ray_args));
+      cmd.barrier();
+      cmd.dispatch_indirect(p.shade, buffers, &push, counters_buffer_,
+                            offsetof(GpuFrameCounters, ray_args));
+      cmd.barrier();
+      if (settings.mode == TraceMode::Whitted && settings.shadows && p.features.lights > 0) {
+        cmd.dispatch_indirect(p.shadow, buffers, &push, counters_buffer_,
+                              offsetof(GpuFrameCounters, shadow_args));
+        cmd.barrier();
+      }
+      dispatches_ += 1;
+    }
+    const std::uint32_t end = cmd.timestamp();
+    cmd.submit();
+    gpu_ms_ += cmd.elapsed_ms(begin, end);
+    waves += batch;
+    counters_buffer_.download(&c, sizeof c);
+    // The last wave appended to the queues of `parity`: empty means every ray is done.
+    if (c.queue_count[parity] == 0 && c.shadow_queue_count[parity] == 0) break;
+    if (waves >= kMaxWaves)
+      throw Error("vulkan", "device frame: rays still queued after " + std::to_string(waves) +
+                                " waves (traversal budget " + std::to_string(budget_) +
+                                " too small for this scene)");
+  }
+
+  // The fold, deepest level first.
+  const std::uint32_t nodes = std::min(c.node_count, node_capacity_);
+  const std::uint32_t deepest = settings.mode == TraceMode::Cast ? 0 : settings.max_depth;
+  const std::uint32_t begin = cmd.timestamp();
+  for (std::uint32_t d = deepest + 1; d-- > 0;) {
+    push = WavePush{0, d, nodes};
+    cmd.dispatch(p.fold, buffers, &push, groups(nodes));
+    cmd.barrier();
+    ++dispatches_;
+  }
+  const std::uint32_t end = cmd.timestamp();
+  cmd.submit();
+  gpu_ms_ += cmd.elapsed_ms(begin, end);
+}
+
+void DeviceRenderer::run_single(std::uint32_t pixels) {
+  const Pipelines& p = *pipelines_;
+  const std::vector<const Buffer*> buffers = bindings();
+  const GpuFrameCounters init{};
+  counters_buffer_.upload(&init, sizeof init);
+  GpuFrameParams params{};
+  params_.download(&params, sizeof params);
+  Commands cmd(context_, 4);
+  const WavePush push;
+  for (std::uint32_t first = 0; first < pixels; first += chunk_pixels_) {
+    params.first_pixel = first;
+    params.chunk_pixels = std::min(chunk_pixels_, pixels - first);
+    params_.upload(&params, sizeof params);
+    cmd.fill(queues_, 0xFFFFFFFFu, 0, VkDeviceSize(params.chunk_pixels) * 4); // kWalkNew
+    cmd.barrier();
+    for (std::uint32_t rounds = 0;;) {
+      const std::uint32_t begin = cmd.timestamp();
+      for (std::uint32_t r = 0; r < kSingleRounds; ++r) {
+        if (r + 1 == kSingleRounds) {
+          cmd.fill(counters_buffer_, 0, offsetof(GpuFrameCounters, pending), 4);
+          cmd.barrier();
+        }
+        cmd.dispatch(p.single, buffers, &push, groups(params.chunk_pixels));
+        cmd.barrier();
+        ++dispatches_;
+      }
+      const std::uint32_t end = cmd.timestamp();
+      cmd.submit();
+      gpu_ms_ += cmd.elapsed_ms(begin, end);
+      rounds += kSingleRounds;
+      GpuFrameCounters c{};
+      counters_buffer_.download(&c, sizeof c);
+      if (c.pending == 0) break;
+      if (rounds >= kMaxWaves)
+        throw Error("vulkan", "device frame: " + std::to_string(c.pending) +
+                                  " pixels unfinished after " + std::to_string(rounds) +
+                                  " dispatches (traversal budget " + std::to_string(budget_) +
+                                  " too small for this scene)");
+    }
+  }
+}
+
+void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
+                            const TraceSettings& settings, Framebuffer& out, FrameStats& stats,
+                            GpuTraceCounters& counters) {
+  if (!supports(settings, false, false))
+    throw Error("vulkan", std::string("device frames do not render mode ") +
+                              trace_mode_name(settings.mode));
+  const auto start = std::chrono::steady_clock::now();
+  const std::uint32_t width = out.width(), height = out.height();
+  const std::uint32_t pixels = width * height;
+  try {
+    upload_tables(layer);
+    const SceneFeatures& scene = layer.emitters().features();
+    const bool whitted = settings.mode == TraceMode::Whitted;
+    Features f{whitted, whitted && settings.shadows, whitted && scene.dielectrics,
+               whitted && (scene.mirrors || scene.dielectrics), light_count_};
+    ensure_pipelines(f);
+    ensure_buffers(pixels, f);
+
+    const CameraRays rays(camera, width, height, layer.render_origin());
+    GpuFrameParams params{};
+    params.camera_origin = rays.origin;
+    params.camera_forward = rays.forward;
+    params.camera_right = rays.right;
+    params.camera_up = rays.up;
+    params.inv_width = rays.inv_width;
+    params.inv_height = rays.inv_height;
+    params.width = width;
+    params.height = height;
+    params.background = settings.background;
+    params.min_weight = settings.min_weight;
+    params.max_depth = settings.max_depth;
+    params.light_count = light_count_;
+    params.node_capacity = node_capacity_;
+    params.shadow_capacity = shadow_capacity_;
+    params.budget = budget_;
+    params.pixel_count = pixels;
+    params.first_pixel = 0;
+    params.chunk_pixels = pixels;
+    params_.upload(&params, sizeof params);
+
+    gpu_ms_ = 0.0;
+    dispatches_ = 0;
+    if (execution_ == Execution::wavefront)
+      run_wavefront(settings, pixels);
+    else
+      run_single(pixels);
+
+    GpuFrameCounters c{};
+    counters_buffer_.download(&c, sizeof c);
+    std::vector<vec4> image(pixels);
+    image_.download(image.data(), image.size() * sizeof(vec4));
+    primary_.resize(pixels);
+    primary_buffer_.download(primary_.data(), primary_.size() * 4);
+    std::span<vec3> px = out.pixels();
+    for (std::uint32_t i = 0; i < pixels; ++i) px[i] = vec3(image[i]);
+
+    stats.rays = RayCounts{};
+    for (int k = 0; k < kRayKindCount; ++k) stats.rays.count[k] = c.rays[k];
+    stats.rays.dropped = c.dropped;
+    stats.rays.nonfinite = c.nonfinite;
+    counters.rays = stats.rays.total();
+    counters.resumed = c.resumed;
+    counters.cut = c.cut;
+    counters.dispatches = dispatches_;
+    counters.gpu_ms = gpu_ms_;
+  } catch (const GpuError& e) {
+    throw GpuError(std::string("vulkan device frame (") + trace_mode_name(settings.mode) + ", " +
+                       (execution_ == Execution::wavefront ? "wavefront" : "single kernel") +
+                       "): " + e.what(),
+                   e.result());
+  }
+  stats.trace_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
 } // namespace specula::gpu

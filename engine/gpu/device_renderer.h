@@ -2,14 +2,26 @@
 /// \file
 /// Whole frames on the device: the streaming ray tracer's kernels (Purcell et al. 2002) — eye-ray
 /// generation, traversal + intersection, shadow rays, shading that emits secondary rays with
-/// weights (no recursion) — over the scene GpuScene holds, as a wavefront (one dispatch per stage,
-/// ray queues between them) or as a single kernel (VulkanTracer's Execution).
-///
-/// GROUNDWORK STUB: supports nothing yet (VulkanTracer then runs the CPU integrators over GPU
-/// traversal).
+/// weights (no recursion) — over the scene GpuScene holds, for cast and Whitted mode, in one of
+/// two execution styles (VulkanTracer's Execution), both giving the same image:
+///   - wavefront (shaders/frame_{eye,args,trace,shade,shadow,fold}.comp): one dispatch per stage,
+///     sizes read by vkCmdDispatchIndirect from atomic queue counters; every ray of a pixel's
+///     Whitted tree is a node appended to one buffer, shadow rays own slots in another, and after
+///     the last wave a fold per depth (deepest first) sums each tree as the CPU does;
+///   - single kernel (shaders/frame_single.comp): one invocation per pixel walks its tree depth
+///     first over a fixed stack of frames in a buffer (shaders/shared/frame_layout.h).
+/// The shading mirrors engine/trace (shaders/include/shading.glsl). Loops are bounded for
+/// lavapipe's silent loop cap: every trace gets a per-dispatch budget; a ray (wavefront) or a
+/// walk (single kernel) that uses it up is resumed by a later dispatch, and rays the driver cut
+/// are counted (GpuTraceCounters::cut, must be 0).
 
 #include "specula/gpu/gpu_scene.h"
 #include "specula/gpu/vk_context.h"
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
 
 namespace specula {
 class SceneLayer;
@@ -31,16 +43,54 @@ public:
   DeviceRenderer(const DeviceRenderer&) = delete;
   DeviceRenderer& operator=(const DeviceRenderer&) = delete;
 
-  /// Whether these settings run on the device (modes with kernels, no hook, no guides).
+  /// Whether these settings run on the device: cast and Whitted without a radiance hook and
+  /// without denoiser guides.
   [[nodiscard]] bool supports(const TraceSettings& settings, bool has_hook, bool has_guides) const;
-  /// Renders one frame into `out`; `counters` gets the frame's ray counts and GPU time.
+  /// Renders one frame of `layer` (GpuScene already updated from it) into `out`; `stats` gets the
+  /// ray counts and trace_ms, `counters` the device's counts and GPU time. Throws GpuError
+  /// (device_lost() for a lost device) naming the device frame.
   void render(const SceneLayer& layer, const Camera& camera, const TraceSettings& settings,
               Framebuffer& out, FrameStats& stats, GpuTraceCounters& counters);
 
+  /// The instance slot each pixel's primary ray hit in the last frame (kNoIndex: a miss), row
+  /// major: for comparing primary visibility with the CPU backends.
+  [[nodiscard]] std::span<const std::uint32_t> primary_instances() const { return primary_; }
+
+  /// Traversal iterations one invocation may spend per dispatch (default kDefaultBudget); lower
+  /// values force resumption (tests).
+  void set_budget(std::uint32_t budget) { budget_ = budget; }
+  static constexpr std::uint32_t kDefaultBudget = 6144;
+
 private:
+  struct Pipelines;
+  struct Features {
+    bool whitted, shadows, dielectrics, specular;
+    std::uint32_t lights;
+    friend bool operator==(const Features&, const Features&) = default;
+  };
+
+  void upload_tables(const SceneLayer& layer);
+  void ensure_pipelines(const Features& features);
+  void ensure_buffers(std::uint32_t pixels, const Features& features);
+  void run_wavefront(const TraceSettings& settings, std::uint32_t pixels);
+  void run_single(std::uint32_t pixels);
+  [[nodiscard]] std::vector<const Buffer*> bindings() const;
+
   Context& context_;
   const GpuScene& scene_;
   Execution execution_;
+  std::uint32_t budget_ = kDefaultBudget;
+  std::unique_ptr<Pipelines> pipelines_;
+  // Tables at bindings 8.. (frame_layout.h).
+  Buffer params_, materials_, lights_, normals_, counters_buffer_, image_, primary_buffer_;
+  Buffer nodes_, hits_, queues_, shadows_, shadow_queues_;
+  std::uint64_t tables_sync_ = 0; ///< SceneLayer::syncs() of the tables uploaded (0: none)
+  std::uint32_t node_capacity_ = 0, shadow_capacity_ = 0, chunk_pixels_ = 0;
+  std::uint32_t light_count_ = 0;
+  std::uint32_t max_depth_ = 0;
+  std::vector<std::uint32_t> primary_;
+  double gpu_ms_ = 0.0;
+  std::uint64_t dispatches_ = 0;
 };
 
 } // namespace specula::gpu

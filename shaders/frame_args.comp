@@ -1,0 +1,21 @@
+#version 460
+// Wavefront: before a wave, the indirect dispatch sizes of its ray and shadow queues (the ones
+// the previous wave appended to), and the queues it appends to emptied.
+#extension GL_GOOGLE_include_directive : require
+#include "include/common.glsl"
+#include "include/frame_wavefront.glsl"
+
+layout(local_size_x = 1) in;
+
+void main() {
+  uint rays = min(counters.queue_count[pc.parity], params.node_capacity);
+  uint shadow_rays = min(counters.shadow_queue_count[pc.parity], params.shadow_capacity);
+  counters.ray_args.x = (rays + 63u) / 64u;
+  counters.ray_args.y = 1u;
+  counters.ray_args.z = 1u;
+  counters.shadow_args.x = (shadow_rays + 63u) / 64u;
+  counters.shadow_args.y = 1u;
+  counters.shadow_args.z = 1u;
+  counters.queue_count[1u - pc.parity] = 0u;
+  counters.shadow_queue_count[1u - pc.parity] = 0u;
+}

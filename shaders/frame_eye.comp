@@ -1,0 +1,32 @@
+#version 460
+// Wavefront, eye-ray generation: node p is pixel p's primary ray, queued for wave 0.
+#extension GL_GOOGLE_include_directive : require
+#include "include/common.glsl"
+#include "include/frame_wavefront.glsl"
+
+layout(local_size_x = 64) in;
+
+void main() {
+  uint p = gl_GlobalInvocationID.x;
+  if (p >= params.pixel_count) return;
+  GpuFrameNode n;
+  n.origin = params.camera_origin;
+  n.tfar = kInfinity;
+  n.direction = camera_direction(p % params.width, p / params.width);
+  n.pixel = p;
+  n.throughput = vec3(1.0);
+  n.depth = 0u;
+  n.radiance = vec3(0.0);
+  n.weight = 1.0;
+  n.kind = kKindPrimary;
+  n.status = kRayPending;
+  n.child_reflect = kNoIndex;
+  n.child_refract = kNoIndex;
+  n.shadow_first = 0u;
+  n.shadow_count = 0u;
+  n._pad0 = 0u;
+  n._pad1 = 0u;
+  nodes[p] = n;
+  queues[p] = p;
+  primary_instance[p] = kNoIndex;
+}

@@ -1,0 +1,28 @@
+#version 460
+// Wavefront, shadow rays: occlusion of the shadow rays the previous wave's shading emitted (or
+// that used up a dispatch's budget and were queued again).
+#extension GL_GOOGLE_include_directive : require
+#include "include/common.glsl"
+#include "include/frame_wavefront.glsl"
+
+layout(local_size_x = 64) in;
+
+void main() {
+  uint i = gl_GlobalInvocationID.x;
+  if (i >= min(counters.shadow_queue_count[pc.parity], params.shadow_capacity)) return;
+  uint s = shadow_queues[pc.parity * params.shadow_capacity + i];
+  shadows[s].status = kRayPending;
+  GpuShadowRay ray = shadows[s];
+  uint budget = params.budget;
+  bool occluded = false;
+  uint status = trace_any(ray.origin, ray.direction, 0.0, ray.tfar, budget, occluded);
+  if (status == kRayDone) {
+    atomicAdd(counters.rays[kKindShadow], 1u);
+    shadows[s].visible = occluded ? 0u : 1u;
+    shadows[s].status = kRayDone;
+  } else if (status == kRayBudget) {
+    atomicAdd(counters.resumed, 1u);
+    shadows[s].status = kRayBudget;
+    push_shadow(s);
+  }
+}

@@ -1,0 +1,31 @@
+#version 460
+// Wavefront, traversal + intersection of a wave's rays. A ray that uses up this dispatch's
+// traversal budget is queued for the next wave, which traces it again (trace.glsl's contract:
+// kRayBudget means "call again in a later dispatch").
+#extension GL_GOOGLE_include_directive : require
+#include "include/common.glsl"
+#include "include/frame_wavefront.glsl"
+
+layout(local_size_x = 64) in;
+
+void main() {
+  uint i = gl_GlobalInvocationID.x;
+  if (i >= min(counters.queue_count[pc.parity], params.node_capacity)) return;
+  uint n = queues[pc.parity * params.node_capacity + i];
+  // Pending until one of the exits below: a ray still pending afterwards was cut by the driver.
+  nodes[n].status = kRayPending;
+  GpuFrameNode node = nodes[n];
+  uint budget = params.budget;
+  GpuHit hit;
+  hit.instance = kNoIndex;
+  uint status = trace_closest(node.origin, node.direction, 0.0, node.tfar, budget, hit);
+  if (status == kRayDone) {
+    hits[n] = hit;
+    atomicAdd(counters.rays[node.kind], 1u);
+    nodes[n].status = kRayDone;
+  } else if (status == kRayBudget) {
+    atomicAdd(counters.resumed, 1u);
+    nodes[n].status = kRayBudget;
+    push_ray(n);
+  }
+}

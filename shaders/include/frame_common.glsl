@@ -1,0 +1,18 @@
+// What every frame kernel shares: the scene (trace.glsl), the frame's tables and counters
+// (shading.glsl), and the scene features, as specialisation constants so that a scene pays only
+// for what it has (no refraction code without dielectrics, no shadow rays with shadows off, the
+// light loop unrolled to the scene's light count).
+#ifndef SPECULA_FRAME_COMMON_GLSL
+#define SPECULA_FRAME_COMMON_GLSL
+
+#include "shared/frame_layout.h"
+#include "include/trace.glsl"
+#include "include/shading.glsl"
+
+layout(constant_id = 0) const bool kWhitted = true;     // false: cast mode
+layout(constant_id = 1) const bool kShadows = true;     // trace shadow rays
+layout(constant_id = 2) const bool kDielectrics = true; // some material transmits
+layout(constant_id = 3) const bool kSpecular = true;    // some material reflects or transmits
+layout(constant_id = 4) const uint kLightCount = 0u;
+
+#endif
