@@ -1,19 +1,29 @@
 #pragma once
 /// \file
 /// The scene on the device: the buffers shaders/include/trace.glsl reads at bindings
-/// [0, kSceneBindings) of set 0, brought up to date from the scene layer's delta.
+/// [0, kSceneBindings) of set 0 (shaders/shared/gpu_scene_layout.h), brought up to date from the
+/// scene layer's delta.
 ///
-/// GROUNDWORK STUB: uploads the layer's flat pools as they are (positions, triangles, meshes,
-/// instances) for trace.glsl's brute-force stub. The two-level BVH / grid version replaces the
-/// implementation and keeps the interface.
+/// The structures are the native backend's (a NativeTracer with the static set in a binned-SAH
+/// BVH or a uniform grid owns them: per-mesh BVHs shared by rigid instances, deforming instances'
+/// own refitted BVHs, the top level over dynamic instances' world bounds); this class only flattens
+/// their arrays into the device layout. Uploads follow the delta: a frame where nothing changed
+/// uploads nothing; one where only instances moved uploads their table entries, their top-level
+/// entries and the top level; a deformation uploads the instance's vertices and the node array;
+/// anything else (a static rebuild, instances or meshes added or removed, relocated pools)
+/// uploads everything.
 
+#include "specula/accel/native/native_tracer.h"
 #include "specula/gpu/vk_context.h"
+#include "specula/shared/gpu_scene_layout.h"
 #include "specula/shared/trace_layout.h"
 #include "specula/trace/tracer.h"
 
 #include <array>
 #include <cstdint>
 #include <span>
+#include <unordered_map>
+#include <vector>
 
 namespace specula {
 class SceneLayer;
@@ -25,27 +35,71 @@ namespace specula::gpu {
 /// through a top-level BVH over per-mesh BVHs).
 enum class GpuStructure : std::uint8_t { bvh, grid };
 
+/// What the latest update() wrote to the device.
+struct GpuUploadStats {
+  std::uint64_t bytes = 0;
+  std::uint32_t writes = 0; ///< buffer uploads (whole buffers or ranges)
+  bool full = false;        ///< every buffer was rewritten
+};
+
 class GpuScene {
 public:
-  GpuScene(Context& context, GpuStructure structure);
+  /// `grid_density`: target cells per static triangle (GpuStructure::grid).
+  GpuScene(Context& context, GpuStructure structure, float grid_density = 4.0f);
   GpuScene(const GpuScene&) = delete;
   GpuScene& operator=(const GpuScene&) = delete;
 
   /// Applies the layer's latest delta; the first call uploads everything.
   const TracerUpdateStats& update(const SceneLayer& layer);
-  [[nodiscard]] const TracerUpdateStats& last_update() const { return last_; }
+  [[nodiscard]] const TracerUpdateStats& last_update() const { return native_.last_update(); }
+  [[nodiscard]] const GpuUploadStats& last_upload() const { return upload_; }
 
   /// The buffers of bindings [0, kSceneBindings), in binding order.
   [[nodiscard]] std::span<const Buffer* const> bindings() const { return bindings_; }
   [[nodiscard]] GpuStructure structure() const { return structure_; }
   [[nodiscard]] Context& context() const { return context_; }
+  /// Stack entries a ray's walk may need (at most kTraceStackSize).
+  [[nodiscard]] std::uint32_t stack_depth() const { return stack_depth_; }
+  /// The CPU structures the device copies (tests compare against them).
+  [[nodiscard]] const NativeTracer& native() const { return native_; }
 
 private:
+  /// The top level's part of the arrays (rewritten alone when only instances moved).
+  struct TopLayout {
+    std::vector<GpuTopEntry> entries;
+    std::vector<BvhNode> nodes;
+    std::vector<std::uint32_t> indices;
+  };
+  void flatten(const SceneTables& tables);
+  [[nodiscard]] TopLayout flatten_top() const;
+  void upload_all(const SceneTables& tables);
+  /// Rewrites the top level's entries, nodes and indices in place; false when its shape changed.
+  bool upload_top();
+  void write_header();
+  /// Uploads `bytes` at `offset` of a binding's buffer (a whole-buffer write may grow it).
+  void write(std::uint32_t binding, const void* data, std::size_t bytes, std::size_t offset = 0);
+  template <class T> void write_vector(std::uint32_t binding, const std::vector<T>& data) {
+    write(binding, data.data(), data.size() * sizeof(T));
+  }
+
   Context& context_;
   GpuStructure structure_;
+  NativeTracer native_;
   std::array<Buffer, kSceneBindings> buffers_;
   std::array<const Buffer*, kSceneBindings> bindings_{};
-  TracerUpdateStats last_;
+  bool uploaded_ = false;
+  GpuUploadStats upload_;
+  std::uint32_t stack_depth_ = 0;
+  // The flattened arrays as last uploaded (bindings 4–7) and where the top level lies in them.
+  GpuSceneHeader header_{};
+  std::vector<BvhNode> nodes_;
+  std::vector<std::uint32_t> words_;
+  std::vector<std::uint32_t> traced_;
+  struct BlasPlace {
+    std::uint32_t node_base, index_base, tri_base;
+  };
+  std::unordered_map<const accel::Bvh*, BlasPlace> blas_; ///< each distinct per-mesh BVH
+  TopLayout top_;
 };
 
 } // namespace specula::gpu

@@ -34,6 +34,13 @@ struct VulkanOptions {
   Execution execution = Execution::wavefront;
   /// Grid resolution: target cells per triangle of the static set (accel::GridBuildOptions).
   float grid_density = 4.0f;
+  /// Traversal steps (nodes, triangles, cells, pops) a ray may take per dispatch of
+  /// trace_rays.comp before it is saved and resumed in the next. Lavapipe ends every loop of a
+  /// SIMD vector of 8 after 65,535 iterations per dispatch (all loops together), so the walk's
+  /// budget plus the kernel's other loops (saving and restoring the stack, the static hit's
+  /// binary search: a few hundred at most) must stay below that: 32,768 leaves half the cap as
+  /// margin and resumes almost no ray (the bunny's longest walks take a few hundred steps).
+  std::uint32_t traversal_budget = 32768;
   /// Render cast and Whitted frames with the streaming kernels; false: the CPU integrators over
   /// GPU traversal (every mode then).
   bool device_frames = true;
@@ -88,6 +95,10 @@ private:
   std::unique_ptr<Kernels> kernels_;
   std::unique_ptr<DeviceRenderer> renderer_;
   mutable GpuTraceCounters counters_;
+
+  /// Traces `rays` through trace_rays.comp (with kernels_->mutex held): closest hits into `hits`
+  /// or occlusion into `occluded` (the other null).
+  void trace_locked(std::span<const Ray> rays, Hit* hits, std::uint8_t* occluded) const;
 };
 
 } // namespace specula::gpu

@@ -10,84 +10,588 @@
 // sets `occluded`) or kRayBudget when
 // `budget` (loop iterations left to this invocation in this dispatch) ran out first.
 //
-// THIS FILE IS THE GROUNDWORK STUB: brute force over every instance and triangle, Möller–Trumbore.
-// The BVH / grid traversal replaces its body, not its contract.
+// Each call starts a fresh traversal. After kRayBudget, trace_closest's `hit` holds the closest hit
+// found so far (instance kNoIndex if none): a kernel that cannot keep the traversal state resumes
+// with trace_closest_resume (same arguments, same `hit`), which traces again over (tnear, hit.t)
+// and keeps the old hit unless a closer one turns up — the result equals an uninterrupted trace
+// (up to which of two triangles at exactly the same t wins), but a ray whose walk needs more
+// than one dispatch's budget before its first hit makes no progress that way. trace_rays.comp
+// instead saves the whole state (trace_state_save / trace_state_load) and loses nothing.
+//
+// The traversal mirrors the native backend step for step (engine/accel: PreparedRay::make, the
+// conservative slab test, Woop et al.'s watertight test with its double fallback, Bvh::traverse,
+// UniformGrid's 3D-DDA, NativeTracer's two levels), with `precise` wherever the C++ build rounds
+// each operation on its own, so hits are bit-identical to native-bvh / native-grid on the same
+// structures. Layout: shaders/shared/gpu_scene_layout.h. One flat loop, one iteration per step (a
+// node visited, a triangle tested, a grid cell entered, a stack entry popped): the budget counts
+// them all, and the state between two steps is all there is to save.
 #ifndef SPECULA_TRACE_GLSL
 #define SPECULA_TRACE_GLSL
 
 #include "shared/scene_layout.h"
 #include "shared/trace_layout.h"
+#include "shared/accel_layout.h"
+#include "shared/gpu_scene_layout.h"
 
 layout(std430, set = 0, binding = 0) readonly buffer ScenePositions { float positions[]; };
 layout(std430, set = 0, binding = 1) readonly buffer SceneTriangles { uint triangles[]; };
 layout(std430, set = 0, binding = 2) readonly buffer SceneMeshes { GpuMesh meshes[]; };
 layout(std430, set = 0, binding = 3) readonly buffer SceneInstances { GpuInstance instances[]; };
-layout(std430, set = 0, binding = 4) readonly buffer SceneHeader { uint instance_count; };
-layout(std430, set = 0, binding = 5) readonly buffer SceneUnused5 { uint unused5[]; };
-layout(std430, set = 0, binding = 6) readonly buffer SceneUnused6 { uint unused6[]; };
-layout(std430, set = 0, binding = 7) readonly buffer SceneUnused7 { uint unused7[]; };
+layout(std430, set = 0, binding = 4) readonly buffer SceneHeader {
+  GpuSceneHeader scene_header;
+  GpuTopEntry scene_top[];
+};
+layout(std430, set = 0, binding = 5) readonly buffer SceneNodes { BvhNode scene_nodes[]; };
+layout(std430, set = 0, binding = 6) readonly buffer SceneWords { uint scene_words[]; };
+layout(std430, set = 0, binding = 7) readonly buffer SceneTraced { uint scene_traced[]; };
+
+// The groundwork's name for the instance count (kernels written against it keep working).
+#define instance_count scene_header.instance_count
 
 vec3 scene_position(uint i) { return vec3(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]); }
 
-// Returns true on a hit within (tnear, tmax); t, u, v out.
-bool stub_triangle(vec3 org, vec3 dir, vec3 p0, vec3 p1, vec3 p2, float tnear, float tmax,
-                   out float t, out float u, out float v) {
-  t = 0.0; u = 0.0; v = 0.0;
-  vec3 e1 = p1 - p0, e2 = p2 - p0;
-  vec3 p = cross(dir, e2);
-  float det = dot(e1, p);
-  if (det == 0.0) return false;
-  float inv_det = 1.0 / det;
-  vec3 s = org - p0;
-  u = dot(s, p) * inv_det;
-  if (!(u >= 0.0) || u > 1.0) return false;
-  vec3 q = cross(s, e1);
-  v = dot(dir, q) * inv_det;
-  if (!(v >= 0.0) || u + v > 1.0) return false;
-  t = dot(e2, q) * inv_det;
-  return t > tnear && t < tmax;
+const float kTraceInf = 1.0 / 0.0;
+const uint kStaticHit = 0xFFFFFFFEu;
+const uint kPhaseStart = 0u;
+const uint kPhaseStatic = 1u;
+const uint kPhaseTop = 2u;
+const uint kPhaseDone = 3u;
+
+// ---- Rays (accel::PreparedRay) -------------------------------------------------------------------
+
+struct PreparedRay {
+  vec3 org;
+  vec3 dir;
+  vec3 inv_dir;
+  float tnear;
+  float tfar;
+  int kx, ky, kz;
+  float sx, sy, sz;
+  uvec3 neg;
+};
+
+// Bit tests: a compiler may assume no NaN/Inf in comparisons, never in integer ops.
+bool trace_finite(float x) { return (floatBitsToUint(x) & 0x7F800000u) != 0x7F800000u; }
+bool trace_nan(float x) { return (floatBitsToUint(x) & 0x7FFFFFFFu) > 0x7F800000u; }
+bool trace_finite3(vec3 v) { return trace_finite(v.x) && trace_finite(v.y) && trace_finite(v.z); }
+
+// geometry/ray.h's traceable().
+bool ray_valid(PreparedRay r) {
+  return trace_finite3(r.org) && trace_finite3(r.dir) && !(r.dir == vec3(0.0)) &&
+         !trace_nan(r.tfar) && !trace_nan(r.tnear) && r.tnear >= 0.0 && r.tnear <= r.tfar &&
+         trace_finite(r.tnear);
 }
 
-uint stub_trace(vec3 org, vec3 dir, float tnear, float tfar, inout uint budget, inout GpuHit hit,
-                bool any_hit) {
-  hit.instance = kNoIndex;
-  hit.t = tfar;
-  for (uint i = 0u; i < instance_count; ++i) {
-    GpuInstance inst = instances[i];
-    if (inst.mesh == kNoIndex) continue;
-    GpuMesh mesh = meshes[inst.mesh];
-    mat4 object_from_world = inverse(inst.world_from_object);
-    vec3 o = (object_from_world * vec4(org, 1.0)).xyz;
-    vec3 d = mat3(object_from_world) * dir;
-    for (uint k = 0u; k < mesh.triangle_count; ++k) {
-      if (budget == 0u) return kRayBudget;
-      --budget;
-      uint tri = 3u * (mesh.first_triangle + k);
-      vec3 p0 = scene_position(mesh.first_vertex + triangles[tri]);
-      vec3 p1 = scene_position(mesh.first_vertex + triangles[tri + 1u]);
-      vec3 p2 = scene_position(mesh.first_vertex + triangles[tri + 2u]);
-      float t, u, v;
-      if (stub_triangle(o, d, p0, p1, p2, tnear, hit.t, t, u, v)) {
-        hit.t = t; hit.u = u; hit.v = v; hit.instance = i; hit.primitive = k;
-        vec3 ng = cross(p1 - p0, p2 - p0);
-        hit.ng_x = ng.x; hit.ng_y = ng.y; hit.ng_z = ng.z;
-        if (any_hit) return kRayDone;
-      }
+PreparedRay prepare_ray(vec3 org, vec3 dir, float tnear, float tfar) {
+  PreparedRay r;
+  r.org = org;
+  r.dir = dir;
+  r.tnear = tnear;
+  r.tfar = tfar;
+  precise vec3 inv = vec3(1.0) / dir;
+  r.inv_dir = inv;
+  r.neg = floatBitsToUint(dir) >> 31;
+  vec3 ad = abs(dir);
+  r.kz = ad.x > ad.y ? (ad.x > ad.z ? 0 : 2) : (ad.y > ad.z ? 1 : 2);
+  r.kx = (r.kz + 1) % 3;
+  r.ky = (r.kx + 1) % 3;
+  if (dir[r.kz] < 0.0) {
+    int k = r.kx;
+    r.kx = r.ky;
+    r.ky = k;
+  }
+  precise float sx = dir[r.kx] / dir[r.kz];
+  precise float sy = dir[r.ky] / dir[r.kz];
+  precise float sz = 1.0 / dir[r.kz];
+  r.sx = sx;
+  r.sy = sy;
+  r.sz = sz;
+  return r;
+}
+
+// ---- The conservative slab test (accel::intersect_box) -------------------------------------------
+
+void trace_slab(float lo, float hi, float o, float inv, uint neg, inout float t0, inout float t1) {
+  precise float tn = (lo - o) * inv;
+  precise float tf = (hi - o) * inv;
+  if (neg != 0u) {
+    float s = tn;
+    tn = tf;
+    tf = s;
+  }
+  precise float tf_scaled = tf * scene_header.box_far_scale;
+  // NaN (0 · inf: origin on a slab plane of a parallel ray) keeps the current bound.
+  t0 = tn > t0 ? tn : t0;
+  t1 = tf_scaled < t1 ? tf_scaled : t1;
+}
+
+bool intersect_box(PreparedRay r, vec3 lo, vec3 hi, out float t_enter) {
+  float t0 = r.tnear, t1 = r.tfar;
+  trace_slab(lo.x, hi.x, r.org.x, r.inv_dir.x, r.neg.x, t0, t1);
+  trace_slab(lo.y, hi.y, r.org.y, r.inv_dir.y, r.neg.y, t0, t1);
+  trace_slab(lo.z, hi.z, r.org.z, r.inv_dir.z, r.neg.z, t0, t1);
+  t_enter = t0;
+  return t0 <= t1;
+}
+
+// ---- Woop, Benthin & Wald's watertight test (accel::intersect_watertight) ------------------------
+
+bool intersect_watertight(PreparedRay r, vec3 p0, vec3 p1, vec3 p2, float tmax, out float t_out,
+                          out float u_out, out float v_out) {
+  t_out = 0.0;
+  u_out = 0.0;
+  v_out = 0.0;
+  precise vec3 a = p0 - r.org;
+  precise vec3 b = p1 - r.org;
+  precise vec3 c = p2 - r.org;
+  precise float ax = a[r.kx] - r.sx * a[r.kz];
+  precise float ay = a[r.ky] - r.sy * a[r.kz];
+  precise float bx = b[r.kx] - r.sx * b[r.kz];
+  precise float by = b[r.ky] - r.sy * b[r.kz];
+  precise float cx = c[r.kx] - r.sx * c[r.kz];
+  precise float cy = c[r.ky] - r.sy * c[r.kz];
+  precise float U = cx * by - cy * bx;
+  precise float V = ax * cy - ay * cx;
+  precise float W = bx * ay - by * ax;
+  if (U == 0.0 || V == 0.0 || W == 0.0) {
+    // An edge function rounded to exactly 0: all three again in double (the paper's §3.2).
+    precise double Ud = double(cx) * double(by) - double(cy) * double(bx);
+    precise double Vd = double(ax) * double(cy) - double(ay) * double(cx);
+    precise double Wd = double(bx) * double(ay) - double(by) * double(ax);
+    U = float(Ud);
+    V = float(Vd);
+    W = float(Wd);
+  }
+  if ((U < 0.0 || V < 0.0 || W < 0.0) && (U > 0.0 || V > 0.0 || W > 0.0)) return false;
+  precise float det = U + V + W;
+  if (det == 0.0) return false;
+  precise float az = r.sz * a[r.kz];
+  precise float bz = r.sz * b[r.kz];
+  precise float cz = r.sz * c[r.kz];
+  precise float T = U * az + V * bz + W * cz;
+  // t = T / det must lie in (tnear, tmax); compare without dividing, signs folded in.
+  precise float abs_det = abs(det);
+  precise float signed_t = (floatBitsToUint(det) >> 31) != 0u ? -T : T;
+  precise float lo = r.tnear * abs_det;
+  precise float hi = tmax * abs_det;
+  if (!(signed_t > lo) || !(signed_t < hi)) return false;
+  precise float inv_det = 1.0 / det;
+  precise float t = T * inv_det;
+  if (!(t > r.tnear) || !(t < tmax)) return false; // rounding of the division at the interval ends
+  precise float u = V * inv_det;
+  precise float v = W * inv_det;
+  t_out = t;
+  u_out = u;
+  v_out = v;
+  return true;
+}
+
+vec3 traced_vertex(uint tri, uint k) { return scene_position(scene_traced[3u * tri + k]); }
+
+bool trace_triangle(PreparedRay r, uint tri, out float t, out float u, out float v) {
+  return intersect_watertight(r, traced_vertex(tri, 0u), traced_vertex(tri, 1u),
+                              traced_vertex(tri, 2u), r.tfar, t, u, v);
+}
+
+// ---- Instances (NativeTracer's to_object) --------------------------------------------------------
+
+// glm's mat4 · vec4 is (c0·x + c1·y) + (c2·z + c3·w), and mat3 · vec3 (c0·x + c1·y) + c2·z.
+PreparedRay to_object(PreparedRay world, GpuTopEntry e) {
+  precise vec3 org = (e.c0 * world.org.x + e.c1 * world.org.y) + (e.c2 * world.org.z + e.c3);
+  precise vec3 dir = (e.c0 * world.dir.x + e.c1 * world.dir.y) + e.c2 * world.dir.z;
+  return prepare_ray(org, dir, world.tnear, world.tfar);
+}
+
+// ---- Traversal state (per invocation) ------------------------------------------------------------
+
+GpuTraceState tr;                    // where the walk stands (saved between dispatches)
+uvec2 tr_stack[kTraceStackSize];     // (node, t_enter bits); entries >= tr.floor: the instance's
+PreparedRay tr_world;                // the ray; its tfar shrinks with each closer hit
+PreparedRay tr_local;                // in the current instance's object space
+bool tr_any;                         // any hit ends the walk
+bool tr_occluded;
+// The grid's DDA constants, recomputed from the ray at every (re)start (UniformGrid::traverse).
+double tr_t0;
+vec3 tr_q, tr_scale;
+ivec3 tr_dstep, tr_out;
+uint tr_max_cells;
+
+float trace_axis(vec3 v, int a) { return a == 0 ? v.x : (a == 1 ? v.y : v.z); }
+
+void trace_open_cell() {
+  uvec3 res = scene_header.grid.resolution;
+  uint c = uint(tr.cell_x) + res.x * (uint(tr.cell_y) + res.y * uint(tr.cell_z));
+  tr.leaf_cursor = scene_words[scene_header.cell_start_base + c];
+  tr.leaf_end = scene_words[scene_header.cell_start_base + c + 1u];
+}
+
+// Clip to the grid in double and set up the DDA (Amanatides & Woo) in grid units from the entry
+// point, as UniformGrid::traverse does. `fresh`: also the walk's starting cell; false when the
+// saved state resumes (the constants do not depend on tfar).
+bool trace_grid_setup(bool fresh) {
+  GridHeader g = scene_header.grid;
+  precise double t0 = double(tr_world.tnear);
+  precise double t1 = double(tr_world.tfar);
+  for (int a = 0; a < 3; ++a) {
+    precise double o = double(tr_world.org[a]);
+    precise double lo = double(g.bounds_min[a]);
+    precise double hi = double(g.bounds_max[a]);
+    if (tr_world.dir[a] == 0.0) {
+      if (o < lo || o > hi) return false;
+      continue;
+    }
+    precise double inv = 1.0lf / double(tr_world.dir[a]);
+    precise double tn = (lo - o) * inv;
+    precise double tf = (hi - o) * inv;
+    if (tn > tf) {
+      double s = tn;
+      tn = tf;
+      tf = s;
+    }
+    t0 = t0 < tn ? tn : t0;
+    t1 = tf < t1 ? tf : t1;
+  }
+  if (fresh && !(t0 <= t1)) return false;
+  tr_t0 = t0;
+  ivec3 cell;
+  vec3 s_next;
+  for (int a = 0; a < 3; ++a) {
+    precise double p = double(tr_world.org[a]) + t0 * double(tr_world.dir[a]);
+    precise double qa = (p - double(g.bounds_min[a])) / double(g.cell_size);
+    int last = int(g.resolution[a]) - 1;
+    double fq = floor(qa);
+    cell[a] = int(fq < 0.0lf ? 0.0lf : (double(last) < fq ? double(last) : fq));
+    tr_q[a] = float(qa);
+    precise double scale = double(g.cell_size) / double(tr_world.dir[a]);
+    float scale_f = tr_world.dir[a] == 0.0 ? kTraceInf : float(scale);
+    tr_scale[a] = scale_f;
+    if (tr_world.dir[a] > 0.0 && trace_finite(scale_f)) {
+      tr_dstep[a] = 1;
+      tr_out[a] = last + 1;
+      precise float s = (float(cell[a] + 1) - tr_q[a]) * scale_f;
+      s_next[a] = s;
+    } else if (tr_world.dir[a] < 0.0 && trace_finite(scale_f)) {
+      tr_dstep[a] = -1;
+      tr_out[a] = -1;
+      precise float s = (float(cell[a]) - tr_q[a]) * scale_f;
+      s_next[a] = s;
+    } else {
+      tr_dstep[a] = 0;
+      tr_out[a] = -2;
+      s_next[a] = kTraceInf;
     }
   }
-  if (hit.instance == kNoIndex) hit.t = 1.0 / 0.0;
+  tr_max_cells = g.resolution.x + g.resolution.y + g.resolution.z + 3u;
+  if (fresh) {
+    tr.cell_x = cell.x;
+    tr.cell_y = cell.y;
+    tr.cell_z = cell.z;
+    tr.s_next_x = s_next.x;
+    tr.s_next_y = s_next.y;
+    tr.s_next_z = s_next.z;
+    tr.cells = 0u;
+    trace_open_cell();
+  }
+  return true;
+}
+
+void trace_start_top() {
+  tr.phase = kPhaseDone;
+  if (scene_header.top_count == 0u) return;
+  BvhNode root = scene_nodes[scene_header.top_node_base];
+  float t_enter;
+  if (!intersect_box(tr_world, root.bounds_min, root.bounds_max, t_enter)) return;
+  tr.phase = kPhaseTop;
+  tr.node = scene_header.top_node_base;
+  tr.leaf_cursor = tr.leaf_end = 0u;
+  tr.entry = kNoIndex;
+  tr.floor = 0u;
+  tr.sp = 0u;
+}
+
+void trace_start_static() {
+  tr.phase = kPhaseStatic;
+  tr.node = kNoIndex;
+  tr.leaf_cursor = tr.leaf_end = 0u;
+  tr.sp = 0u;
+  if (scene_header.static_kind == kStaticBvh) {
+    BvhNode root = scene_nodes[scene_header.static_node_base];
+    float t_enter;
+    if (intersect_box(tr_world, root.bounds_min, root.bounds_max, t_enter)) {
+      tr.node = scene_header.static_node_base;
+      return;
+    }
+  } else if (scene_header.static_kind == kStaticGrid) {
+    if (trace_grid_setup(true)) return;
+  }
+  trace_start_top();
+}
+
+// A closer hit (or, for any-hit queries, the end of the walk).
+void trace_record(uint instance, uint tri, uint prim, float t, float u, float v) {
+  if (tr_any) {
+    tr_occluded = true;
+    tr.phase = kPhaseDone;
+    return;
+  }
+  tr.hit_t = t;
+  tr.hit_u = u;
+  tr.hit_v = v;
+  tr.hit_instance = instance;
+  tr.hit_tri = tri;
+  tr.hit_prim = prim;
+  tr_world.tfar = t;
+  tr_local.tfar = t;
+}
+
+// Leaves the current instance's BVH: the top level's walk goes on.
+void trace_leave_instance() { tr.entry = kNoIndex; }
+
+// Enters top-level box `box`: its BVH is walked with the ray in its object space.
+void trace_enter_instance(uint box) {
+  GpuTopEntry e = scene_top[box];
+  tr_local = e.identity != 0u ? tr_world : to_object(tr_world, e);
+  if (!ray_valid(tr_local)) return;
+  BvhNode root = scene_nodes[e.node_base];
+  float t_enter;
+  if (!intersect_box(tr_local, root.bounds_min, root.bounds_max, t_enter)) return;
+  tr.entry = box;
+  tr.floor = tr.sp;
+  tr.node = e.node_base;
+}
+
+// One step of a BVH walk (Bvh::traverse): a leaf entry, a node, or a pop.
+void trace_bvh_step() {
+  bool in_instance = tr.entry != kNoIndex;
+  uint node_base, index_base;
+  if (tr.phase == kPhaseStatic) {
+    node_base = scene_header.static_node_base;
+    index_base = scene_header.static_index_base;
+  } else if (in_instance) {
+    node_base = scene_top[tr.entry].node_base;
+    index_base = scene_top[tr.entry].index_base;
+  } else {
+    node_base = scene_header.top_node_base;
+    index_base = scene_header.top_index_base;
+  }
+  PreparedRay r = in_instance ? tr_local : tr_world;
+
+  if (tr.leaf_cursor < tr.leaf_end) {
+    uint prim = scene_words[index_base + tr.leaf_cursor];
+    ++tr.leaf_cursor;
+    if (tr.phase == kPhaseTop && !in_instance) {
+      trace_enter_instance(prim);
+      return;
+    }
+    uint tri = tr.phase == kPhaseStatic ? prim : scene_top[tr.entry].tri_base + prim;
+    float t, u, v;
+    if (trace_triangle(r, tri, t, u, v)) {
+      if (tr.phase == kPhaseStatic)
+        trace_record(kStaticHit, tri, prim, t, u, v);
+      else
+        trace_record(scene_top[tr.entry].slot, tri, prim, t, u, v);
+    }
+    return;
+  }
+
+  if (tr.node != kNoIndex) {
+    BvhNode n = scene_nodes[tr.node];
+    tr.node = kNoIndex;
+    if (n.count == 0u) {
+      uint i0 = node_base + n.index;
+      BvhNode c0 = scene_nodes[i0];
+      BvhNode c1 = scene_nodes[i0 + 1u];
+      float e0, e1;
+      bool hit0 = intersect_box(r, c0.bounds_min, c0.bounds_max, e0);
+      bool hit1 = intersect_box(r, c1.bounds_min, c1.bounds_max, e1);
+      if (hit0 && hit1) {
+        if (e1 < e0) {
+          tr_stack[tr.sp++] = uvec2(i0, floatBitsToUint(e0));
+          tr.node = i0 + 1u;
+        } else {
+          tr_stack[tr.sp++] = uvec2(i0 + 1u, floatBitsToUint(e1));
+          tr.node = i0;
+        }
+      } else if (hit0 || hit1) {
+        tr.node = hit0 ? i0 : i0 + 1u;
+      }
+    } else {
+      tr.leaf_cursor = n.index;
+      tr.leaf_end = n.index + n.count;
+    }
+    return;
+  }
+
+  // Pop the nearest pending subtree the ray can still reach (its tfar may have shrunk).
+  if (in_instance && tr.sp == tr.floor) {
+    trace_leave_instance();
+    return;
+  }
+  if (tr.sp == 0u) {
+    if (tr.phase == kPhaseStatic)
+      trace_start_top();
+    else
+      tr.phase = kPhaseDone;
+    return;
+  }
+  uvec2 e = tr_stack[--tr.sp];
+  if (uintBitsToFloat(e.y) <= r.tfar) tr.node = e.x;
+}
+
+// One step of the grid's walk: a triangle of the current cell, or the move to the next cell.
+void trace_grid_step() {
+  if (tr.leaf_cursor < tr.leaf_end) {
+    uint prim = scene_words[scene_header.static_index_base + tr.leaf_cursor];
+    ++tr.leaf_cursor;
+    float t, u, v;
+    if (trace_triangle(tr_world, prim, t, u, v)) trace_record(kStaticHit, prim, prim, t, u, v);
+    return;
+  }
+  // The walk stops once the closest hit so far lies within the cells visited.
+  precise double s_tfar_d = double(tr_world.tfar) - tr_t0;
+  float s_tfar = float(s_tfar_d);
+  vec3 s_next = vec3(tr.s_next_x, tr.s_next_y, tr.s_next_z);
+  int axis = s_next.x < s_next.y ? (s_next.x < s_next.z ? 0 : 2) : (s_next.y < s_next.z ? 1 : 2);
+  ivec3 cell = ivec3(tr.cell_x, tr.cell_y, tr.cell_z);
+  if (s_tfar <= s_next[axis]) {
+    trace_start_top();
+    return;
+  }
+  cell[axis] += tr_dstep[axis];
+  if (cell[axis] == tr_out[axis] || ++tr.cells >= tr_max_cells) {
+    trace_start_top();
+    return;
+  }
+  precise float s = (float(cell[axis] + (tr_dstep[axis] > 0 ? 1 : 0)) - tr_q[axis]) *
+                    tr_scale[axis];
+  s_next[axis] = s;
+  tr.cell_x = cell.x;
+  tr.cell_y = cell.y;
+  tr.cell_z = cell.z;
+  tr.s_next_x = s_next.x;
+  tr.s_next_y = s_next.y;
+  tr.s_next_z = s_next.z;
+  trace_open_cell();
+}
+
+// Starts a walk over (tnear, tfar).
+void trace_begin(vec3 org, vec3 dir, float tnear, float tfar, bool any_hit) {
+  tr_any = any_hit;
+  tr_occluded = false;
+  tr_world = prepare_ray(org, dir, tnear, tfar);
+  tr_local = tr_world;
+  tr.phase = ray_valid(tr_world) ? kPhaseStart : kPhaseDone;
+  tr.node = kNoIndex;
+  tr.leaf_cursor = tr.leaf_end = 0u;
+  tr.entry = kNoIndex;
+  tr.floor = tr.sp = tr.cells = 0u;
+  tr.hit_t = kTraceInf;
+  tr.hit_u = tr.hit_v = 0.0;
+  tr.hit_instance = kNoIndex;
+  tr.hit_tri = tr.hit_prim = 0u;
+}
+
+// Runs the walk until it ends (kRayDone) or `budget` steps are used up (kRayBudget).
+uint trace_run(inout uint budget) {
+  for (;;) {
+    if (tr.phase == kPhaseDone) return kRayDone;
+    if (budget == 0u) return kRayBudget;
+    --budget;
+    if (tr.phase == kPhaseStart)
+      trace_start_static();
+    else if (tr.phase == kPhaseStatic && scene_header.static_kind == kStaticGrid)
+      trace_grid_step();
+    else
+      trace_bvh_step();
+  }
   return kRayDone;
 }
 
+// The hit as the CPU backends report it (NativeTracer::resolve_static for the static set).
+GpuHit trace_result() {
+  GpuHit hit;
+  hit.t = kTraceInf;
+  hit.u = 0.0;
+  hit.v = 0.0;
+  hit.instance = kNoIndex;
+  hit.primitive = 0u;
+  hit.ng_x = hit.ng_y = hit.ng_z = 0.0;
+  if (tr.hit_instance == kNoIndex) return hit;
+  hit.t = tr.hit_t;
+  hit.u = tr.hit_u;
+  hit.v = tr.hit_v;
+  hit.instance = tr.hit_instance;
+  hit.primitive = tr.hit_prim;
+  if (tr.hit_instance == kStaticHit) {
+    // upper_bound over the static instances' first triangles (at most 32 halvings).
+    uint base = scene_header.static_first_base;
+    uint lo = 0u, n = scene_header.static_instances;
+    while (n > 0u) {
+      uint half_n = n / 2u;
+      if (scene_words[base + lo + half_n] <= tr.hit_prim) {
+        lo += half_n + 1u;
+        n -= half_n + 1u;
+      } else {
+        n = half_n;
+      }
+    }
+    uint k = lo - 1u;
+    hit.instance = scene_words[scene_header.static_slot_base + k];
+    hit.primitive = tr.hit_prim - scene_words[base + k];
+  }
+  vec3 p0 = traced_vertex(tr.hit_tri, 0u);
+  precise vec3 e1 = traced_vertex(tr.hit_tri, 1u) - p0;
+  precise vec3 e2 = traced_vertex(tr.hit_tri, 2u) - p0;
+  precise float nx = e1.y * e2.z - e2.y * e1.z;
+  precise float ny = e1.z * e2.x - e2.z * e1.x;
+  precise float nz = e1.x * e2.y - e2.x * e1.y;
+  hit.ng_x = nx;
+  hit.ng_y = ny;
+  hit.ng_z = nz;
+  return hit;
+}
+
+// ---- Saving and resuming (trace_rays.comp) -------------------------------------------------------
+
+// After trace_begin's fields were reloaded into `tr` and the stack: the rays and the DDA's
+// constants again.
+void trace_resume(vec3 org, vec3 dir, float tnear, bool any_hit) {
+  tr_any = any_hit;
+  tr_occluded = false;
+  tr_world = prepare_ray(org, dir, tnear, tr.tfar);
+  tr_local = tr_world;
+  if (tr.phase == kPhaseStatic && scene_header.static_kind == kStaticGrid) trace_grid_setup(false);
+  if (tr.entry != kNoIndex) {
+    GpuTopEntry e = scene_top[tr.entry];
+    if (e.identity == 0u) tr_local = to_object(tr_world, e);
+  }
+}
+
+// ---- The contract ----------------------------------------------------------------------------------
+
 uint trace_closest(vec3 org, vec3 dir, float tnear, float tfar, inout uint budget, inout GpuHit hit) {
-  return stub_trace(org, dir, tnear, tfar, budget, hit, false);
+  trace_begin(org, dir, tnear, tfar, false);
+  uint status = trace_run(budget);
+  hit = trace_result();
+  return status;
+}
+
+// Continues a trace_closest that returned kRayBudget (see the top of this file).
+uint trace_closest_resume(vec3 org, vec3 dir, float tnear, float tfar, inout uint budget,
+                          inout GpuHit hit) {
+  GpuHit best = hit;
+  trace_begin(org, dir, tnear, best.instance != kNoIndex ? best.t : tfar, false);
+  uint status = trace_run(budget);
+  hit = trace_result();
+  if (hit.instance == kNoIndex) hit = best;
+  return status;
 }
 
 // occluded is set to true when anything lies within (tnear, tfar).
 uint trace_any(vec3 org, vec3 dir, float tnear, float tfar, inout uint budget, out bool occluded) {
-  GpuHit hit;
-  uint status = stub_trace(org, dir, tnear, tfar, budget, hit, true);
-  occluded = hit.instance != kNoIndex;
+  trace_begin(org, dir, tnear, tfar, true);
+  uint status = trace_run(budget);
+  occluded = tr_occluded;
   return status;
 }
 

@@ -88,9 +88,12 @@ void NativeTracer::rebuild_static(const SceneTables& tables) {
     case StaticStructure::bvh:
       static_bvh_.build(view);
       break;
-    case StaticStructure::grid:
-      grid_.build(view);
+    case StaticStructure::grid: {
+      accel::GridBuildOptions grid_options;
+      grid_options.density = options_.grid_density;
+      grid_.build(view, grid_options);
       break;
+    }
     }
   }
   ++last_.static_builds;

@@ -24,6 +24,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -43,6 +44,8 @@ struct NativeOptions {
   /// A deforming mesh's subtree is rebuilt once its SAH cost exceeds this multiple of its cost
   /// when last built.
   float restructure_threshold = 1.3f;
+  /// Target cells per static triangle when the static set is a grid (accel::GridBuildOptions).
+  float grid_density = accel::GridBuildOptions{}.density;
 };
 
 class NativeTracer final : public Tracer {
@@ -68,6 +71,28 @@ public:
   [[nodiscard]] const accel::KdTree& kdtree() const { return kd_; }
   [[nodiscard]] const accel::Bvh& static_bvh() const { return static_bvh_; }
   [[nodiscard]] const accel::UniformGrid& grid() const { return grid_; }
+
+  // What the Vulkan path flattens onto the device (engine/gpu/gpu_scene.cpp), read-only.
+  /// The static set as its structure indexes it: triangle i belongs to instance static_slots()[k]
+  /// for the last k with static_first_triangles()[k] <= i (its triangle i - that within the mesh).
+  [[nodiscard]] std::span<const std::uint32_t> static_first_triangles() const {
+    return static_first_triangle_;
+  }
+  [[nodiscard]] std::span<const std::uint32_t> static_slots() const { return static_slot_; }
+  [[nodiscard]] bool has_static() const { return has_static_; }
+  /// The top level over dynamic instances' world bounds; box i holds top_entry(i).
+  [[nodiscard]] const accel::Bvh& top_level() const { return top_; }
+  struct TopEntry {
+    std::uint32_t slot;      ///< instance slot
+    const accel::Bvh* blas;  ///< over the triangles of the instance's mesh (shared or its own)
+    mat4 object_from_world;  ///< as the CPU traversal uses it (inverted in double)
+    bool identity;
+  };
+  [[nodiscard]] std::size_t top_entry_count() const { return top_slot_.size(); }
+  [[nodiscard]] TopEntry top_entry(std::size_t box) const {
+    const Dynamic& d = *top_entry_[box];
+    return {top_slot_[box], &d.blas->bvh, d.object_from_world, d.identity};
+  }
 
 private:
   /// A mesh's own copy of its geometry (object space) and its BVH; addresses stay put.

@@ -1,0 +1,79 @@
+// A batch of rays through the scene (VulkanTracer::intersect / occluded / intersect_camera): each
+// invocation walks one ray for at most `budget` steps. A ray that finishes writes its hit (or its
+// occlusion word) and kRayDone; one that runs out saves its traversal state and stack and writes
+// kRayBudget, and the host dispatches again with `resume` set until none is left. Statuses are
+// written only at this kernel's exits (into status_out, which the host clears before each
+// dispatch): a ray still kRayPending was cut off by the driver (lavapipe's loop cap), and the
+// next dispatch counts it in `cut`.
+#version 460
+#extension GL_GOOGLE_include_directive : require
+#include "include/common.glsl"
+#include "include/trace.glsl"
+
+layout(local_size_x = 64) in;
+
+layout(push_constant) uniform Push {
+  uint ray_count;
+  uint budget;       // traversal steps per ray in this dispatch
+  uint any_hit;      // 1: occlusion words instead of hits
+  uint resume;       // 1: continue the rays whose status_in is kRayBudget
+  uint stack_stride; // saved stack entries per ray
+} pc;
+
+layout(std430, set = 0, binding = 8) readonly buffer Rays { GpuRay rays[]; };
+layout(std430, set = 0, binding = 9) writeonly buffer Hits { GpuHit hits[]; };
+layout(std430, set = 0, binding = 10) writeonly buffer Occluded { uint occluded_words[]; };
+layout(std430, set = 0, binding = 11) readonly buffer StatusIn { uint status_in[]; };
+layout(std430, set = 0, binding = 12) writeonly buffer StatusOut { uint status_out[]; };
+layout(std430, set = 0, binding = 13) buffer States { GpuTraceState states[]; };
+layout(std430, set = 0, binding = 14) buffer Stacks { uvec2 stacks[]; };
+layout(std430, set = 0, binding = 15) buffer Counters { TraceCounters counters; };
+
+void main() {
+  uint i = gl_GlobalInvocationID.x;
+  if (i >= pc.ray_count) return;
+  GpuRay ray = rays[i];
+  bool any_hit = pc.any_hit != 0u;
+
+  // ---- Start or resume ---------------------------------------------------------------------------
+  if (pc.resume == 0u) {
+    trace_begin(ray.origin, ray.direction, ray.tnear, ray.tfar, any_hit);
+  } else {
+    uint status = status_in[i];
+    if (status == kRayDone) {
+      status_out[i] = kRayDone;
+      return;
+    }
+    if (status == kRayPending) { // cut off in the previous dispatch: its state is lost
+      atomicAdd(counters.cut, 1u);
+      status_out[i] = kRayDone;
+      return;
+    }
+    tr = states[i];
+    uint base = i * pc.stack_stride;
+    for (uint k = 0u; k < tr.sp; ++k) tr_stack[k] = stacks[base + k];
+    trace_resume(ray.origin, ray.direction, ray.tnear, any_hit);
+  }
+
+  // ---- Walk --------------------------------------------------------------------------------------
+  uint budget = pc.budget;
+  uint status = trace_run(budget);
+  atomicAdd(counters.steps, pc.budget - budget);
+
+  // ---- Exits -------------------------------------------------------------------------------------
+  if (status == kRayBudget) {
+    tr.tfar = tr_world.tfar;
+    states[i] = tr;
+    uint base = i * pc.stack_stride;
+    for (uint k = 0u; k < tr.sp; ++k) stacks[base + k] = tr_stack[k];
+    atomicAdd(counters.budget, 1u);
+    status_out[i] = kRayBudget;
+    return;
+  }
+  if (any_hit)
+    occluded_words[i] = tr_occluded ? 1u : 0u;
+  else
+    hits[i] = trace_result();
+  atomicAdd(counters.rays, 1u);
+  status_out[i] = kRayDone;
+}
