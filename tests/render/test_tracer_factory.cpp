@@ -138,6 +138,22 @@ TEST(TracerFactory, GpuOptionsReachTheVulkanTracer) {
   options.gpu.grid_density = 0.0f;
   EXPECT_THROW((void)make_tracer("vulkan-grid", options), Error);
 }
+
+TEST(TracerFactory, TheTestOnlyDeviceLossKnobLosesTheNewTracersDevice) {
+  if (!backend_info("vulkan").available) GTEST_SKIP() << "no Vulkan device here";
+  EXPECT_FALSE(dynamic_cast<gpu::VulkanTracer&>(*make_tracer("vulkan")).context().lost());
+  const ScopedEnv lose("SPECULA_VK_SIMULATE_DEVICE_LOSS", "1");
+  const std::unique_ptr<Tracer> tracer = make_tracer("vulkan");
+  gpu::Context& context = dynamic_cast<gpu::VulkanTracer&>(*tracer).context();
+  EXPECT_TRUE(context.lost());
+  // What the CLI turns into exit 3: the next submit reports the lost device.
+  try {
+    context.run_now([](VkCommandBuffer) {});
+    ADD_FAILURE() << "a submit on a lost device must fail";
+  } catch (const gpu::GpuError& e) {
+    EXPECT_TRUE(e.device_lost()) << e.what();
+  }
+}
 #endif
 
 } // namespace
