@@ -142,8 +142,7 @@ void grid_sweep(const Options& o, Scene& scene) {
   for (const float density : {0.5f, 1.0f, 2.0f, 4.0f, 8.0f}) {
     Config c{"vulkan-grid", "vulkan-grid", {}};
     c.gpu.grid_density = density;
-    const Measured m =
-        measure(o, c, layer, camera, scene.settings.width, scene.settings.height);
+    const Measured m = measure(o, c, layer, camera, scene.settings.width, scene.settings.height);
     if (!m.failure.empty()) {
       std::printf("| %g | n/a: %s | | | | |\n", double(density), m.failure.c_str());
       continue;
@@ -151,8 +150,7 @@ void grid_sweep(const Options& o, Scene& scene) {
     const TracerDevice d = m.device.value_or(TracerDevice{});
     std::printf("| %g | %.2f | %.2f | %llu | %llu | %llu |\n", double(density), m.mrays,
                 m.gpu_mrays, static_cast<unsigned long long>(d.dispatches),
-                static_cast<unsigned long long>(d.resumed),
-                static_cast<unsigned long long>(d.cut));
+                static_cast<unsigned long long>(d.resumed), static_cast<unsigned long long>(d.cut));
   }
   std::fflush(stdout);
 }

@@ -117,9 +117,7 @@ int run_machine_info(bool as_json, std::ostream& out) {
     for (const VulkanDeviceEntry& d : devices)
       list.push_back(
           {{"name", d.name}, {"type", d.type}, {"compute", d.compute}, {"chosen", d.chosen}});
-    nlohmann::json j = {{"backends", backends},
-                        {"auto", auto_pick},
-                        {"vulkan_devices", list}};
+    nlohmann::json j = {{"backends", backends}, {"auto", auto_pick}, {"vulkan_devices", list}};
     if (auto_note) j["auto_reason"] = *auto_note;
     if (!why_no_device.empty()) j["vulkan_unavailable"] = why_no_device;
     out << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
@@ -133,8 +131,7 @@ int run_machine_info(bool as_json, std::ostream& out) {
   out << "\nVulkan devices:" << (devices.empty() ? " none" : "") << "\n";
   for (const VulkanDeviceEntry& d : devices)
     out << "  " << (d.chosen ? "* " : "  ") << d.name << " (" << d.type
-        << (d.compute ? "" : ", no compute queue") << ")" << (d.chosen ? " — chosen" : "")
-        << "\n";
+        << (d.compute ? "" : ", no compute queue") << ")" << (d.chosen ? " — chosen" : "") << "\n";
   if (!why_no_device.empty()) out << "  (none chosen: " << one_line(why_no_device) << ")\n";
   return 0;
 }
@@ -245,8 +242,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
     throw Error("--gpu-frames", "expected on or off, got '" + printable(options.gpu_frames) + "'");
   gpu.device_frames = options.gpu_frames == "on";
   if (!(options.grid_density > 0.0f && options.grid_density <= 64.0f))
-    throw Error("--grid-density",
-                "expected cells per triangle in (0, 64], got " + shown_number(options.grid_density));
+    throw Error("--grid-density", "expected cells per triangle in (0, 64], got " +
+                                      shown_number(options.grid_density));
   gpu.grid_density = options.grid_density;
   const bool stochastic = stochastic_mode(*mode);
   if (options.denoise && !stochastic)
@@ -402,9 +399,9 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   if (tracer_dev) {
     const GpuFrameStats& g = last.gpu;
     out << "  device: " << device << ", " << tracer_dev->execution << ", device frames "
-        << (tracer_dev->device_frames ? "on" : "off") << "; last frame " << g.rays
-        << " GPU rays, " << g.dispatches << " dispatches, " << g.resumed << " resumed, " << g.cut
-        << " cut, " << g.gpu_ms << " GPU ms\n";
+        << (tracer_dev->device_frames ? "on" : "off") << "; last frame " << g.rays << " GPU rays, "
+        << g.dispatches << " dispatches, " << g.resumed << " resumed, " << g.cut << " cut, "
+        << g.gpu_ms << " GPU ms\n";
   }
   if (cache_settings.policy != cache::CachePolicy::Off) {
     const CacheCounts& c = last.cache;

@@ -265,8 +265,7 @@ int main(int argc, char** argv) {
   try {
     if (info_cmd->parsed()) return cli::run_info(info, std::cout);
     if (render_cmd->parsed())
-      return cli::run_render(render, std::cout, &std::cerr, isatty(STDERR_FILENO) == 1,
-                             &std::cerr);
+      return cli::run_render(render, std::cout, &std::cerr, isatty(STDERR_FILENO) == 1, &std::cerr);
     if (compare_cmd->parsed()) return cli::run_compare(compare, std::cout);
   } catch (const Error& e) {
     std::cerr << "specula: error: " << e.what() << "\n";

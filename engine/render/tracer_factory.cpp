@@ -192,8 +192,7 @@ std::optional<std::string> auto_cpu_reason(SceneKind kind) {
   if (vk.device && vk.gpu) return std::nullopt;
   std::string why;
   if (vk.device)
-    why = "no Vulkan GPU, only software Vulkan (" + vk.software +
-          "), slower than the CPU backends";
+    why = "no Vulkan GPU, only software Vulkan (" + vk.software + "), slower than the CPU backends";
   else
     why = "no Vulkan GPU (vulkan " + vk.reason + ")";
   std::string chosen;
@@ -299,7 +298,8 @@ std::vector<VulkanDeviceEntry> vulkan_devices(std::string* why_none) {
   }
   if (why_none != nullptr) *why_none = why;
 #else
-  if (why_none != nullptr) *why_none = "not in this build (configured with SPECULA_WITH_VULKAN=OFF)";
+  if (why_none != nullptr)
+    *why_none = "not in this build (configured with SPECULA_WITH_VULKAN=OFF)";
 #endif
   return list;
 }

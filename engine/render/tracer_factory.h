@@ -90,7 +90,7 @@ struct TracerOptions {
 /// nullopt for CPU tracers. The factory is the one place that knows backend types, so systems
 /// and the CLI ask here rather than cast.
 struct TracerDevice {
-  std::string name;     ///< the device's name ("NVIDIA H100 80GB HBM3", "llvmpipe (LLVM ...)")
+  std::string name; ///< the device's name ("NVIDIA H100 80GB HBM3", "llvmpipe (LLVM ...)")
   std::string type; ///< "discrete GPU", "integrated GPU", "virtual GPU", "CPU (software)", "other"
   std::string execution; ///< "wavefront" or "single kernel"
   bool device_frames = true;

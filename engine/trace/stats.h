@@ -139,7 +139,7 @@ struct RunSettings {
   float denoise_sigma_depth = 0.1f;
   // The Vulkan backends' device and options (empty gpu_device: a CPU backend; files from before
   // the Vulkan path have none).
-  std::string gpu_device = {}; ///< the device's name
+  std::string gpu_device = {};      ///< the device's name
   std::string gpu_device_type = {}; ///< "discrete GPU", "integrated GPU", "CPU (software)", ...
   std::string gpu_execution = "wavefront"; ///< wavefront | single kernel
   bool gpu_device_frames = true;

@@ -266,7 +266,8 @@ TEST(Cli, BackendsNotAvailableExitTwo) {
   if (!specula::backend_info("embree").available) unavailable.push_back("embree");
   if (!specula::backend_info("vulkan").available) unavailable.push_back("vulkan");
   for (const std::string& backend : unavailable) {
-    const Result r = run({"render", scene, "--width", "16", "--height", "16", "--backend", backend});
+    const Result r =
+        run({"render", scene, "--width", "16", "--height", "16", "--backend", backend});
     ASSERT_TRUE(r.exited);
     EXPECT_EQ(r.code, 2) << backend << "\n" << r.err;
     EXPECT_NE(r.err.find("specula: not available: "), std::string::npos) << r.err;
@@ -292,9 +293,8 @@ TEST(Cli, ForcedVulkanBackendWithoutADeviceExitsTwoWithOneLineSayingWhy) {
       EXPECT_TRUE(r.out.empty()) << r.out;
     }
   if (!in_this_build("vulkan")) return;
-  const Result named = run({"render", scene, "--width", "8", "--height", "8", "--backend",
-                            "vulkan"},
-                           kNoVulkanDevice);
+  const Result named = run(
+      {"render", scene, "--width", "8", "--height", "8", "--backend", "vulkan"}, kNoVulkanDevice);
   EXPECT_NE(named.err.find("no-such-device"), std::string::npos)
       << "the reason names the device asked for: " << named.err;
 }
@@ -330,37 +330,37 @@ TEST(Cli, AutoWithoutARealGpuSaysInOneLineWhyTheCpuBackendWasChosen) {
 TEST(Cli, GpuOptionsRejectBadValuesNamingTheOption) {
   const std::string scene =
       (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
-  for (const auto& [option, value] : std::vector<std::pair<std::string, std::string>>{
-           {"--gpu-execution", "fast"},
-           {"--gpu-execution", ""},
-           {"--gpu-frames", "yes"},
-           {"--grid-density", "0"},
-           {"--grid-density", "-2"},
-           {"--grid-density", "65"},
-           {"--grid-density", "abc"},
-           {"--grid-density", "nan"}}) {
-    const Result r = run({"render", scene, "--width", "8", "--height", "8", "--backend",
-                          "native", option, value});
+  for (const auto& [option, value] :
+       std::vector<std::pair<std::string, std::string>>{{"--gpu-execution", "fast"},
+                                                        {"--gpu-execution", ""},
+                                                        {"--gpu-frames", "yes"},
+                                                        {"--grid-density", "0"},
+                                                        {"--grid-density", "-2"},
+                                                        {"--grid-density", "65"},
+                                                        {"--grid-density", "abc"},
+                                                        {"--grid-density", "nan"}}) {
+    const Result r = run(
+        {"render", scene, "--width", "8", "--height", "8", "--backend", "native", option, value});
     ASSERT_TRUE(r.exited);
     EXPECT_EQ(r.code, 1) << option << " " << value << "\n" << r.err;
     EXPECT_NE(r.err.find(option), std::string::npos) << r.err;
     EXPECT_TRUE(r.out.empty()) << r.out;
   }
   // Valid values pass on every backend (CPU backends ignore them).
-  const Result ok = run({"render", scene, "--width", "8", "--height", "8", "--backend", "native",
-                         "--gpu-execution", "single", "--gpu-frames", "off", "--grid-density",
-                         "0.5"});
+  const Result ok =
+      run({"render", scene, "--width", "8", "--height", "8", "--backend", "native",
+           "--gpu-execution", "single", "--gpu-frames", "off", "--grid-density", "0.5"});
   EXPECT_EQ(ok.code, 0) << ok.err;
 }
 
 /// Renders a tiny cast frame on a Vulkan backend; skips while the traversal kernels are the
 /// groundwork's stub (which says "not implemented yet").
 Result render_on_vulkan(const std::vector<std::string>& extra, const std::string& prefix = "") {
-  std::vector<std::string> args = {"render",
-                                   (fs::path(SPECULA_SOURCE_DIR) /
-                                    "samples/scenes/cornell_box.json")
-                                       .string(),
-                                   "--width", "8", "--height", "8", "--mode", "cast"};
+  std::vector<std::string> args = {
+      "render",   (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string(),
+      "--width",  "8",
+      "--height", "8",
+      "--mode",   "cast"};
   args.insert(args.end(), extra.begin(), extra.end());
   return run(args, prefix);
 }
