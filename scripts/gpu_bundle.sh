@@ -98,7 +98,7 @@ done
 env -i PATH=/usr/bin:/bin "$out/run.sh" specula --version >/dev/null
 env -i PATH=/usr/bin:/bin "$out/run.sh" specula info "$out/samples/scenes/cornell_box.json" >/dev/null
 # The bench reads the bunny and the Cornell box from the bundle's samples/.
-env -i PATH=/usr/bin:/bin "$out/run.sh" specula_bench --sections gpu --size 8 --repetitions 1 >/dev/null
+env -i PATH=/usr/bin:/bin "$out/run.sh" specula_bench --sections gpu --size 16 --repetitions 1 >/dev/null
 size_mb=$(du -sm "$out" | cut -f1)
 if [ "$size_mb" -gt 60 ]; then
   echo "gpu_bundle.sh: the bundle is ${size_mb} MB, over 60 MB" >&2
