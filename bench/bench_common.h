@@ -84,6 +84,10 @@ void section_cache_paper(const Options& o);
 void section_path_reference(const Options& o);
 void section_path_error(const Options& o);
 
+// The Vulkan backends beside the CPU ones (gpu_sections.cpp): kernel styles, structures, grid
+// resolution.
+void section_gpu(const Options& o);
+
 /// A report section's Markdown: printed to stdout as it is written and kept to be saved.
 class Report {
 public:

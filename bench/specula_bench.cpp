@@ -18,6 +18,9 @@
 //            cached converged references, and RMSE / FLIP against samples and wall time for BSDF,
 //            light and MIS sampling with and without the à-trous denoiser (Markdown and log-log
 //            PNGs under --out-dir).
+//   gpu      the Vulkan backends (gpu_sections.cpp; not in the default list): primary Mrays/s on
+//            the bunny and the Cornell box per kernel style and structure beside native-bvh and
+//            Embree, and vulkan-grid's resolution sweep.
 
 #include "bench_common.h"
 #include "specula/accel/embree/embree_tracer.h"
@@ -345,7 +348,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 6));
   app.add_option("--sections", o.sections,
                  "Comma-separated: primary,tiles,whitted,depth,build,refit,native,paper,cache,"
-                 "cache-paper,path-reference,path-error");
+                 "cache-paper,path-reference,path-error,gpu");
   app.add_option("--out-dir", o.out_dir,
                  "Where cache, cache-paper and path-error write Markdown and PNGs (default: "
                  "SOURCE_DIR/docs/cache-report, SOURCE_DIR/docs/path-report)");
@@ -411,6 +414,7 @@ int main(int argc, char** argv) {
     if (has("cache-paper")) section_cache_paper(o);
     if (has("path-reference")) section_path_reference(o);
     if (has("path-error")) section_path_error(o);
+    if (has("gpu")) section_gpu(o);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "specula_bench: %s\n", e.what());
     return 1;

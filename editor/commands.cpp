@@ -28,6 +28,12 @@ namespace {
 
 nlohmann::json vec_json(const vec3& v) { return {v.x, v.y, v.z}; }
 
+std::string shown_number(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", value);
+  return text;
+}
+
 bool power_of_two(std::uint32_t v) { return v >= 1 && v <= 4096 && (v & (v - 1)) == 0; }
 
 /// --cache and its companions → the job's cache settings.
@@ -92,7 +98,64 @@ std::uint64_t render_memory_bytes(std::uint32_t width, std::uint32_t height, std
          (std::uint64_t{64} << 20);
 }
 
+namespace {
+
+/// `specula info` without a scene: what this machine can trace with.
+int run_machine_info(bool as_json, std::ostream& out) {
+  std::string why_no_device;
+  const std::vector<VulkanDeviceEntry> devices = vulkan_devices(&why_no_device);
+  const std::optional<std::string> auto_note = auto_cpu_reason();
+  const std::string auto_pick = resolve_backend("auto");
+  if (as_json) {
+    nlohmann::json backends = nlohmann::json::array();
+    for (const BackendInfo& b : specula::backends()) {
+      nlohmann::json entry = {{"name", std::string(b.name)}, {"available", b.available}};
+      if (!b.available) entry["reason"] = b.reason;
+      backends.push_back(entry);
+    }
+    nlohmann::json list = nlohmann::json::array();
+    for (const VulkanDeviceEntry& d : devices)
+      list.push_back(
+          {{"name", d.name}, {"type", d.type}, {"compute", d.compute}, {"chosen", d.chosen}});
+    nlohmann::json j = {{"backends", backends}, {"auto", auto_pick}, {"vulkan_devices", list}};
+    if (auto_note) j["auto_reason"] = *auto_note;
+    if (!why_no_device.empty()) j["vulkan_unavailable"] = why_no_device;
+    out << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    return 0;
+  }
+  out << "backends:\n";
+  for (const BackendInfo& b : specula::backends())
+    out << "  " << b.name << ": " << (b.available ? "available" : b.reason) << "\n";
+  out << "auto:       " << auto_pick;
+  if (auto_note) out << " (" << *auto_note << ")";
+  out << "\nVulkan devices:" << (devices.empty() ? " none" : "") << "\n";
+  for (const VulkanDeviceEntry& d : devices)
+    out << "  " << (d.chosen ? "* " : "  ") << d.name << " (" << d.type
+        << (d.compute ? "" : ", no compute queue") << ")" << (d.chosen ? " — chosen" : "") << "\n";
+  if (!why_no_device.empty()) out << "  (none chosen: " << one_line(why_no_device) << ")\n";
+  return 0;
+}
+
+/// The GPU side of a frame: the tracer's counters when it runs on a device.
+GpuFrameStats gpu_frame_stats(const Tracer& tracer) {
+  GpuFrameStats g;
+  if (const std::optional<TracerDevice> d = tracer_device(tracer)) {
+    g.present = true;
+    g.rays = d->rays;
+    g.resumed = d->resumed;
+    g.cut = d->cut;
+    g.dispatches = d->dispatches;
+    g.gpu_ms = d->gpu_ms;
+  }
+  return g;
+}
+
+bool on_device(const std::string& backend) { return backend.rfind("vulkan", 0) == 0; }
+
+} // namespace
+
 int run_info(const InfoOptions& options, std::ostream& out) {
+  if (options.scene.empty()) return run_machine_info(options.json, out);
   Scene scene = load_scene(options.scene);
   const SceneSummary s = summarize(scene);
   if (options.json) {
@@ -139,7 +202,7 @@ int run_info(const InfoOptions& options, std::ostream& out) {
 }
 
 int run_render(const RenderOptions& options, std::ostream& out, std::ostream* progress,
-               bool progress_is_terminal) {
+               bool progress_is_terminal, std::ostream* notes) {
   using Clock = std::chrono::steady_clock;
   // Validate everything the user gave before reporting what this build lacks, so a bad scene or
   // option is reported as such (exit 1) rather than hidden behind "not available" (exit 2).
@@ -167,6 +230,21 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
                 "expected mis, bsdf or light, got '" + printable(options.sampling) + "'");
   if (options.accumulate != "on" && options.accumulate != "off")
     throw Error("--accumulate", "expected on or off, got '" + printable(options.accumulate) + "'");
+  GpuTracerOptions gpu;
+  if (options.gpu_execution == "wavefront")
+    gpu.execution = GpuTracerOptions::Execution::wavefront;
+  else if (options.gpu_execution == "single")
+    gpu.execution = GpuTracerOptions::Execution::single_kernel;
+  else
+    throw Error("--gpu-execution",
+                "expected wavefront or single, got '" + printable(options.gpu_execution) + "'");
+  if (options.gpu_frames != "on" && options.gpu_frames != "off")
+    throw Error("--gpu-frames", "expected on or off, got '" + printable(options.gpu_frames) + "'");
+  gpu.device_frames = options.gpu_frames == "on";
+  if (!(options.grid_density > 0.0f && options.grid_density <= 64.0f))
+    throw Error("--grid-density", "expected cells per triangle in (0, 64], got " +
+                                      shown_number(options.grid_density));
+  gpu.grid_density = options.grid_density;
   const bool stochastic = stochastic_mode(*mode);
   if (options.denoise && !stochastic)
     throw Error("--denoise", "filters the noise of --mode path and shadow; mode '" +
@@ -203,8 +281,35 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
           "x" + std::to_string(height));
   job.image = Framebuffer(width, height);
   job.cache = cache_settings;
-  prepare_rendering(scene.registry, std::move(job));
-  const std::string backend = scene.registry.resource<RenderJob>().backend;
+  job.gpu = gpu;
+  const SceneKind kind = scene_kind(scene.registry);
+  // A Vulkan call failing (a lost device, a failed allocation) is the backend's failure, not bad
+  // input nor a bug here: say which backend and device, and stop.
+  std::string backend = options.backend;
+  std::string device;
+  const auto backend_failed = [&](const std::exception& e) {
+    return BackendFailure("backend '" + backend + "'" + (device.empty() ? "" : " on " + device) +
+                          " failed: " + one_line(e.what()));
+  };
+  try {
+    prepare_rendering(scene.registry, std::move(job));
+  } catch (const Error&) {
+    throw;
+  } catch (const UnavailableError&) {
+    throw;
+  } catch (const std::bad_alloc&) {
+    throw;
+  } catch (const std::exception& e) {
+    if (!on_device(resolve_backend(options.backend, kind))) throw;
+    throw backend_failed(e);
+  }
+  backend = scene.registry.resource<RenderJob>().backend;
+  const Tracer& tracer = *scene.registry.resource<ActiveTracer>().tracer;
+  const std::optional<TracerDevice> tracer_dev = tracer_device(tracer);
+  if (tracer_dev) device = tracer_dev->name + " (" + tracer_dev->type + ")";
+  if (options.backend == "auto" && notes != nullptr)
+    if (const std::optional<std::string> why = auto_cpu_reason(kind); why && !on_device(backend))
+      *notes << "specula: note: --backend auto: " << *why << "\n";
 
   RunStats stats;
   stats.settings = {options.scene,   backend,        options.mode,    width,
@@ -228,12 +333,31 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
     stats.settings.denoise_sigma_normal = denoise->sigma_normal;
     stats.settings.denoise_sigma_depth = denoise->sigma_depth;
   }
+  if (tracer_dev) {
+    stats.settings.gpu_device = tracer_dev->name;
+    stats.settings.gpu_device_type = tracer_dev->type;
+    stats.settings.gpu_execution = tracer_dev->execution;
+    stats.settings.gpu_device_frames = tracer_dev->device_frames;
+    stats.settings.grid_density = gpu.grid_density;
+  }
   Schedule schedule;
   const Clock::time_point start = Clock::now();
   bool progress_shown = false;
   for (std::uint32_t f = 0; f < options.frames; ++f) {
-    schedule.tick(scene.registry, 1.0 / 60.0);
+    try {
+      schedule.tick(scene.registry, 1.0 / 60.0);
+    } catch (const Error&) {
+      throw;
+    } catch (const UnavailableError&) {
+      throw;
+    } catch (const std::bad_alloc&) {
+      throw;
+    } catch (const std::exception& e) {
+      if (!tracer_dev) throw;
+      throw backend_failed(e);
+    }
     stats.frames.push_back(scene.registry.resource<RenderJob>().last);
+    stats.frames.back().gpu = gpu_frame_stats(tracer);
     const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
     if (progress != nullptr && progress_is_terminal && elapsed > options.progress_after_s &&
         f + 1 < options.frames) {
@@ -272,6 +396,13 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   }
   out << "), " << (trace > 0.0 ? double(last.rays.total()) / (trace * 1e3) : 0.0)
       << " Mrays/s of tracing time\n";
+  if (tracer_dev) {
+    const GpuFrameStats& g = last.gpu;
+    out << "  device: " << device << ", " << tracer_dev->execution << ", device frames "
+        << (tracer_dev->device_frames ? "on" : "off") << "; last frame " << g.rays << " GPU rays, "
+        << g.dispatches << " dispatches, " << g.resumed << " resumed, " << g.cut << " cut, "
+        << g.gpu_ms << " GPU ms\n";
+  }
   if (cache_settings.policy != cache::CachePolicy::Off) {
     const CacheCounts& c = last.cache;
     out << "  cache: " << c.lookups << " lookups, " << c.hits << " served ("

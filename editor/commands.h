@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <iosfwd>
 #include <optional>
+#include <stdexcept>
 #include <string>
 
 namespace specula::cli {
@@ -16,13 +17,24 @@ namespace specula::cli {
 inline constexpr std::uint32_t kMaxFrames = 1000000;
 
 struct InfoOptions {
-  std::string scene;
+  std::string scene; ///< empty: the backends and Vulkan devices of this machine instead
   bool json = false;
 };
 
+/// A tracing backend failed while rendering (a Vulkan call, a lost device): the run stops with
+/// this message naming the backend and its device; exit code kExitBackendFailed.
+class BackendFailure : public std::runtime_error {
+public:
+  using std::runtime_error::runtime_error;
+};
+inline constexpr int kExitBackendFailed = 3;
+
 struct RenderOptions {
   std::string scene;
-  std::string backend = "auto"; ///< auto | embree | native | vulkan
+  std::string backend = "auto"; ///< auto | a backends() name (vulkan, embree, native, ...)
+  std::string gpu_execution = "wavefront"; ///< wavefront | single (the Vulkan backends)
+  std::string gpu_frames = "on";           ///< on | off: whole frames on the device
+  float grid_density = 4.0f;               ///< vulkan-grid: cells per triangle
   std::string mode = "whitted"; ///< cast | whitted | path | shadow
   std::uint32_t width = 0;      ///< 0: the scene's settings
   std::uint32_t height = 0;     ///< 0: the scene's settings
@@ -49,6 +61,8 @@ struct RenderOptions {
   double progress_after_s = 1.0;
 };
 
+/// Prints the scene's summary, or without a scene the backends (availability, reasons) and the
+/// Vulkan devices (name, type, the one the backend would choose).
 int run_info(const InfoOptions& options, std::ostream& out);
 
 /// A bound on the bytes a render of this size allocates beyond the scene, its acceleration
@@ -67,10 +81,12 @@ int run_info(const InfoOptions& options, std::ostream& out);
 /// Renders options.frames ticks of the scene. Before loading the scene, checks the options and
 /// the output path (check_image_output_path); before allocating the framebuffer, checks
 /// render_memory_bytes against the memory budget (exit 1 naming the scene when it does not fit).
+/// With `--backend auto` and no real GPU, `notes` (nullptr: none) gets one line saying why a CPU
+/// backend was chosen. A backend failing mid-render (a lost device) throws BackendFailure.
 /// `progress` receives a one-line progress report (frames done, frames/s, time left), rewritten in
 /// place and cleared at the end, once the render has run longer than options.progress_after_s and
 /// when `progress_is_terminal`; pass nullptr for none.
 int run_render(const RenderOptions& options, std::ostream& out, std::ostream* progress = nullptr,
-               bool progress_is_terminal = false);
+               bool progress_is_terminal = false, std::ostream* notes = nullptr);
 
 } // namespace specula::cli

@@ -1,6 +1,6 @@
 // The `specula` program: headless subcommands over the engine (info, render, compare). Bad input
 // ends with a message naming the file and the problem and exit code 1; a feature this build lacks
-// ends with exit code 2.
+// ends with exit code 2; a backend failing while rendering (a lost GPU) with exit code 3.
 
 #include "commands.h"
 #include "compare_command.h"
@@ -118,12 +118,12 @@ int main(int argc, char** argv) {
   });
 
   cli::InfoOptions info;
-  CLI::App* info_cmd =
-      app.add_subcommand("info", "Print entity, triangle, material and light counts and bounds");
+  CLI::App* info_cmd = app.add_subcommand(
+      "info", "Print a scene's entity, triangle, material and light counts and bounds; without a "
+              "scene, the backends and Vulkan devices of this machine");
   info_cmd
       ->add_option("scene", info.scene,
                    "Scene (.json, .gltf, .glb) or mesh (.obj, .ply, .off, .stl)")
-      ->required()
       ->check(non_empty_path());
   info_cmd->add_flag("--json", info.json, "Print the summary as JSON");
 
@@ -137,6 +137,23 @@ int main(int argc, char** argv) {
   render_cmd
       ->add_option("--backend", render.backend, "Tracing backend (auto: the best one available)")
       ->check(one_of(backend_names()))
+      ->capture_default_str();
+  render_cmd
+      ->add_option("--gpu-execution", render.gpu_execution,
+                   "Vulkan backends: whole frames as a wavefront (one dispatch per stage, ray "
+                   "queues) or as a single kernel")
+      ->check(one_of({"wavefront", "single"}))
+      ->capture_default_str();
+  render_cmd
+      ->add_option("--gpu-frames", render.gpu_frames,
+                   "Vulkan backends: render whole frames on the device where the mode has "
+                   "kernels (off: the CPU integrators over GPU traversal)")
+      ->check(one_of({"on", "off"}))
+      ->capture_default_str();
+  render_cmd
+      ->add_option("--grid-density", render.grid_density,
+                   "vulkan-grid: target grid cells per triangle, in (0, 64]")
+      ->check(number())
       ->capture_default_str();
   render_cmd->add_option("--mode", render.mode, "Integrator")
       ->check(one_of({"cast", "whitted", "path", "shadow"}))
@@ -248,7 +265,7 @@ int main(int argc, char** argv) {
   try {
     if (info_cmd->parsed()) return cli::run_info(info, std::cout);
     if (render_cmd->parsed())
-      return cli::run_render(render, std::cout, &std::cerr, isatty(STDERR_FILENO) == 1);
+      return cli::run_render(render, std::cout, &std::cerr, isatty(STDERR_FILENO) == 1, &std::cerr);
     if (compare_cmd->parsed()) return cli::run_compare(compare, std::cout);
   } catch (const Error& e) {
     std::cerr << "specula: error: " << e.what() << "\n";
@@ -256,6 +273,9 @@ int main(int argc, char** argv) {
   } catch (const UnavailableError& e) {
     std::cerr << "specula: not available: " << one_line(e.what()) << "\n";
     return kExitUnavailable;
+  } catch (const cli::BackendFailure& e) {
+    std::cerr << "specula: " << one_line(e.what()) << "\n";
+    return cli::kExitBackendFailed;
   } catch (const std::bad_alloc&) {
     std::cerr << "specula: error: out of memory\n";
     return kExitBadInput;

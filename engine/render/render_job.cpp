@@ -70,8 +70,11 @@ void prepare_rendering(ecs::Registry& registry, RenderJob job) {
     throw Error("render settings", std::string("the denoiser filters path and shadow modes' "
                                                "noise; mode '") +
                                        trace_mode_name(job.settings.mode) + "' has none");
-  std::unique_ptr<Tracer> tracer =
-      make_tracer(job.backend, job.packet_width, scene_kind(registry));
+  TracerOptions tracer_options;
+  tracer_options.packet_width = job.packet_width;
+  tracer_options.kind = scene_kind(registry);
+  tracer_options.gpu = job.gpu;
+  std::unique_ptr<Tracer> tracer = make_tracer(job.backend, tracer_options);
   job.backend = std::string(tracer->name());
   if (job.cache.policy != cache::CachePolicy::Off) {
     if (job.hook)

@@ -10,6 +10,7 @@
 #include "specula/image/framebuffer.h"
 #include "specula/render/accumulation.h"
 #include "specula/render/scene_layer.h"
+#include "specula/render/tracer_factory.h"
 #include "specula/trace/radiance_hook.h"
 #include "specula/trace/render_frame.h"
 #include "specula/trace/stats.h"
@@ -31,6 +32,9 @@ struct RenderJob {
   std::string backend = "auto";
   /// Primary-ray packet width (1, 4, 8, 16); 16 measured fastest here (docs/PERFORMANCE.md).
   std::uint32_t packet_width = 16;
+  /// How the Vulkan backends run (execution style, device frames, grid density); CPU backends
+  /// ignore it.
+  GpuTracerOptions gpu;
   /// For path and shadow modes, settings.sample_offset is where the first frame after every
   /// restart starts; later frames continue from there (Accumulation).
   TraceSettings settings;

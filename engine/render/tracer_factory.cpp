@@ -6,6 +6,11 @@
 
 #include "specula/accel/native/native_tracer.h"
 
+#include <cctype>
+#include <cstdlib>
+#include <mutex>
+#include <utility>
+
 #if SPECULA_HAS_EMBREE
 #include "specula/accel/embree/embree_tracer.h"
 #endif
@@ -17,31 +22,67 @@ namespace specula {
 
 namespace {
 
-/// What the Vulkan loader offers, probed once per process (creating an instance costs
-/// milliseconds): whether any device can run the kernels, and whether one is a real GPU.
+/// What the Vulkan loader offers, as the backend's Context::create would see it: whether a device
+/// can run the kernels (named like SPECULA_VK_DEVICE when that is set), whether one is a real GPU,
+/// and the software devices seen (for auto's message).
 struct VulkanProbe {
   bool device = false;
   bool gpu = false;
-  std::string reason;
+  std::string reason;   ///< why no device, when none
+  std::string software; ///< names of the CPU devices that would serve, comma-separated
 };
 
-const VulkanProbe& vulkan_probe() {
-  static const VulkanProbe probe = [] {
-    VulkanProbe p;
 #if SPECULA_HAS_VULKAN
-    std::string why;
-    for (const gpu::DeviceSummary& d : gpu::list_devices(&why)) {
-      if (!d.compute) continue;
-      p.device = true;
-      if (d.type != VK_PHYSICAL_DEVICE_TYPE_CPU) p.gpu = true;
-    }
-    if (!p.device) p.reason = "unavailable: " + (why.empty() ? std::string("no Vulkan compute device") : why);
-#else
-    p.reason = "not in this build (configured with SPECULA_WITH_VULKAN=OFF)";
+std::string lower(std::string text) {
+  for (char& c : text) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return text;
+}
+
+const char* device_type_name(VkPhysicalDeviceType type) {
+  gpu::DeviceInfo info;
+  info.type = type;
+  return info.type_name();
+}
 #endif
-    return p;
-  }();
-  return probe;
+
+/// Probed once per process and SPECULA_VK_DEVICE value (creating an instance costs milliseconds;
+/// tests change the variable between cases).
+VulkanProbe vulkan_probe() {
+  static std::mutex mutex;
+  static std::optional<std::pair<std::string, VulkanProbe>> cached;
+  const char* env = std::getenv("SPECULA_VK_DEVICE");
+  const std::string wanted = env != nullptr ? env : "";
+  const std::lock_guard<std::mutex> lock(mutex);
+  if (cached && cached->first == wanted) return cached->second;
+  VulkanProbe p;
+#if SPECULA_HAS_VULKAN
+  std::string why;
+  std::string names;
+  for (const gpu::DeviceSummary& d : gpu::list_devices(&why)) {
+    names += (names.empty() ? "" : ", ") + d.name;
+    if (!d.compute) continue;
+    if (!wanted.empty() && lower(d.name).find(lower(wanted)) == std::string::npos) continue;
+    p.device = true;
+    if (d.type != VK_PHYSICAL_DEVICE_TYPE_CPU) {
+      p.gpu = true;
+    } else {
+      p.software += (p.software.empty() ? "" : ", ") + d.name;
+    }
+  }
+  if (!p.device) {
+    if (!why.empty())
+      p.reason = "unavailable: " + why;
+    else if (!wanted.empty())
+      p.reason = "unavailable: no Vulkan compute device named like '" + printable(wanted) +
+                 "' (SPECULA_VK_DEVICE); devices: " + names;
+    else
+      p.reason = "unavailable: no Vulkan compute device";
+  }
+#else
+  p.reason = "not in this build (configured with SPECULA_WITH_VULKAN=OFF)";
+#endif
+  cached.emplace(wanted, p);
+  return p;
 }
 
 } // namespace
@@ -50,7 +91,7 @@ std::vector<BackendInfo> backends() {
   std::vector<BackendInfo> list;
   // The order is auto's preference: a real GPU first (lavapipe, the software Vulkan device, is
   // slower than the CPU backends), then the CPU backends.
-  const VulkanProbe& vk = vulkan_probe();
+  const VulkanProbe vk = vulkan_probe();
   list.push_back({"vulkan", vk.device, vk.reason, true});
   list.push_back({"vulkan-grid", vk.device, vk.reason, true});
 #if SPECULA_HAS_EMBREE
@@ -146,28 +187,121 @@ std::string resolve_backend(std::string_view requested, SceneKind kind) {
               "unknown backend '" + std::string(requested) + "' (expected one of " + names + ")");
 }
 
-std::unique_ptr<Tracer> make_tracer(std::string_view name, std::uint32_t packet_width,
-                                    SceneKind kind) {
-  if (packet_width != 1 && packet_width != 4 && packet_width != 8 && packet_width != 16)
+std::optional<std::string> auto_cpu_reason(SceneKind kind) {
+  const VulkanProbe vk = vulkan_probe();
+  if (vk.device && vk.gpu) return std::nullopt;
+  std::string why;
+  if (vk.device)
+    why = "no Vulkan GPU, only software Vulkan (" + vk.software + "), slower than the CPU backends";
+  else
+    why = "no Vulkan GPU (vulkan " + vk.reason + ")";
+  std::string chosen;
+  for (const std::string_view name : cpu_preference(kind))
+    if (backend_info(name).available) {
+      chosen = std::string(name);
+      break;
+    }
+  if (chosen.empty()) return why;
+  return why + "; using the CPU backend " + chosen + ", the fastest here for " +
+         scene_kind_name(kind) + " scenes";
+}
+
+std::unique_ptr<Tracer> make_tracer(std::string_view name, const TracerOptions& options) {
+  if (options.packet_width != 1 && options.packet_width != 4 && options.packet_width != 8 &&
+      options.packet_width != 16)
     throw Error("render settings",
-                "packet width must be 1, 4, 8 or 16, got " + std::to_string(packet_width));
-  const std::string backend = resolve_backend(name, kind);
+                "packet width must be 1, 4, 8 or 16, got " + std::to_string(options.packet_width));
+  if (!(options.gpu.grid_density > 0.0f && options.gpu.grid_density <= 64.0f))
+    throw Error("render settings", "grid density must lie in (0, 64] cells per triangle, got " +
+                                       std::to_string(options.gpu.grid_density));
+  const std::string backend = resolve_backend(name, options.kind);
+  const std::uint32_t packet_width = options.packet_width;
 #if SPECULA_HAS_EMBREE
   if (backend == "embree") return std::make_unique<EmbreeTracer>(packet_width);
 #endif
 #if SPECULA_HAS_VULKAN
   if (backend == "vulkan" || backend == "vulkan-grid") {
-    gpu::VulkanOptions options;
-    if (backend == "vulkan-grid") options.structure = gpu::GpuStructure::grid;
-    return std::make_unique<gpu::VulkanTracer>(packet_width, options);
+    gpu::VulkanOptions vk;
+    if (backend == "vulkan-grid") vk.structure = gpu::GpuStructure::grid;
+    vk.execution = options.gpu.execution == GpuTracerOptions::Execution::single_kernel
+                       ? gpu::Execution::single_kernel
+                       : gpu::Execution::wavefront;
+    vk.device_frames = options.gpu.device_frames;
+    vk.grid_density = options.gpu.grid_density;
+    auto tracer = std::make_unique<gpu::VulkanTracer>(packet_width, vk);
+    // Test-only: lets the CLI's tests reach the device-loss path of a whole run (every submit
+    // then fails as on a lost device); see tests/cli.
+    if (const char* lose = std::getenv("SPECULA_VK_SIMULATE_DEVICE_LOSS");
+        lose != nullptr && std::string(lose) == "1")
+      tracer->context().simulate_device_loss();
+    return tracer;
   }
 #endif
-  NativeOptions options;
-  if (backend == "native-bvh") options.static_structure = StaticStructure::bvh;
-  if (backend == "native-grid") options.static_structure = StaticStructure::grid;
+  NativeOptions native;
+  if (backend == "native-bvh") native.static_structure = StaticStructure::bvh;
+  if (backend == "native-grid") native.static_structure = StaticStructure::grid;
   if (backend == "native" || backend == "native-bvh" || backend == "native-grid")
-    return std::make_unique<NativeTracer>(packet_width, options);
+    return std::make_unique<NativeTracer>(packet_width, native);
   throw UnavailableError("backend '" + backend + "' has no tracer in this build");
+}
+
+std::unique_ptr<Tracer> make_tracer(std::string_view name, std::uint32_t packet_width,
+                                    SceneKind kind) {
+  TracerOptions options;
+  options.packet_width = packet_width;
+  options.kind = kind;
+  return make_tracer(name, options);
+}
+
+std::optional<TracerDevice> tracer_device(const Tracer& tracer) {
+#if SPECULA_HAS_VULKAN
+  if (const auto* vk = dynamic_cast<const gpu::VulkanTracer*>(&tracer)) {
+    TracerDevice d;
+    d.name = vk->context().info().name;
+    d.type = vk->context().info().type_name();
+    d.execution =
+        vk->options().execution == gpu::Execution::single_kernel ? "single kernel" : "wavefront";
+    d.device_frames = vk->options().device_frames;
+    const gpu::GpuTraceCounters& c = vk->counters();
+    d.rays = c.rays;
+    d.resumed = c.resumed;
+    d.cut = c.cut;
+    d.dispatches = c.dispatches;
+    d.gpu_ms = c.gpu_ms;
+    return d;
+  }
+#else
+  (void)tracer;
+#endif
+  return std::nullopt;
+}
+
+std::vector<VulkanDeviceEntry> vulkan_devices(std::string* why_none) {
+  std::vector<VulkanDeviceEntry> list;
+#if SPECULA_HAS_VULKAN
+  std::string why;
+  for (const gpu::DeviceSummary& d : gpu::list_devices(&why))
+    list.push_back({d.name, device_type_name(d.type), d.compute, false});
+  // The device the backend would open: ask Context::create itself, so that this list and the
+  // backend never disagree (SPECULA_VK_DEVICE, API version, preference order).
+  try {
+    const std::string chosen = gpu::Context::create()->info().name;
+    for (VulkanDeviceEntry& e : list)
+      if (e.name == chosen) {
+        e.chosen = true;
+        break;
+      }
+  } catch (const UnavailableError& e) {
+    why = e.what();
+  } catch (const gpu::GpuError& e) {
+    why = e.what();
+  }
+  if (why_none != nullptr) *why_none = why;
+#else
+  if (why_none != nullptr)
+    *why_none = "not in this build (configured with SPECULA_WITH_VULKAN=OFF)";
+#endif
+  return list;
 }
 
 } // namespace specula

@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -54,10 +55,63 @@ enum class SceneKind : std::uint8_t { static_only, rigid_dynamic, deforming };
 /// measured by specula_bench (docs/PERFORMANCE.md, "Choosing between CPU backends").
 [[nodiscard]] std::vector<std::string_view> cpu_preference(SceneKind kind);
 
-/// A new tracer of the named backend (resolve_backend's rules, so `auto` works too) with the
-/// given primary packet width (1, 4, 8 or 16).
+/// Why `auto` picks a CPU backend for this kind of scene, in one line ("no Vulkan GPU: only
+/// llvmpipe (software) ...; embree chosen"), or nullopt when it picks the Vulkan backend. What
+/// `specula render --backend auto` prints, so a user never wonders why the GPU was not used.
+[[nodiscard]] std::optional<std::string> auto_cpu_reason(SceneKind kind = SceneKind::static_only);
+
+/// How the Vulkan backends run (gpu::VulkanOptions, spelled without naming the backend's types):
+/// the CLI's --gpu-execution, --gpu-frames and --grid-density. CPU backends ignore it.
+struct GpuTracerOptions {
+  enum class Execution : std::uint8_t { wavefront, single_kernel };
+  Execution execution = Execution::wavefront;
+  /// Whole cast and Whitted frames on the device; false: CPU integrators over GPU traversal.
+  bool device_frames = true;
+  /// vulkan-grid's target cells per triangle of the static set.
+  float grid_density = 4.0f;
+};
+
+struct TracerOptions {
+  std::uint32_t packet_width = 16; ///< primary packet width: 1, 4, 8 or 16
+  SceneKind kind = SceneKind::static_only;
+  GpuTracerOptions gpu;
+};
+
+/// A new tracer of the named backend (resolve_backend's rules, so `auto` works too). Throws
+/// specula::Error for bad options (packet width; grid density outside (0, 64]).
+[[nodiscard]] std::unique_ptr<Tracer> make_tracer(std::string_view name,
+                                                  const TracerOptions& options);
+/// As above with the given primary packet width (1, 4, 8 or 16) and default GPU options.
 [[nodiscard]] std::unique_ptr<Tracer> make_tracer(std::string_view name,
                                                   std::uint32_t packet_width = 16,
                                                   SceneKind kind = SceneKind::static_only);
+
+/// The device a tracer runs on and its counters, for tracers on a device (the Vulkan backends);
+/// nullopt for CPU tracers. The factory is the one place that knows backend types, so systems
+/// and the CLI ask here rather than cast.
+struct TracerDevice {
+  std::string name; ///< the device's name ("NVIDIA H100 80GB HBM3", "llvmpipe (LLVM ...)")
+  std::string type; ///< "discrete GPU", "integrated GPU", "virtual GPU", "CPU (software)", "other"
+  std::string execution; ///< "wavefront" or "single kernel"
+  bool device_frames = true;
+  /// The tracer's counters after its latest frame or batch (gpu::GpuTraceCounters).
+  std::uint64_t rays = 0;
+  std::uint64_t resumed = 0;
+  std::uint64_t cut = 0;
+  std::uint64_t dispatches = 0;
+  double gpu_ms = 0.0;
+};
+[[nodiscard]] std::optional<TracerDevice> tracer_device(const Tracer& tracer);
+
+/// Vulkan devices the loader reports, for `specula info`: name, type (TracerDevice::type's words),
+/// whether it has a compute queue, and whether the backend would choose it (Context::create's
+/// choice, SPECULA_VK_DEVICE included). `why_none` gets the reason when none would be chosen.
+struct VulkanDeviceEntry {
+  std::string name;
+  std::string type;
+  bool compute = false;
+  bool chosen = false;
+};
+[[nodiscard]] std::vector<VulkanDeviceEntry> vulkan_devices(std::string* why_none = nullptr);
 
 } // namespace specula

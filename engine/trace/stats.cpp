@@ -116,6 +116,12 @@ std::string stats_to_json(const RunStats& stats) {
                                                 {"sigma_normal", s.denoise_sigma_normal},
                                                 {"sigma_depth", s.denoise_sigma_depth}}
                                          : json(false)}};
+  if (!s.gpu_device.empty())
+    settings["gpu"] = {{"device", s.gpu_device},
+                       {"device_type", s.gpu_device_type},
+                       {"execution", s.gpu_execution},
+                       {"device_frames", s.gpu_device_frames},
+                       {"grid_density", s.grid_density}};
   json frames = json::array();
   double total_ms = 0.0;
   double total_trace_ms = 0.0;
@@ -151,6 +157,12 @@ std::string stats_to_json(const RunStats& stats) {
                       {"accumulated_samples", f.accumulated_samples},
                       {"accumulation_restarted", f.accumulation_restarted},
                       {"denoise_ms", f.denoise_ms}});
+    if (f.gpu.present)
+      frames.back()["gpu"] = {{"rays", f.gpu.rays},
+                              {"resumed", f.gpu.resumed},
+                              {"cut", f.gpu.cut},
+                              {"dispatches", f.gpu.dispatches},
+                              {"gpu_ms", f.gpu.gpu_ms}};
     total_ms += f.ms;
     total_trace_ms += f.trace_ms;
     total_rays += f.rays;
@@ -225,6 +237,16 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
       throw Error(name, "settings.denoise", "must be false or an object");
     }
   }
+  // Arrived with the Vulkan path (issue 10): CPU runs and older files have none.
+  if (settings.contains("gpu")) {
+    const json g = read<json>(settings, "gpu", name, "settings");
+    const std::string at = "settings.gpu";
+    s.gpu_device = read<std::string>(g, "device", name, at);
+    s.gpu_device_type = read<std::string>(g, "device_type", name, at);
+    s.gpu_execution = read<std::string>(g, "execution", name, at);
+    s.gpu_device_frames = read<bool>(g, "device_frames", name, at);
+    s.grid_density = read<float>(g, "grid_density", name, at);
+  }
   const json frames = read<json>(root, "frames", name, "");
   if (!frames.is_array()) throw Error(name, "frames", "must be an array");
   for (std::size_t i = 0; i < frames.size(); ++i) {
@@ -291,6 +313,16 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
     read_optional(frames[i], "accumulated_samples", f.accumulated_samples, name, at);
     read_optional(frames[i], "accumulation_restarted", f.accumulation_restarted, name, at);
     read_optional(frames[i], "denoise_ms", f.denoise_ms, name, at);
+    if (frames[i].contains("gpu")) {
+      const json g = read<json>(frames[i], "gpu", name, at);
+      const std::string where = at + ".gpu";
+      f.gpu.present = true;
+      f.gpu.rays = read<std::uint64_t>(g, "rays", name, where);
+      f.gpu.resumed = read<std::uint64_t>(g, "resumed", name, where);
+      f.gpu.cut = read<std::uint64_t>(g, "cut", name, where);
+      f.gpu.dispatches = read<std::uint64_t>(g, "dispatches", name, where);
+      f.gpu.gpu_ms = read<double>(g, "gpu_ms", name, where);
+    }
     stats.frames.push_back(f);
   }
   return stats;

@@ -80,6 +80,18 @@ struct AccelStats {
   friend bool operator==(const AccelStats&, const AccelStats&) = default;
 };
 
+/// A frame on a device (the Vulkan backends): the tracer's counters after it. Absent (present
+/// false) on CPU backends; the stats file then has no "gpu" object in the frame.
+struct GpuFrameStats {
+  bool present = false;
+  std::uint64_t rays = 0;       ///< rays the kernels traced
+  std::uint64_t resumed = 0;    ///< rays resumed after using up a dispatch's traversal budget
+  std::uint64_t cut = 0;        ///< rays the driver cut off silently: must be 0
+  std::uint64_t dispatches = 0; ///< traversal dispatches
+  double gpu_ms = 0.0;          ///< device time of those dispatches (timestamps)
+  friend bool operator==(const GpuFrameStats&, const GpuFrameStats&) = default;
+};
+
 struct FrameStats {
   double ms = 0.0;       ///< wall-clock time of the whole frame: every system of the tick
   double trace_ms = 0.0; ///< of which tracing the image (render_system)
@@ -93,6 +105,7 @@ struct FrameStats {
   /// the scene, camera or settings changed).
   bool accumulation_restarted = false;
   double denoise_ms = 0.0; ///< of trace_ms, the denoiser's part (0: not denoised)
+  GpuFrameStats gpu;
   friend bool operator==(const FrameStats&, const FrameStats&) = default;
 };
 
@@ -124,6 +137,13 @@ struct RunSettings {
   float denoise_sigma_color = 0.6f;
   float denoise_sigma_normal = 0.1f;
   float denoise_sigma_depth = 0.1f;
+  // The Vulkan backends' device and options (empty gpu_device: a CPU backend; files from before
+  // the Vulkan path have none).
+  std::string gpu_device = {};      ///< the device's name
+  std::string gpu_device_type = {}; ///< "discrete GPU", "integrated GPU", "CPU (software)", ...
+  std::string gpu_execution = "wavefront"; ///< wavefront | single kernel
+  bool gpu_device_frames = true;
+  float grid_density = 4.0f; ///< vulkan-grid's cells per triangle
   friend bool operator==(const RunSettings&, const RunSettings&) = default;
 };
 

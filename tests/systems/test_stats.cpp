@@ -130,6 +130,26 @@ TEST(Stats, ReadsFilesFromBeforeTheStochasticModes) {
   EXPECT_THROW((void)stats_from_json(j.dump(), "bad.json"), Error);
 }
 
+TEST(Stats, WritesTheDeviceAndGpuCountersOnlyForDeviceRuns) {
+  RunStats s = sample_stats();
+  const auto cpu = nlohmann::json::parse(stats_to_json(s));
+  EXPECT_FALSE(cpu.at("settings").contains("gpu")) << "a CPU run names no device";
+  EXPECT_FALSE(cpu.at("frames").at(0).contains("gpu"));
+  s.settings.backend = "vulkan-grid";
+  s.settings.gpu_device = "llvmpipe (LLVM 15.0.6, 256 bits)";
+  s.settings.gpu_device_type = "CPU (software)";
+  s.settings.gpu_execution = "single kernel";
+  s.settings.gpu_device_frames = false;
+  s.settings.grid_density = 2.0f;
+  s.frames[0].gpu = {true, 4096, 12, 0, 3, 1.5};
+  const auto j = nlohmann::json::parse(stats_to_json(s));
+  EXPECT_EQ(j.at("settings").at("gpu").at("device_type"), "CPU (software)");
+  EXPECT_EQ(j.at("settings").at("gpu").at("grid_density"), 2.0);
+  EXPECT_EQ(j.at("frames").at(0).at("gpu").at("rays"), 4096);
+  EXPECT_EQ(j.at("frames").at(0).at("gpu").at("cut"), 0);
+  EXPECT_EQ(stats_from_json(stats_to_json(s), "gpu.json"), s);
+}
+
 TEST(Stats, DerivedRatesFollowFromCountsAndTime) {
   const RunStats s = sample_stats();
   const auto j = nlohmann::json::parse(stats_to_json(s));
