@@ -150,8 +150,6 @@ GpuFrameStats gpu_frame_stats(const Tracer& tracer) {
   return g;
 }
 
-bool on_device(const std::string& backend) { return backend.rfind("vulkan", 0) == 0; }
-
 } // namespace
 
 int run_info(const InfoOptions& options, std::ostream& out) {
@@ -283,32 +281,26 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   job.cache = cache_settings;
   job.gpu = gpu;
   const SceneKind kind = scene_kind(scene.registry);
-  // A Vulkan call failing (a lost device, a failed allocation) is the backend's failure, not bad
-  // input nor a bug here: say which backend and device, and stop.
-  std::string backend = options.backend;
+  // A device failing (a lost device, an allocation the device refused) is the backend's failure,
+  // neither bad input nor a bug here: say which backend and device, and stop.
+  std::string backend = resolve_backend(options.backend, kind);
   std::string device;
-  const auto backend_failed = [&](const std::exception& e) {
-    return BackendFailure("backend '" + backend + "'" + (device.empty() ? "" : " on " + device) +
-                          " failed: " + one_line(e.what()));
+  const auto naming_device_failures = [&](const auto& step) {
+    try {
+      step();
+    } catch (const std::exception& e) {
+      if (!is_device_failure(e)) throw;
+      throw BackendFailure("backend '" + backend + "'" + (device.empty() ? "" : " on " + device) +
+                           " failed: " + one_line(e.what()));
+    }
   };
-  try {
-    prepare_rendering(scene.registry, std::move(job));
-  } catch (const Error&) {
-    throw;
-  } catch (const UnavailableError&) {
-    throw;
-  } catch (const std::bad_alloc&) {
-    throw;
-  } catch (const std::exception& e) {
-    if (!on_device(resolve_backend(options.backend, kind))) throw;
-    throw backend_failed(e);
-  }
+  naming_device_failures([&] { prepare_rendering(scene.registry, std::move(job)); });
   backend = scene.registry.resource<RenderJob>().backend;
   const Tracer& tracer = *scene.registry.resource<ActiveTracer>().tracer;
   const std::optional<TracerDevice> tracer_dev = tracer_device(tracer);
   if (tracer_dev) device = tracer_dev->name + " (" + tracer_dev->type + ")";
   if (options.backend == "auto" && notes != nullptr)
-    if (const std::optional<std::string> why = auto_cpu_reason(kind); why && !on_device(backend))
+    if (const std::optional<std::string> why = auto_cpu_reason(kind); why && !tracer_dev)
       *notes << "specula: note: --backend auto: " << *why << "\n";
 
   RunStats stats;
@@ -344,18 +336,7 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   const Clock::time_point start = Clock::now();
   bool progress_shown = false;
   for (std::uint32_t f = 0; f < options.frames; ++f) {
-    try {
-      schedule.tick(scene.registry, 1.0 / 60.0);
-    } catch (const Error&) {
-      throw;
-    } catch (const UnavailableError&) {
-      throw;
-    } catch (const std::bad_alloc&) {
-      throw;
-    } catch (const std::exception& e) {
-      if (!tracer_dev) throw;
-      throw backend_failed(e);
-    }
+    naming_device_failures([&] { schedule.tick(scene.registry, 1.0 / 60.0); });
     stats.frames.push_back(scene.registry.resource<RenderJob>().last);
     stats.frames.back().gpu = gpu_frame_stats(tracer);
     const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();

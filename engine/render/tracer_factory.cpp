@@ -276,6 +276,15 @@ std::optional<TracerDevice> tracer_device(const Tracer& tracer) {
   return std::nullopt;
 }
 
+bool is_device_failure(const std::exception& e) {
+#if SPECULA_HAS_VULKAN
+  return dynamic_cast<const gpu::GpuError*>(&e) != nullptr;
+#else
+  (void)e;
+  return false;
+#endif
+}
+
 std::vector<VulkanDeviceEntry> vulkan_devices(std::string* why_none) {
   std::vector<VulkanDeviceEntry> list;
 #if SPECULA_HAS_VULKAN

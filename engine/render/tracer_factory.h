@@ -7,6 +7,7 @@
 #include "specula/trace/tracer.h"
 
 #include <cstdint>
+#include <exception>
 #include <memory>
 #include <optional>
 #include <string>
@@ -102,6 +103,11 @@ struct TracerDevice {
   double gpu_ms = 0.0;
 };
 [[nodiscard]] std::optional<TracerDevice> tracer_device(const Tracer& tracer);
+
+/// Whether an exception is a tracer's device failing (gpu::GpuError: a Vulkan call failed, the
+/// device was lost), as opposed to bad input (specula::Error), a missing feature
+/// (UnavailableError) or a bug. The CLI reports it naming the backend and device (exit 3).
+[[nodiscard]] bool is_device_failure(const std::exception& e);
 
 /// Vulkan devices the loader reports, for `specula info`: name, type (TracerDevice::type's words),
 /// whether it has a compute queue, and whether the backend would choose it (Context::create's

@@ -152,7 +152,10 @@ TEST(TracerFactory, TheTestOnlyDeviceLossKnobLosesTheNewTracersDevice) {
     ADD_FAILURE() << "a submit on a lost device must fail";
   } catch (const gpu::GpuError& e) {
     EXPECT_TRUE(e.device_lost()) << e.what();
+    EXPECT_TRUE(is_device_failure(e)) << "the CLI reports it as the backend's failure";
   }
+  EXPECT_FALSE(is_device_failure(Error("scene.json", "bad input")));
+  EXPECT_FALSE(is_device_failure(UnavailableError("no such mode")));
 }
 #endif
 
