@@ -45,7 +45,9 @@ constexpr std::uint32_t kMaxDispatches = 1u << 20;
 
 /// trace_rays.comp and the buffers of its batches, kept between calls (grown, never shrunk).
 struct VulkanTracer::Kernels {
+  explicit Kernels(Context& context) : cmd(context) {}
   Pipeline trace;
+  Commands cmd; ///< recorded and submitted again for every dispatch (submit resets it)
   std::mutex mutex;
   std::size_t capacity = 0;      ///< rays the batch buffers hold
   std::uint32_t stack_stride = 0; ///< saved stack entries per ray they were sized for
@@ -75,7 +77,7 @@ VulkanTracer::VulkanTracer(std::uint32_t packet_width, VulkanOptions options)
       name_(options_.structure == GpuStructure::grid ? "vulkan-grid" : "vulkan") {
   context_ = Context::create(options_.context);
   scene_ = std::make_unique<GpuScene>(*context_, options_.structure, options_.grid_density);
-  kernels_ = std::make_unique<Kernels>();
+  kernels_ = std::make_unique<Kernels>(*context_);
   PipelineDesc desc;
   desc.spirv = shader_spirv("trace_rays");
   desc.storage_buffers = kSceneBindings + 8;
@@ -100,7 +102,7 @@ void VulkanTracer::trace_locked(std::span<const Ray> rays, Hit* hits,
     const std::size_t n = std::min(kChunkRays, rays.size() - first);
     k.reserve(*context_, n, stride);
     k.rays.upload(rays.data() + first, n * sizeof(Ray));
-    Commands cmd(*context_);
+    Commands& cmd = k.cmd;
     int in = 0;
     for (std::uint32_t dispatch = 0;; ++dispatch) {
       if (dispatch == kMaxDispatches)

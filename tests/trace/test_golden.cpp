@@ -53,7 +53,12 @@ TEST_P(Golden, MatchesTheReference) {
   // edge two surfaces share hits both at the same distance, and which one a backend reports
   // depends on the order its structure visits them (the Cornell box's corner edges fall exactly
   // on pixel centres: Embree and each native structure pick differently there, all correctly).
-  fs::path reference = fs::path(SPECULA_TEST_DATA_DIR) / "golden" / backend / (name + ".exr");
+  // The Vulkan backends walk the native structures step for step (bit-identical hits), so they
+  // share the native backends' references.
+  const std::string structure = backend == "vulkan"        ? std::string("native-bvh")
+                                : backend == "vulkan-grid" ? std::string("native-grid")
+                                                           : backend;
+  fs::path reference = fs::path(SPECULA_TEST_DATA_DIR) / "golden" / structure / (name + ".exr");
   if (!fs::exists(reference) && std::getenv("SPECULA_UPDATE_GOLDEN_BACKEND") == nullptr)
     reference = fs::path(SPECULA_TEST_DATA_DIR) / "golden" / (name + ".exr");
   const Framebuffer image = test::render_sample(c.scene, c.mode, backend, 128);
