@@ -61,6 +61,7 @@ void main() {
   atomicAdd(counters.steps, pc.budget - budget);
 
   // ---- Exits -------------------------------------------------------------------------------------
+  if (status == kRayPending) return; // cut off by the driver: left pending, counted by the host
   if (status == kRayBudget) {
     tr.tfar = tr_world.tfar;
     states[i] = tr;

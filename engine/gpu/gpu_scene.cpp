@@ -57,6 +57,7 @@ GpuScene::GpuScene(Context& context, GpuStructure structure, float grid_density)
 }
 
 void GpuScene::write(std::uint32_t binding, const void* data, std::size_t bytes, std::size_t offset) {
+  if (bytes == 0) return;
   Buffer& b = buffers_[binding];
   if (b.size() < offset + bytes) {
     // Only whole-buffer writes grow a buffer (partial ones land in an array of unchanged size);
@@ -65,7 +66,6 @@ void GpuScene::write(std::uint32_t binding, const void* data, std::size_t bytes,
     b = context_.make_buffer(std::max<std::size_t>(bytes + bytes / 4, 16));
     bindings_[binding] = &b;
   }
-  if (bytes == 0) return;
   b.upload(data, bytes, offset);
   upload_.bytes += bytes;
   ++upload_.writes;
@@ -200,6 +200,7 @@ bool GpuScene::upload_top() {
       top.indices.size() != top_.indices.size() ||
       top.entries.size() != native_.top_entry_count())
     return false;
+  if (top.entries.empty()) return true; // still no dynamic instance to trace: nothing to write
   top_ = std::move(top);
   write(kHeader, top_.entries.data(), top_.entries.size() * sizeof(GpuTopEntry),
         sizeof(GpuSceneHeader));

@@ -9,6 +9,8 @@
 // Both return kRayDone when finished (trace_closest: hit.instance != kNoIndex on a hit; trace_any:
 // sets `occluded`) or kRayBudget when
 // `budget` (loop iterations left to this invocation in this dispatch) ran out first.
+// (kRayPending: the driver cut the walk's loop off; the result is garbage and the ray's status
+// must stay unset, so that it is counted as cut.)
 //
 // Each call starts a fresh traversal. After kRayBudget, trace_closest's `hit` holds the closest hit
 // found so far (instance kNoIndex if none): a kernel that cannot keep the traversal state resumes
@@ -218,9 +220,16 @@ uint tr_max_cells;
 
 float trace_axis(vec3 v, int a) { return a == 0 ? v.x : (a == 1 ? v.y : v.z); }
 
-void trace_open_cell() {
+// The walk stands in `cell` (its triangles next), the next planes at distances s_next.
+void trace_enter_cell(ivec3 cell, vec3 s_next) {
+  tr.cell_x = cell.x;
+  tr.cell_y = cell.y;
+  tr.cell_z = cell.z;
+  tr.s_next_x = s_next.x;
+  tr.s_next_y = s_next.y;
+  tr.s_next_z = s_next.z;
   uvec3 res = scene_header.grid.resolution;
-  uint c = uint(tr.cell_x) + res.x * (uint(tr.cell_y) + res.y * uint(tr.cell_z));
+  uint c = uint(cell.x) + res.x * (uint(cell.y) + res.y * uint(cell.z));
   tr.leaf_cursor = scene_words[scene_header.cell_start_base + c];
   tr.leaf_end = scene_words[scene_header.cell_start_base + c + 1u];
 }
@@ -283,14 +292,8 @@ bool trace_grid_setup(bool fresh) {
   }
   tr_max_cells = g.resolution.x + g.resolution.y + g.resolution.z + 3u;
   if (fresh) {
-    tr.cell_x = cell.x;
-    tr.cell_y = cell.y;
-    tr.cell_z = cell.z;
-    tr.s_next_x = s_next.x;
-    tr.s_next_y = s_next.y;
-    tr.s_next_z = s_next.z;
     tr.cells = 0u;
-    trace_open_cell();
+    trace_enter_cell(cell, s_next);
   }
   return true;
 }
@@ -465,13 +468,7 @@ void trace_grid_step() {
   precise float s = (float(cell[axis] + (tr_dstep[axis] > 0 ? 1 : 0)) - tr_q[axis]) *
                     tr_scale[axis];
   s_next[axis] = s;
-  tr.cell_x = cell.x;
-  tr.cell_y = cell.y;
-  tr.cell_z = cell.z;
-  tr.s_next_x = s_next.x;
-  tr.s_next_y = s_next.y;
-  tr.s_next_z = s_next.z;
-  trace_open_cell();
+  trace_enter_cell(cell, s_next);
 }
 
 // Starts a walk over (tnear, tfar).
@@ -491,7 +488,9 @@ void trace_begin(vec3 org, vec3 dir, float tnear, float tfar, bool any_hit) {
   tr.hit_tri = tr.hit_prim = 0u;
 }
 
-// Runs the walk until it ends (kRayDone) or `budget` steps are used up (kRayBudget).
+// Runs the walk until it ends (kRayDone) or `budget` steps are used up (kRayBudget). Falling out
+// of the loop any other way means the driver cut it off (lavapipe's silent iteration cap):
+// kRayPending then, and the caller must leave the ray's status unset.
 uint trace_run(inout uint budget) {
   for (;;) {
     if (tr.phase == kPhaseDone) return kRayDone;
@@ -504,7 +503,7 @@ uint trace_run(inout uint budget) {
     else
       trace_bvh_step();
   }
-  return kRayDone;
+  return kRayPending;
 }
 
 // The hit as the CPU backends report it (NativeTracer::resolve_static for the static set).

@@ -391,5 +391,31 @@ TEST(VulkanTraceFailure, ALostDeviceIsAGpuErrorFromIntersectNotACrash) {
   EXPECT_THROW(gpu->occluded(rays, occluded), GpuError);
 }
 
+TEST(VulkanTraceFailure, AWalkTheDriverCutsOffIsReportedAsCutNotAsAWrongHit) {
+  // Lavapipe's silent loop cap (PLATFORM-NOTES): a budget past it (measured: 32,768 steps) lets
+  // the driver end the walk. The kernel must leave such rays pending and the tracer say so.
+  VulkanOptions o;
+  o.structure = GpuStructure::grid;
+  o.grid_density = 1e-6f; // one cell: every ray tests every triangle, one step each
+  o.traversal_budget = 40000;
+  SPECULA_NEED_VULKAN(gpu, o);
+  if (!gpu->context().info().is_cpu()) GTEST_SKIP() << "the loop cap is lavapipe's";
+  ecs::Registry reg;
+  add(reg, std::make_shared<const TriangleMesh>(test::icosphere(6)), test::at(vec3(0.0f)),
+      Kinematics::Type::Static); // 81,920 triangles
+  update_world_transforms(reg, 1);
+  SceneLayer layer;
+  layer.sync(reg);
+  gpu->update(layer);
+  std::vector<Ray> rays(16);
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    rays[i].origin = vec3(0.01f * float(i), 0.0f, 5.0f);
+    rays[i].direction = vec3(0.0f, 0.0f, -1.0f);
+  }
+  std::vector<Hit> hits(rays.size());
+  EXPECT_THROW(gpu->intersect(rays, hits), Error);
+  EXPECT_EQ(gpu->counters().cut, rays.size());
+}
+
 } // namespace
 } // namespace specula::gpu

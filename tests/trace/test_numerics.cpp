@@ -416,8 +416,13 @@ TEST_P(ConcaveSeams, NoBlackLinesAlongTheCornellBoxSeamsAtAnyParity) {
   // The camera is centred on the room: at even widths or heights, pixel-centre rays pass exactly
   // through the ceiling–wall and floor–wall seams. Before issue 13's fix: 165 such pixels at
   // 512×400, 257 at 512×512, 164 at 640×480, almost none at 511×400.
-  for (const auto& [w, h] : {std::pair{512u, 400u}, std::pair{511u, 400u}, std::pair{512u, 512u},
-                             std::pair{640u, 480u}}) {
+  // The Vulkan backends trace on lavapipe here, an order of magnitude slower than the CPU: the
+  // same parities and aspect ratios at an eighth of the size (centre rays still pass through the
+  // seams).
+  const bool device = GetParam().starts_with("vulkan");
+  const std::uint32_t k = device ? 8u : 1u;
+  for (const auto& [w, h] : {std::pair{512u / k, 400u / k}, std::pair{512u / k - 1, 400u / k},
+                             std::pair{512u / k, 512u / k}, std::pair{640u / k, 480u / k}}) {
     const CornellFrame whitted = render_cornell(GetParam(), TraceMode::Whitted, w, h);
     const CornellFrame cast = render_cornell(GetParam(), TraceMode::Cast, w, h);
     EXPECT_EQ(isolated_black_seam_pixels(whitted, cast), 0) << w << "x" << h;
