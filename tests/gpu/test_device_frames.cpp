@@ -28,7 +28,7 @@ constexpr std::uint32_t kWidth = 64, kHeight = 48;
 std::string reference_backend() { return "native-bvh"; }
 
 /// A small Cornell box: coloured walls, a block, a mirror sphere and a glass sphere (smooth
-/// normals), a point light; spheres coarse enough for the brute-force stub traversal.
+/// normals), a point light; coarse spheres keep it fast on lavapipe.
 void cornell(ecs::Registry& reg) {
   using test::add_mesh;
   using test::at;
@@ -176,12 +176,11 @@ TEST_P(DeviceFrames, DISABLED_SmallBudgetResumesToTheSameImage) {
   test::TracedWorld world(reg, reference_backend());
   const Camera camera = cornell_camera();
   const TraceSettings s = settings_for(GetParam());
-  // The single kernel's walks share one budget per dispatch across all their rays. (The
-  // wavefront resumes single rays; with the brute-force stub traversal, which restarts a
-  // resumed ray, a budget below one ray's cost never finishes, so it is not tested here.)
+  // The single kernel's walks share one budget per dispatch across all their rays; its frames
+  // resume through trace_closest_resume (trace.glsl). Disabled: written against the groundwork's
+  // brute-force traversal and not yet re-checked with the BVH (issue 10 note).
   for (const gpu::Execution e : {gpu::Execution::single_kernel}) {
     Device full(world.layer, e), small(world.layer, e);
-    // The stub traversal spends one iteration per triangle (about 1,000 here).
     small.renderer->set_budget(2500);
     const Framebuffer a = full.render(world.layer, camera, s);
     const Framebuffer b = small.render(world.layer, camera, s);
