@@ -14,8 +14,8 @@ cache::RayCacheStore* DeviceCache::store_of(RadianceHook* hook) {
   auto* store = dynamic_cast<cache::RayCacheStore*>(hook);
   if (store == nullptr) return nullptr;
   const cache::CacheSettings& s = store->settings();
-  // Auto walks a per-cube ladder with verified rays and the march; prefill traces from the
-  // centres through the tracer: both stay with the CPU integrators.
+  // Auto (a per-cube ladder of modes with verified rays) and the march stay with the CPU
+  // integrators.
   const bool mode = s.lookup == cache::LookupMode::Direction || s.lookup == cache::LookupMode::Tau;
   return s.policy == cache::CachePolicy::On && mode ? store : nullptr;
 }
