@@ -166,7 +166,9 @@ void grid_sweep(const Options& o, Scene& scene) {
 /// in turn in one run while the camera pans, frames/s of each and the PSNR of every cached frame
 /// against the uncached frame of the same view. The first frames fill the cubes; the figures
 /// after them are the steady state.
-void device_cache_section(const Options& o) {
+} // namespace
+
+void section_gpu_cache(const Options& o) {
   std::printf("\n### Ray-cache cubes on the device (mirror_spheres_32, vulkan wavefront, %ux%u, "
               "direction mode, pan 0.25°/frame)\n\n",
               o.size, o.size);
@@ -203,7 +205,7 @@ void device_cache_section(const Options& o) {
   }
   const Camera start = *active_camera(runs[0]->scene.registry);
   double psnr_min = 1e9, psnr_sum = 0.0;
-  std::uint64_t hits = 0, lookups = 0;
+  std::uint64_t hits = 0, lookups = 0, cut = 0;
   for (int f = 0; f < kFrames; ++f) {
     const float a = glm::radians(0.25f * float(f + 1));
     const vec3 c(start.look_at), d = vec3(start.position) - c;
@@ -212,6 +214,7 @@ void device_cache_section(const Options& o) {
     for (auto& run : runs) {
       run->scene.registry.view<Camera>().each([&](Camera& cam) { cam.position = p; });
       run->ms.push_back(time_ms([&] { run->schedule.tick(run->scene.registry, 0.0); }));
+      cut += run->scene.registry.resource<RenderJob>().last.gpu.cut;
     }
     if (f < kFill) continue;
     const double q = psnr(runs[0]->scene.registry.resource<RenderJob>().image,
@@ -235,10 +238,10 @@ void device_cache_section(const Options& o) {
   std::printf("| cached (direction) | %s | %s | %s dB, %s dB | %.1f%% |\n", fixed(cached).c_str(),
               ratio(cached, uncached).c_str(), fixed(psnr_sum / (kFrames - kFill)).c_str(),
               fixed(psnr_min).c_str(), lookups > 0 ? 100.0 * double(hits) / double(lookups) : 0.0);
+  std::printf("\nRays cut by the driver in these frames: %llu (must be 0).\n",
+              static_cast<unsigned long long>(cut));
   std::fflush(stdout);
 }
-
-} // namespace
 
 void section_gpu(const Options& o) {
   std::string why;
@@ -252,7 +255,7 @@ void section_gpu(const Options& o) {
   cornell.settings.width = cornell.settings.height = o.size;
   table(o, "Cornell box", cornell);
   grid_sweep(o, bunny);
-  device_cache_section(o);
+  section_gpu_cache(o);
 }
 
 } // namespace specula::bench
