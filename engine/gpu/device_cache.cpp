@@ -68,7 +68,8 @@ void DeviceCache::upload(const cache::RayCacheStore& store, std::uint32_t slots,
 
 void DeviceCache::reserve_records(std::uint32_t capacity) {
   const VkDeviceSize range = context_.info().max_storage_buffer_range;
-  record_capacity_ = std::uint32_t(std::min<VkDeviceSize>(capacity, range / sizeof(GpuLeavingRecord)));
+  record_capacity_ =
+      std::uint32_t(std::min<VkDeviceSize>(capacity, range / sizeof(GpuLeavingRecord)));
   const VkDeviceSize bytes = std::max<VkDeviceSize>(16, VkDeviceSize(record_capacity_) * 64);
   if (!records_.valid() || records_.size() < bytes) records_ = context_.make_buffer(bytes);
 }
@@ -97,7 +98,7 @@ std::uint64_t DeviceCache::deliver(cache::RayCacheStore& store, const SceneTable
     r.pixel = g.pixel;
     r.origin = g.origin;
     r.direction = g.direction;
-    r.weight = vec3(0.0f);     // only verified rays (auto) read these
+    r.weight = vec3(0.0f); // only verified rays (auto) read these
     r.throughput = vec3(0.0f);
     r.radiance = g.radiance;
     r.cached = vec3(0.0f);
@@ -119,11 +120,11 @@ std::uint64_t DeviceCache::deliver(cache::RayCacheStore& store, const SceneTable
     const LeavingRadiance& r = leaving[queried[q]];
     const CacheAnswer a = answers[q].answer;
     // A cached miss (UseIfClear) is used with its occlusion ray, or traced after it.
-    const bool agree =
-        a == CacheAnswer::Trace ? r.answer == CacheAnswer::Trace
-        : a == CacheAnswer::Use ? r.answer == CacheAnswer::Use && r.rays == 0
-                                : (r.answer == CacheAnswer::Use && r.rays == 1) ||
-                                      (r.answer == CacheAnswer::Trace && r.rays >= 2);
+    const bool agree = a == CacheAnswer::Trace ? r.answer == CacheAnswer::Trace
+                       : a == CacheAnswer::Use
+                           ? r.answer == CacheAnswer::Use && r.rays == 0
+                           : (r.answer == CacheAnswer::Use && r.rays == 1) ||
+                                 (r.answer == CacheAnswer::Trace && r.rays >= 2);
     differ += agree ? 0u : 1u;
   }
   store.leaving(leaving);

@@ -99,8 +99,8 @@ TEST(DeviceCache, CubeAddressingMatchesCubeMapBitForBit) {
       const std::uint32_t texel = cache::texel_index(c, res);
       if (out[2 * i] != c.face || out[2 * i + 1] != texel) {
         if (++differ <= 5)
-          ADD_FAILURE() << "res " << res << " direction (" << dirs[i].x << ", " << dirs[i].y
-                        << ", " << dirs[i].z << "): device face " << out[2 * i] << " texel "
+          ADD_FAILURE() << "res " << res << " direction (" << dirs[i].x << ", " << dirs[i].y << ", "
+                        << dirs[i].z << "): device face " << out[2 * i] << " texel "
                         << out[2 * i + 1] << ", CPU face " << c.face << " texel " << texel;
       }
     }
@@ -134,16 +134,16 @@ struct CacheScene {
     using test::add_mesh;
     using test::at;
     using test::primitive;
-    const ecs::Entity a = add_mesh(reg, primitive("sphere", 1.0f, vec3(1), 16, 8), at(vec3(-1.1f, 1, 0)),
-                                   mirror(0.9f));
+    const ecs::Entity a = add_mesh(reg, primitive("sphere", 1.0f, vec3(1), 16, 8),
+                                   at(vec3(-1.1f, 1, 0)), mirror(0.9f));
     const ecs::Entity b = add_mesh(reg, primitive("sphere", 0.7f, vec3(1), 16, 8),
                                    at(vec3(1.2f, 0.7f, 0.3f)), mirror(0.6f));
     Material glass;
     glass.base_color = vec3(1.0f);
     glass.transmission = 0.9f;
     glass.ior = 1.5f;
-    const ecs::Entity c = add_mesh(reg, primitive("sphere", 0.5f, vec3(1), 12, 6),
-                                   at(vec3(0.2f, 0.5f, 1.4f)), glass);
+    const ecs::Entity c =
+        add_mesh(reg, primitive("sphere", 0.5f, vec3(1), 12, 6), at(vec3(0.2f, 0.5f, 1.4f)), glass);
     for (const ecs::Entity e : {a, b, c}) reg.emplace<RayCacheCube>(e, RayCacheCube{16});
     mover = add_mesh(reg, primitive("sphere", 0.4f, vec3(1), 12, 6), at(vec3(0.1f, 0.4f, -1.2f)),
                      diffuse(vec3(0.9f, 0.3f, 0.2f)), Kinematics::Type::Free);
