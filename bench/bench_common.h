@@ -87,6 +87,9 @@ void section_path_error(const Options& o);
 // The Vulkan backends beside the CPU ones (gpu_sections.cpp): kernel styles, structures, grid
 // resolution.
 void section_gpu(const Options& o);
+// Ray-cache cubes on the device (gpu_sections.cpp; part of gpu, or alone as gpu-cache): the
+// mirror-spheres scene's frames/s cached against uncached, with the cached frames' PSNR.
+void section_gpu_cache(const Options& o);
 
 /// A report section's Markdown: printed to stdout as it is written and kept to be saved.
 class Report {

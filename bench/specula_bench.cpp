@@ -20,7 +20,8 @@
 //            PNGs under --out-dir).
 //   gpu      the Vulkan backends (gpu_sections.cpp; not in the default list): primary Mrays/s on
 //            the bunny and the Cornell box per kernel style and structure beside native-bvh and
-//            Embree, and vulkan-grid's resolution sweep.
+//            Embree, vulkan-grid's resolution sweep, and ray-cache cubes on the device (also
+//            alone: gpu-cache).
 
 #include "bench_common.h"
 #include "specula/accel/embree/embree_tracer.h"
@@ -348,7 +349,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 6));
   app.add_option("--sections", o.sections,
                  "Comma-separated: primary,tiles,whitted,depth,build,refit,native,paper,cache,"
-                 "cache-paper,path-reference,path-error,gpu");
+                 "cache-paper,path-reference,path-error,gpu,gpu-cache");
   app.add_option("--out-dir", o.out_dir,
                  "Where cache, cache-paper and path-error write Markdown and PNGs (default: "
                  "SOURCE_DIR/docs/cache-report, SOURCE_DIR/docs/path-report)");
@@ -415,6 +416,7 @@ int main(int argc, char** argv) {
     if (has("path-reference")) section_path_reference(o);
     if (has("path-error")) section_path_error(o);
     if (has("gpu")) section_gpu(o);
+    if (has("gpu-cache") && !has("gpu")) section_gpu_cache(o);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "specula_bench: %s\n", e.what());
     return 1;

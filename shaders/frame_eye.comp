@@ -24,6 +24,10 @@ void main() {
   n.child_refract = kNoIndex;
   n.shadow_first = 0u;
   n.shadow_count = 0u;
+  n.seen = 0u;
+  n.rays = 0u;
+  n.leaves = kNoIndex;
+  n.answer = kAnswerTrace;
   n._pad0 = 0u;
   n._pad1 = 0u;
   nodes[p] = n;

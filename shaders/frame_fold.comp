@@ -15,6 +15,7 @@ void main() {
   GpuFrameNode node = nodes[n];
   if (node.depth != pc.depth) return;
   precise vec3 radiance = node.radiance;
+  uint seen = node.seen, rays = node.rays;
   for (uint k = 0u; k < kLightCount; ++k) {
     if (k >= node.shadow_count) break;
     GpuShadowRay s = shadows[node.shadow_first + k];
@@ -24,11 +25,33 @@ void main() {
   if (node.child_refract != kNoIndex) {
     GpuFrameNode c = nodes[node.child_refract];
     radiance = radiance + vec3(c.weight) * c.radiance;
+    seen |= c.seen;
+    rays += c.rays;
   }
   if (node.child_reflect != kNoIndex) {
     GpuFrameNode c = nodes[node.child_reflect];
     radiance = radiance + vec3(c.weight) * c.radiance;
+    seen |= c.seen;
+    rays += c.rays;
   }
   nodes[n].radiance = radiance;
+  if (kCache) {
+    nodes[n].seen = seen;
+    nodes[n].rays = rays;
+    if (node.leaves != kNoIndex) {
+      // What the CPU hands the store: the first hit of a traced ray (none for a served one).
+      float hit_t = kInfinity;
+      uint entity = kNoIndex;
+      if ((node.answer & 15u) != kAnswerUse) {
+        GpuHit hit = hits[n];
+        if (hit.instance != kNoIndex) {
+          hit_t = hit.t;
+          entity = instances[hit.instance].entity_index;
+        }
+      }
+      cache_record(node.leaves, node.origin, node.direction, node.pixel, radiance, hit_t, entity,
+                   seen, rays, node.depth, node.kind, node.answer);
+    }
+  }
   if (node.depth == 0u) write_pixel(node.pixel, radiance);
 }

@@ -10,7 +10,11 @@
 
 layout(local_size_x = 64) in;
 
-uint spawn(GpuFrameNode parent, vec3 origin, vec3 direction, float weight, uint kind) {
+// A ray leaving a cached object (`leaves`, a cube's slot) is first looked up, as the CPU asks
+// the store before the next wave: served ones are done here (a cached miss still needs its
+// occlusion ray, traced by frame_trace before the ray itself).
+uint spawn(GpuFrameNode parent, vec3 origin, vec3 direction, float weight, uint kind,
+           uint leaves) {
   precise vec3 throughput = parent.throughput * weight;
   if (max_component(throughput) < params.min_weight) return kNoIndex;
   uint n = atomicAdd(counters.node_count, 1u);
@@ -33,8 +37,23 @@ uint spawn(GpuFrameNode parent, vec3 origin, vec3 direction, float weight, uint 
   c.child_refract = kNoIndex;
   c.shadow_first = 0u;
   c.shadow_count = 0u;
+  c.seen = 0u;
+  c.rays = 1u;
+  c.leaves = leaves;
+  c.answer = kAnswerTrace;
   c._pad0 = 0u;
   c._pad1 = 0u;
+  if (kCache && leaves != kNoIndex) {
+    vec3 cached;
+    c.answer = cache_lookup(leaves, origin, direction, cached, c.seen);
+    if ((c.answer & 15u) != kAnswerTrace) c.radiance = cached;
+    if ((c.answer & 15u) == kAnswerUse) {
+      c.rays = 0u;
+      c.status = kRayDone;
+      nodes[n] = c;
+      return n;
+    }
+  }
   nodes[n] = c;
   push_ray(n);
   return n;
@@ -52,6 +71,7 @@ void main() {
     return;
   }
   GpuFrameNode node = nodes[n];
+  if (kCache && (node.answer & 15u) == kAnswerUse) return; // a cached miss, confirmed clear
   GpuHit hit = hits[n];
   if (node.depth == 0u) primary_instance[node.pixel] = hit.instance;
   if (hit.instance == kNoIndex) {
@@ -66,6 +86,7 @@ void main() {
   vec3 d = node.direction;
   ShadingPoint sp = shading_point(hit, d, true);
   nodes[n].radiance = m.emission;
+  if (kCache) nodes[n].seen = 1u << (instances[hit.instance].entity_index & 31u);
 
   float diffuse = diffuse_weight(m);
   if (kLightCount > 0u && diffuse > 0.0) {
@@ -75,6 +96,7 @@ void main() {
     } else {
       precise vec3 albedo = m.base_color * (diffuse * kInvPi);
       vec3 origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
+      uint lit_count = 0u;
       for (uint l = 0u; l < kLightCount; ++l) {
         GpuShadowRay s;
         s.origin = origin;
@@ -88,8 +110,12 @@ void main() {
           else s.visible = 1u;
         }
         shadows[first + l] = s;
-        if (lit && kShadows) push_shadow(first + l);
+        if (lit && kShadows) {
+          push_shadow(first + l);
+          ++lit_count;
+        }
       }
+      if (kCache) nodes[n].rays = node.rays + lit_count; // the CPU counts each shadow ray
       nodes[n].shadow_first = first;
       nodes[n].shadow_count = kLightCount;
     }
@@ -100,9 +126,11 @@ void main() {
   if (split.reflect_weight > 0.0)
     nodes[n].child_reflect =
         spawn(node, offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal),
-              split.reflect_direction, split.reflect_weight, kKindReflection);
+              split.reflect_direction, split.reflect_weight, kKindReflection,
+              cache_leaves(hit.instance, sp.front_face));
   if (kDielectrics && split.refract_weight > 0.0)
     nodes[n].child_refract =
         spawn(node, offset_ray_origin(sp.spawn_point, sp.spawn_error, -sp.geometric_normal),
-              split.refract_direction, split.refract_weight, kKindRefraction);
+              split.refract_direction, split.refract_weight, kKindRefraction,
+              cache_leaves(hit.instance, !sp.front_face));
 }

@@ -23,7 +23,7 @@ const uint kWalkDone = 0xFFFFFFFEu;
 const uint kMaxSteps = 512u;
 
 void init_frame(uint f, vec3 origin, vec3 direction, vec3 throughput, float weight, uint depth,
-                uint kind) {
+                uint kind, uint leaves) {
   stack[f].origin = origin;
   stack[f].direction = direction;
   stack[f].throughput = throughput;
@@ -35,10 +35,21 @@ void init_frame(uint f, vec3 origin, vec3 direction, vec3 throughput, float weig
   stack[f].reflect_weight = 0.0;
   stack[f].refract_weight = 0.0;
   stack[f].state = kFrameTrace;
+  stack[f].seen = 0u;
+  stack[f].rays = kind == kKindPrimary ? 0u : 1u;
+  stack[f].hit_entity = kNoIndex;
+  stack[f].hit_t = kInfinity;
+  stack[f].leaves = leaves;
+  stack[f].answer = kAnswerTrace;
+  stack[f].reflect_leaves = kNoIndex;
+  stack[f].refract_leaves = kNoIndex;
 }
 
 // Pushes a child of frame f when its throughput passes min_weight; false when none was pushed.
-bool push_child(uint base, uint top, vec3 origin, vec3 direction, float weight, uint kind) {
+// A child leaving a cached object is looked up first (the CPU asks the store before tracing it):
+// served, it returns at once; a cached miss confirms with an occlusion ray first.
+bool push_child(uint base, uint top, vec3 origin, vec3 direction, float weight, uint kind,
+                uint leaves) {
   uint f = base + top;
   precise vec3 throughput = stack[f].throughput * weight;
   if (max_component(throughput) < params.min_weight) return false;
@@ -46,7 +57,23 @@ bool push_child(uint base, uint top, vec3 origin, vec3 direction, float weight, 
     atomicAdd(counters.dropped, 1u);
     return false;
   }
-  init_frame(f + 1u, origin, direction, throughput, weight, stack[f].depth + 1u, kind);
+  init_frame(f + 1u, origin, direction, throughput, weight, stack[f].depth + 1u, kind, leaves);
+  if (kCache && leaves != kNoIndex) {
+    vec3 cached;
+    uint seen;
+    uint answer = cache_lookup(leaves, origin, direction, cached, seen);
+    stack[f + 1u].answer = answer;
+    if ((answer & 15u) != kAnswerTrace) {
+      stack[f + 1u].radiance = cached;
+      stack[f + 1u].seen = seen;
+    }
+    if ((answer & 15u) == kAnswerUse) {
+      stack[f + 1u].rays = 0u;
+      stack[f + 1u].state = kFrameReturn;
+    } else if ((answer & 15u) == kAnswerUseIfClear) {
+      stack[f + 1u].state = kFrameConfirm;
+    }
+  }
   return true;
 }
 
@@ -61,7 +88,7 @@ void main() {
     top = 0u;
     init_frame(base, params.camera_origin,
                camera_direction(pixel % params.width, pixel / params.width), vec3(1.0), 1.0, 0u,
-               kKindPrimary);
+               kKindPrimary, kNoIndex);
     primary_instance[pixel] = kNoIndex;
   }
   uint budget = params.budget;
@@ -81,6 +108,11 @@ void main() {
       atomicAdd(counters.rays[stack[f].kind], 1u);
       if (stack[f].depth == 0u) primary_instance[pixel] = hit.instance;
       stack[f].state = kFrameReturn;
+      if (kCache && hit.instance != kNoIndex) {
+        stack[f].hit_t = hit.t;
+        stack[f].hit_entity = instances[hit.instance].entity_index;
+        stack[f].seen = 1u << (stack[f].hit_entity & 31u);
+      }
       if (hit.instance == kNoIndex) {
         stack[f].radiance = params.background;
       } else if (!kWhitted) {
@@ -112,6 +144,8 @@ void main() {
           stack[f].refract_direction = split.refract_direction;
           stack[f].refract_origin =
               offset_ray_origin(sp.spawn_point, sp.spawn_error, -sp.geometric_normal);
+          stack[f].reflect_leaves = cache_leaves(hit.instance, sp.front_face);
+          stack[f].refract_leaves = cache_leaves(hit.instance, !sp.front_face);
         }
         stack[f].state = kFrameShadows;
       }
@@ -135,6 +169,7 @@ void main() {
             break;
           }
           atomicAdd(counters.rays[kKindShadow], 1u);
+          if (kCache) stack[f].rays += 1u;
         }
         if (!occluded) {
           precise vec3 r = stack[f].radiance + value;
@@ -146,14 +181,34 @@ void main() {
       stack[f].state = kFrameReflect;
       if (kDielectrics && stack[f].refract_weight > 0.0 &&
           push_child(base, top, stack[f].refract_origin, stack[f].refract_direction,
-                     stack[f].refract_weight, kKindRefraction))
+                     stack[f].refract_weight, kKindRefraction, stack[f].refract_leaves))
         ++top;
     } else if (state == kFrameReflect) {
       stack[f].state = kFrameReturn;
       if (stack[f].reflect_weight > 0.0 &&
           push_child(base, top, stack[f].reflect_origin, stack[f].reflect_direction,
-                     stack[f].reflect_weight, kKindReflection))
+                     stack[f].reflect_weight, kKindReflection, stack[f].reflect_leaves))
         ++top;
+    } else if (kCache && state == kFrameConfirm) {
+      // As frame_trace.comp: clear, the cached miss is used; blocked, the ray is traced.
+      bool occluded = false;
+      if (trace_any(stack[f].origin, stack[f].direction, 0.0, kInfinity, budget, occluded) !=
+          kRayDone) {
+        stopped = true;
+        break;
+      }
+      atomicAdd(counters.rays[kKindShadow], 1u);
+      if (!occluded) {
+        stack[f].answer = kAnswerUse | kAnswerLookedUp;
+        stack[f].rays = 1u;
+        stack[f].state = kFrameReturn;
+      } else {
+        stack[f].answer = kAnswerTrace | kAnswerLookedUp;
+        stack[f].rays = 2u;
+        stack[f].radiance = vec3(0.0);
+        stack[f].seen = 0u;
+        stack[f].state = kFrameTrace;
+      }
     } else { // kFrameReturn
       if (top == 0u) {
         write_pixel(pixel, stack[f].radiance);
@@ -162,6 +217,14 @@ void main() {
       }
       precise vec3 r = stack[f - 1u].radiance + vec3(stack[f].weight) * stack[f].radiance;
       stack[f - 1u].radiance = r;
+      if (kCache) {
+        stack[f - 1u].seen |= stack[f].seen;
+        stack[f - 1u].rays += stack[f].rays;
+        if (stack[f].leaves != kNoIndex)
+          cache_record(stack[f].leaves, stack[f].origin, stack[f].direction, pixel,
+                       stack[f].radiance, stack[f].hit_t, stack[f].hit_entity, stack[f].seen,
+                       stack[f].rays, stack[f].depth, stack[f].kind, stack[f].answer);
+      }
       --top;
     }
   }

@@ -16,6 +16,30 @@ void main() {
   nodes[n].status = kRayPending;
   GpuFrameNode node = nodes[n];
   uint budget = params.budget;
+  if (kCache && (node.answer & 15u) == kAnswerUseIfClear) {
+    // A cached miss (Tau mode): the CPU's occlusion ray confirms nothing lies on the way; if
+    // something does, the ray is traced after all (two rays for it, its radiance its own).
+    bool occluded = false;
+    uint confirm = trace_any(node.origin, node.direction, 0.0, kInfinity, budget, occluded);
+    if (confirm == kRayBudget) {
+      atomicAdd(counters.resumed, 1u);
+      nodes[n].status = kRayBudget;
+      push_ray(n);
+      return;
+    }
+    if (confirm != kRayDone) return; // cut by the driver: left pending
+    atomicAdd(counters.rays[kKindShadow], 1u);
+    if (!occluded) {
+      nodes[n].answer = kAnswerUse | kAnswerLookedUp;
+      nodes[n].rays = 1u;
+      nodes[n].status = kRayDone;
+      return;
+    }
+    nodes[n].answer = kAnswerTrace | kAnswerLookedUp;
+    nodes[n].rays = 2u;
+    nodes[n].radiance = vec3(0.0);
+    nodes[n].seen = 0u;
+  }
   GpuHit hit;
   hit.instance = kNoIndex;
   uint status = trace_closest(node.origin, node.direction, 0.0, node.tfar, budget, hit);

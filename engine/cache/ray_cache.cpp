@@ -154,6 +154,11 @@ bool segment_meets_sphere(const vec3& p, const vec3& d, float length, const Sphe
   return glm::dot(closest - s.centre, closest - s.centre) <= s.radius * s.radius;
 }
 
+/// Texel generations (CubeView::generation). Only changed on the thread that applies writes and
+/// invalidations, but cubes of several stores may live at once.
+std::atomic<std::uint64_t> texel_generations{0};
+std::uint64_t next_generation() { return ++texel_generations; }
+
 } // namespace
 
 struct RayCacheStore::Cube {
@@ -163,6 +168,7 @@ struct RayCacheStore::Cube {
   vec3 centre{0.0f};
   float radius = 0.0f; ///< the owner's bounding sphere: where leaving rays start
   std::vector<Texel> texels;
+  std::uint64_t generation = next_generation();
   std::vector<std::uint32_t> edges; ///< by entity index: valid texels whose first hit it is
   std::uint64_t valid = 0;
   // Policy.
@@ -204,12 +210,14 @@ struct RayCacheStore::Cube {
     if (!t.valid()) return;
     t.state &= std::uint8_t(~kValid);
     --valid;
+    generation = next_generation();
     if (t.hit < edges.size()) --edges[t.hit];
   }
   void store(std::uint32_t i, const Texel& value) {
     outdate(i);
     texels[i] = value;
     ++valid;
+    generation = next_generation();
     if (value.hit != kNoInstance) {
       if (value.hit >= edges.size()) edges.resize(value.hit + 1, 0);
       ++edges[value.hit];
@@ -220,6 +228,7 @@ struct RayCacheStore::Cube {
     for (Texel& t : texels) t.state &= std::uint8_t(~kValid);
     std::fill(edges.begin(), edges.end(), 0u);
     valid = 0;
+    if (was > 0) generation = next_generation();
     return was;
   }
 };
@@ -243,7 +252,8 @@ std::size_t RayCacheStore::cube_count() const { return cubes_.size(); }
 
 CubeView RayCacheStore::cube(std::size_t i) const {
   const Cube& c = *cubes_.at(i);
-  return CubeView{c.owner, c.instance, c.resolution, c.centre, c.texels, c.mode, c.enabled};
+  return CubeView{c.owner,   c.instance, c.resolution, c.centre,    c.texels,
+                  c.mode,    c.enabled,  c.cos_tau,    c.generation};
 }
 
 std::optional<std::size_t> RayCacheStore::cube_of(ecs::Entity owner) const {

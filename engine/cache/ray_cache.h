@@ -75,6 +75,10 @@ struct CubeView {
   std::span<const Texel> texels;
   LookupMode mode;
   bool enabled;
+  float cos_tau;
+  /// Changes whenever a texel does (from a process-wide counter: never reused, even by a cube
+  /// made anew), so a device copy re-uploads only the cubes that changed.
+  std::uint64_t generation;
 };
 
 /// What one invalidation did.

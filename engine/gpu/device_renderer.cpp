@@ -1,9 +1,12 @@
 #include "specula/gpu/device_renderer.h"
 
+#include "specula/cache/ray_cache.h"
 #include "specula/core/error.h"
+#include "specula/gpu/device_cache.h"
 #include "specula/gpu/shaders.h"
 #include "specula/gpu/vulkan_tracer.h"
 #include "specula/render/scene_layer.h"
+#include "specula/shared/cache_layout.h"
 #include "specula/shared/frame_layout.h"
 #include "specula/trace/camera_rays.h"
 #include "specula/trace/render_frame.h"
@@ -59,15 +62,18 @@ struct DeviceRenderer::Pipelines {
 };
 
 DeviceRenderer::DeviceRenderer(Context& context, const GpuScene& scene, Execution execution)
-    : context_(context), scene_(scene), execution_(execution) {}
+    : context_(context), scene_(scene), execution_(execution),
+      cache_(std::make_unique<DeviceCache>(context)) {}
 
 DeviceRenderer::~DeviceRenderer() = default;
 
-bool DeviceRenderer::supports(const TraceSettings& settings, bool has_hook,
+bool DeviceRenderer::supports(const TraceSettings& settings, RadianceHook* hook,
                               bool has_guides) const {
-  return (settings.mode == TraceMode::Cast || settings.mode == TraceMode::Whitted) && !has_hook &&
-         !has_guides;
+  return (settings.mode == TraceMode::Cast || settings.mode == TraceMode::Whitted) &&
+         (hook == nullptr || DeviceCache::store_of(hook) != nullptr) && !has_guides;
 }
+
+std::uint64_t DeviceRenderer::cache_texels_uploaded() const { return cache_->texels_uploaded(); }
 
 void DeviceRenderer::upload_tables(const SceneLayer& layer) {
   const SceneTables& t = layer.tables();
@@ -93,10 +99,10 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
   p->features = f;
   const std::vector<std::uint32_t> spec = {f.whitted ? 1u : 0u, f.shadows ? 1u : 0u,
                                            f.dielectrics ? 1u : 0u, f.specular ? 1u : 0u,
-                                           f.lights};
+                                           f.lights, f.cache ? 1u : 0u};
   const auto make = [&](const char* name) {
     return context_.make_pipeline(
-        {shader_spirv(name), kFrameBindings, sizeof(WavePush), spec, name});
+        {shader_spirv(name), kCacheBindings, sizeof(WavePush), spec, name});
   };
   if (execution_ == Execution::wavefront) {
     p->args = make("frame_args");
@@ -148,7 +154,15 @@ std::vector<const Buffer*> DeviceRenderer::bindings() const {
                             &primary_buffer_, &nodes_, &hits_, &queues_, &shadows_,
                             &shadow_queues_})
     b.push_back(own);
+  for (const Buffer* own : cache_buffers_) b.push_back(own);
   return b;
+}
+
+void DeviceRenderer::bind_cache(bool cache) {
+  ensure_size(context_, no_cache_, 16);
+  cache_buffers_[0] = cache ? &cache_->cubes() : &no_cache_;
+  cache_buffers_[1] = cache ? &cache_->texels() : &no_cache_;
+  cache_buffers_[2] = cache ? &cache_->records() : &no_cache_;
 }
 
 void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t pixels) {
@@ -260,21 +274,36 @@ void DeviceRenderer::run_single(std::uint32_t pixels) {
 
 void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
                             const TraceSettings& settings, Framebuffer& out, FrameStats& stats,
-                            GpuTraceCounters& counters) {
-  if (!supports(settings, false, false))
+                            GpuTraceCounters& counters, RadianceHook* hook) {
+  if (!supports(settings, hook, false))
     throw Error("vulkan", std::string("device frames do not render mode ") +
-                              trace_mode_name(settings.mode));
+                              trace_mode_name(settings.mode) +
+                              (hook != nullptr ? " with this radiance hook" : ""));
+  cache::RayCacheStore* store = hook != nullptr ? DeviceCache::store_of(hook) : nullptr;
   const auto start = std::chrono::steady_clock::now();
   const std::uint32_t width = out.width(), height = out.height();
   const std::uint32_t pixels = width * height;
+  if (store != nullptr) store->begin_frame(width, height);
   try {
     upload_tables(layer);
     const SceneFeatures& scene = layer.emitters().features();
     const bool whitted = settings.mode == TraceMode::Whitted;
-    Features f{whitted, whitted && settings.shadows, whitted && scene.dielectrics,
-               whitted && (scene.mirrors || scene.dielectrics), light_count_};
+    const bool specular = whitted && (scene.mirrors || scene.dielectrics);
+    // Cubes only matter where rays leave objects: the cache code is compiled in for those frames.
+    const bool cache = specular && store != nullptr && store->cube_count() > 0;
+    Features f{whitted, whitted && settings.shadows, whitted && scene.dielectrics, specular,
+               cache,   light_count_};
     ensure_pipelines(f);
     ensure_buffers(pixels, f);
+    if (cache) {
+      cache_->upload(*store, std::uint32_t(layer.tables().instances.size()),
+                     store->wants_lookups());
+      // Each traced or served ray is at most one record: the wavefront's node slots bound them;
+      // the single kernel gets as many.
+      cache_->reserve_records(execution_ == Execution::wavefront ? node_capacity_
+                                                                 : pixels * kNodesPerPixel);
+    }
+    bind_cache(cache);
 
     const CameraRays rays(camera, width, height, layer.render_origin());
     GpuFrameParams params{};
@@ -296,6 +325,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     params.pixel_count = pixels;
     params.first_pixel = 0;
     params.chunk_pixels = pixels;
+    params.record_capacity = cache ? cache_->record_capacity() : 0;
     params_.upload(&params, sizeof params);
 
     gpu_ms_ = 0.0;
@@ -323,6 +353,8 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     counters.cut = c.cut;
     counters.dispatches = dispatches_;
     counters.gpu_ms = gpu_ms_;
+    cache_records_ = cache ? c.records : 0;
+    cache_mismatches_ = cache ? cache_->deliver(*store, layer.tables(), c.records) : 0;
   } catch (const GpuError& e) {
     throw GpuError(std::string("vulkan device frame (") + trace_mode_name(settings.mode) + ", " +
                        (execution_ == Execution::wavefront ? "wavefront" : "single kernel") +
@@ -331,6 +363,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
   }
   stats.trace_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  if (store != nullptr) store->end_frame(stats.trace_ms, stats.rays.total());
 }
 
 } // namespace specula::gpu

@@ -24,6 +24,7 @@
 #include <vector>
 
 namespace specula {
+class RadianceHook;
 class SceneLayer;
 class Framebuffer;
 struct Camera;
@@ -35,6 +36,7 @@ namespace specula::gpu {
 
 enum class Execution : std::uint8_t;
 struct GpuTraceCounters;
+class DeviceCache;
 
 class DeviceRenderer {
 public:
@@ -43,14 +45,24 @@ public:
   DeviceRenderer(const DeviceRenderer&) = delete;
   DeviceRenderer& operator=(const DeviceRenderer&) = delete;
 
-  /// Whether these settings run on the device: cast and Whitted without a radiance hook and
-  /// without denoiser guides.
-  [[nodiscard]] bool supports(const TraceSettings& settings, bool has_hook, bool has_guides) const;
+  /// Whether these settings run on the device: cast and Whitted without denoiser guides, with
+  /// no radiance hook or a ray-cache store the device can serve (DeviceCache::store_of).
+  [[nodiscard]] bool supports(const TraceSettings& settings, RadianceHook* hook,
+                              bool has_guides) const;
   /// Renders one frame of `layer` (GpuScene already updated from it) into `out`; `stats` gets the
-  /// ray counts and trace_ms, `counters` the device's counts and GPU time. Throws GpuError
-  /// (device_lost() for a lost device) naming the device frame.
+  /// ray counts and trace_ms, `counters` the device's counts and GPU time. A ray-cache `hook`
+  /// gets the frame as from render_frame (begin_frame, lookups, leaving, end_frame). Throws
+  /// GpuError (device_lost() for a lost device) naming the device frame.
   void render(const SceneLayer& layer, const Camera& camera, const TraceSettings& settings,
-              Framebuffer& out, FrameStats& stats, GpuTraceCounters& counters);
+              Framebuffer& out, FrameStats& stats, GpuTraceCounters& counters,
+              RadianceHook* hook = nullptr);
+
+  /// Ray-cache records of the last frame whose device answer differed from the store's replayed
+  /// lookup (must be 0), and texels uploaded for it.
+  [[nodiscard]] std::uint64_t cache_mismatches() const { return cache_mismatches_; }
+  [[nodiscard]] std::uint64_t cache_texels_uploaded() const;
+  /// Leaving rays the last frame recorded for the store.
+  [[nodiscard]] std::uint32_t cache_records() const { return cache_records_; }
 
   /// The instance slot each pixel's primary ray hit in the last frame (kNoIndex: a miss), row
   /// major: for comparing primary visibility with the CPU backends.
@@ -64,7 +76,7 @@ public:
 private:
   struct Pipelines;
   struct Features {
-    bool whitted, shadows, dielectrics, specular;
+    bool whitted, shadows, dielectrics, specular, cache;
     std::uint32_t lights;
     friend bool operator==(const Features&, const Features&) = default;
   };
@@ -74,6 +86,7 @@ private:
   void ensure_buffers(std::uint32_t pixels, const Features& features);
   void run_wavefront(const TraceSettings& settings, std::uint32_t pixels);
   void run_single(std::uint32_t pixels);
+  void bind_cache(bool cache);
   [[nodiscard]] std::vector<const Buffer*> bindings() const;
 
   Context& context_;
@@ -81,6 +94,11 @@ private:
   Execution execution_;
   std::uint32_t budget_ = kDefaultBudget;
   std::unique_ptr<Pipelines> pipelines_;
+  std::unique_ptr<DeviceCache> cache_;
+  Buffer no_cache_; ///< bound at the cache bindings of frames without cubes
+  const Buffer* cache_buffers_[3] = {nullptr, nullptr, nullptr};
+  std::uint64_t cache_mismatches_ = 0;
+  std::uint32_t cache_records_ = 0;
   // Tables at bindings 8.. (frame_layout.h).
   Buffer params_, materials_, lights_, normals_, counters_buffer_, image_, primary_buffer_;
   Buffer nodes_, hits_, queues_, shadows_, shadow_queues_;

@@ -199,9 +199,9 @@ bool VulkanTracer::render_frame_on_device(const SceneLayer& layer, const Camera&
                                           const TraceSettings& settings, Framebuffer& out,
                                           RadianceHook* hook, GuideBuffers* guides,
                                           FrameStats& stats) const {
-  if (!options_.device_frames || !renderer_->supports(settings, hook != nullptr, guides != nullptr))
+  if (!options_.device_frames || !renderer_->supports(settings, hook, guides != nullptr))
     return false;
-  renderer_->render(layer, camera, settings, out, stats, counters_);
+  renderer_->render(layer, camera, settings, out, stats, counters_, hook);
   return true;
 }
 

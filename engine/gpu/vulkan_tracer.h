@@ -85,6 +85,8 @@ public:
   [[nodiscard]] Context& context() const { return *context_; }
   [[nodiscard]] const GpuScene& scene() const { return *scene_; }
   [[nodiscard]] const GpuTraceCounters& counters() const { return counters_; }
+  /// The device-frame renderer (its latest frame's ray-cache figures, for tests).
+  [[nodiscard]] const DeviceRenderer& renderer() const { return *renderer_; }
 
 private:
   struct Kernels;

@@ -59,6 +59,10 @@ struct GpuFrameParams {
   uint pixel_count;
   uint first_pixel; ///< single kernel: the chunk's first pixel
   uint chunk_pixels;
+  uint record_capacity; ///< ray-cache records (cache_layout.h) the frame may write
+  uint _pad0;
+  uint _pad1;
+  uint _pad2;
 };
 
 /// One ray of a pixel's Whitted tree (wavefront). Its radiance is first its local shading's
@@ -80,6 +84,11 @@ struct GpuFrameNode {
   uint child_refract;
   uint shadow_first;
   uint shadow_count;
+  // Ray-cache cubes (kCache): what the CPU hands the store for a leaving ray (LeavingRadiance).
+  uint seen;   ///< entity bits its subtree hit (folded)
+  uint rays;   ///< rays traced for it and its subtree (folded)
+  uint leaves; ///< the slot whose cube gets its record (kNoIndex: none)
+  uint answer; ///< kAnswer* | kAnswerLookedUp (frame_cache.glsl)
   uint _pad0;
   uint _pad1;
 };
@@ -113,17 +122,21 @@ struct GpuStackFrame {
   vec3 geometric_normal;
   float refract_weight;
   vec3 shading_normal;
-  uint _pad0;
+  uint seen; ///< ray-cache cubes (kCache): as GpuFrameNode's
   vec3 albedo;
-  uint _pad1;
+  uint rays;
   vec3 reflect_origin;
-  uint _pad2;
+  uint hit_entity;
   vec3 reflect_direction;
-  uint _pad3;
+  float hit_t;
   vec3 refract_origin;
-  uint _pad4;
+  uint leaves;
   vec3 refract_direction;
-  uint _pad5;
+  uint answer;
+  uint reflect_leaves; ///< the children's `leaves`, found when this frame is shaded
+  uint refract_leaves;
+  uint _pad0;
+  uint _pad1;
 };
 
 SPECULA_CONST uint kFrameTrace = 0u;   ///< its ray is to be traced and shaded
@@ -131,6 +144,7 @@ SPECULA_CONST uint kFrameShadows = 1u; ///< shaded; shadow rays from `light` on 
 SPECULA_CONST uint kFrameRefract = 2u; ///< shadows done; the refraction child is next
 SPECULA_CONST uint kFrameReflect = 3u; ///< the reflection child is next
 SPECULA_CONST uint kFrameReturn = 4u;  ///< complete: folds into its parent
+SPECULA_CONST uint kFrameConfirm = 5u; ///< a cached miss: its occlusion ray is due
 
 /// Indirect dispatch arguments.
 struct GpuDispatch {
@@ -153,17 +167,17 @@ struct GpuFrameCounters {
   uint dropped;  ///< rays not traced: node or shadow buffer full, or the stack full
   uint nonfinite; ///< pixels that came out Inf or NaN (written as 0)
   uint pending;   ///< single kernel: pixels not finished after a dispatch (resumed)
-  uint _pad0;
+  uint records;   ///< ray-cache records written (past GpuFrameParams::record_capacity: lost)
   uint _pad1;
   uint _pad2;
 };
 
 #ifdef __cplusplus
-static_assert(sizeof(GpuFrameParams) == 112 && offsetof(GpuFrameParams, background) == 64 &&
+static_assert(sizeof(GpuFrameParams) == 128 && offsetof(GpuFrameParams, background) == 64 &&
               offsetof(GpuFrameParams, max_depth) == 80);
-static_assert(sizeof(GpuFrameNode) == 96 && offsetof(GpuFrameNode, kind) == 64);
+static_assert(sizeof(GpuFrameNode) == 112 && offsetof(GpuFrameNode, kind) == 64);
 static_assert(sizeof(GpuShadowRay) == 48);
-static_assert(sizeof(GpuStackFrame) == 208 && offsetof(GpuStackFrame, refract_direction) == 192);
+static_assert(sizeof(GpuStackFrame) == 224 && offsetof(GpuStackFrame, refract_direction) == 192);
 static_assert(sizeof(GpuFrameCounters) == 96 && offsetof(GpuFrameCounters, queue_count) == 32 &&
               offsetof(GpuFrameCounters, rays) == 48);
 } // namespace specula::gpu

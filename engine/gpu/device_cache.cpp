@@ -1,0 +1,134 @@
+#include "specula/gpu/device_cache.h"
+
+#include "specula/cache/ray_cache.h"
+#include "specula/core/error.h"
+#include "specula/render/scene_layer.h"
+#include "specula/shared/cache_layout.h"
+
+#include <algorithm>
+#include <string>
+
+namespace specula::gpu {
+
+cache::RayCacheStore* DeviceCache::store_of(RadianceHook* hook) {
+  auto* store = dynamic_cast<cache::RayCacheStore*>(hook);
+  if (store == nullptr) return nullptr;
+  const cache::CacheSettings& s = store->settings();
+  // Auto (a per-cube ladder of modes with verified rays) and the march stay with the CPU
+  // integrators.
+  const bool mode = s.lookup == cache::LookupMode::Direction || s.lookup == cache::LookupMode::Tau;
+  return s.policy == cache::CachePolicy::On && mode ? store : nullptr;
+}
+
+void DeviceCache::upload(const cache::RayCacheStore& store, std::uint32_t slots, bool lookups) {
+  const VkDeviceSize range = context_.info().max_storage_buffer_range;
+  std::vector<GpuCube> table(std::max(1u, slots));
+  for (GpuCube& c : table) c = GpuCube{vec3(0.0f), 0, 0, kCubeNone, 1.0f, 0};
+  std::uint64_t total = 0;
+  for (std::size_t i = 0; i < store.cube_count(); ++i) total += store.cube(i).texels.size();
+  if (total * sizeof(cache::Texel) > range)
+    throw Error("vulkan", "ray-cache cubes need " + std::to_string(total * 16) +
+                              " bytes of texels, more than a storage buffer holds (" +
+                              std::to_string(range) + ")");
+  const VkDeviceSize bytes = std::max<VkDeviceSize>(16, total * sizeof(cache::Texel));
+  if (!texels_.valid() || texels_.size() < bytes) {
+    texels_ = context_.make_buffer(bytes);
+    uploaded_.clear(); // a new buffer: every cube goes up
+  }
+  std::vector<Uploaded> now;
+  texels_uploaded_ = 0;
+  std::uint32_t first = 0;
+  for (std::size_t i = 0; i < store.cube_count(); ++i) {
+    const cache::CubeView v = store.cube(i);
+    if (v.instance >= table.size()) throw Error("vulkan", "ray-cache cube of an unknown instance");
+    GpuCube& c = table[v.instance];
+    c.centre = v.centre;
+    c.resolution = v.resolution;
+    c.first_texel = first;
+    c.mode = v.mode == cache::LookupMode::Tau ? kCubeTau : kCubeDirection;
+    c.cos_tau = v.cos_tau;
+    c.flags = lookups && v.enabled ? kCubeEnabled : 0u;
+    const Uploaded u{v.owner.index, first, v.resolution, v.generation};
+    const bool same = i < uploaded_.size() && uploaded_[i].owner == u.owner &&
+                      uploaded_[i].first == u.first && uploaded_[i].resolution == u.resolution &&
+                      uploaded_[i].generation == u.generation;
+    if (!same) {
+      texels_.upload(v.texels.data(), v.texels.size_bytes(), VkDeviceSize(first) * 16);
+      texels_uploaded_ += v.texels.size();
+    }
+    now.push_back(u);
+    first += std::uint32_t(v.texels.size());
+  }
+  uploaded_ = std::move(now);
+  const VkDeviceSize table_bytes = table.size() * sizeof(GpuCube);
+  if (!cubes_.valid() || cubes_.size() < table_bytes)
+    cubes_ = context_.make_buffer(table_bytes, MemoryKind::host);
+  cubes_.upload(table.data(), table_bytes);
+}
+
+void DeviceCache::reserve_records(std::uint32_t capacity) {
+  const VkDeviceSize range = context_.info().max_storage_buffer_range;
+  record_capacity_ =
+      std::uint32_t(std::min<VkDeviceSize>(capacity, range / sizeof(GpuLeavingRecord)));
+  const VkDeviceSize bytes = std::max<VkDeviceSize>(16, VkDeviceSize(record_capacity_) * 64);
+  if (!records_.valid() || records_.size() < bytes) records_ = context_.make_buffer(bytes);
+}
+
+std::uint64_t DeviceCache::deliver(cache::RayCacheStore& store, const SceneTables& tables,
+                                   std::uint32_t count) {
+  if (count > record_capacity_)
+    throw Error("vulkan", "device frame: " + std::to_string(count) +
+                              " ray-cache records, room for " + std::to_string(record_capacity_));
+  std::vector<GpuLeavingRecord> records(count);
+  if (count > 0) records_.download(records.data(), records.size() * sizeof(GpuLeavingRecord));
+  std::vector<LeavingQuery> queries;
+  std::vector<std::uint32_t> queried;
+  std::vector<LeavingRadiance> leaving(count);
+  for (std::uint32_t k = 0; k < count; ++k) {
+    const GpuLeavingRecord& g = records[k];
+    const std::uint32_t depth = g.packed & 0xffu;
+    const std::uint32_t answer = (g.packed >> 12) & 15u;
+    LeavingRadiance& r = leaving[k];
+    r.from = tables.entity(g.instance);
+    r.instance = g.instance;
+    r.kind = RayKind((g.packed >> 8) & 15u);
+    r.exits = true;
+    r.answer = answer == kAnswerUse ? CacheAnswer::Use : CacheAnswer::Trace;
+    r.depth = depth;
+    r.pixel = g.pixel;
+    r.origin = g.origin;
+    r.direction = g.direction;
+    r.weight = vec3(0.0f); // only verified rays (auto) read these
+    r.throughput = vec3(0.0f);
+    r.radiance = g.radiance;
+    r.cached = vec3(0.0f);
+    r.hit_t = g.hit_t;
+    r.hit_entity = g.hit_entity;
+    r.seen = g.seen;
+    r.rays = g.rays;
+    if ((g.packed >> 16) & 1u) {
+      queries.push_back(LeavingQuery{g.instance, g.pixel, depth, g.origin, g.direction});
+      queried.push_back(k);
+    }
+  }
+  // The lookups the kernels made, made again on the store: its counters (lookups, outdated,
+  // rejected) come out as the CPU integrator's, and the answers check the device's.
+  std::vector<CachedRadiance> answers(queries.size());
+  store.lookup(queries, answers);
+  std::uint64_t differ = 0;
+  for (std::size_t q = 0; q < queries.size(); ++q) {
+    const LeavingRadiance& r = leaving[queried[q]];
+    const CacheAnswer a = answers[q].answer;
+    // A cached miss (UseIfClear) is used with its occlusion ray, or traced after it.
+    const bool agree = a == CacheAnswer::Trace ? r.answer == CacheAnswer::Trace
+                       : a == CacheAnswer::Use
+                           ? r.answer == CacheAnswer::Use && r.rays == 0
+                           : (r.answer == CacheAnswer::Use && r.rays == 1) ||
+                                 (r.answer == CacheAnswer::Trace && r.rays >= 2);
+    differ += agree ? 0u : 1u;
+  }
+  store.leaving(leaving);
+  return differ;
+}
+
+} // namespace specula::gpu

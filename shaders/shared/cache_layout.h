@@ -1,0 +1,70 @@
+// Ray-cache cubes on the device (engine/gpu/device_cache.h): the cube table, the texels and the
+// leaving-ray records the frame kernels write. Included by C++ and GLSL (std430).
+#ifndef SPECULA_SHARED_CACHE_LAYOUT_H
+#define SPECULA_SHARED_CACHE_LAYOUT_H
+
+#ifdef __cplusplus
+#include <glm/glm.hpp>
+
+#include <cstddef>
+#include <cstdint>
+
+namespace specula::gpu {
+using uint = std::uint32_t;
+using vec3 = glm::vec3;
+#define SPECULA_CONST inline constexpr
+#else
+#define SPECULA_CONST const
+#endif
+
+/// After the frame kernels' own buffers (frame_layout.h, kFrameBindings = 20).
+SPECULA_CONST uint kCacheCubesBinding = 20u;
+SPECULA_CONST uint kCacheTexelsBinding = 21u;
+SPECULA_CONST uint kCacheRecordsBinding = 22u;
+SPECULA_CONST uint kCacheBindings = 23u;
+
+/// GpuCube::mode: cache::LookupMode (Direction, Tau); kCubeNone: the slot has no cube.
+SPECULA_CONST uint kCubeDirection = 0u;
+SPECULA_CONST uint kCubeTau = 1u;
+SPECULA_CONST uint kCubeNone = 0xFFFFFFFFu;
+/// GpuCube::flags.
+SPECULA_CONST uint kCubeEnabled = 1u; ///< looked up (else only its leaving rays are recorded)
+
+/// How a leaving ray was served (CacheAnswer's values), and a lookup's first answer.
+SPECULA_CONST uint kAnswerTrace = 0u;
+SPECULA_CONST uint kAnswerUse = 1u;
+SPECULA_CONST uint kAnswerUseIfClear = 2u;
+
+/// One cube per scene-layer instance slot (mode kCubeNone where the slot has none).
+struct GpuCube {
+  vec3 centre;
+  uint resolution;
+  uint first_texel; ///< into the texel buffer (uvec4 per cache::Texel)
+  uint mode;
+  float cos_tau;
+  uint flags;
+};
+
+/// A ray that left a cached object (the CPU's LeavingRadiance, for the cube's rays only):
+/// written by the frame kernels once its subtree is folded, read back after the frame.
+struct GpuLeavingRecord {
+  vec3 origin;
+  uint instance; ///< the slot it leaves
+  vec3 direction;
+  uint pixel;
+  vec3 radiance;
+  float hit_t;     ///< +inf: it left the scene (or was served)
+  uint hit_entity; ///< kNoIndex: none
+  uint seen;
+  uint rays;
+  uint packed; ///< depth | kind << 8 | answer << 12 | looked up << 16
+};
+
+#ifdef __cplusplus
+static_assert(sizeof(GpuCube) == 32);
+static_assert(sizeof(GpuLeavingRecord) == 64);
+} // namespace specula::gpu
+#endif
+
+#undef SPECULA_CONST
+#endif // SPECULA_SHARED_CACHE_LAYOUT_H

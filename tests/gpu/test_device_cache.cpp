@@ -1,0 +1,336 @@
+// Ray-cache cubes on the device (engine/gpu/device_cache.h): the device's cube addressing is
+// cube_map.h's bit for bit; cached Whitted frames (direction and tau modes, wavefront and single
+// kernel) equal the CPU integrator's over native-bvh — image and the store's counters — frame
+// after frame while the cubes fill, and again after an object moves and the store invalidates;
+// no ray is cut by the driver and every device lookup agrees with the store's own.
+#include "../trace/scene_builder.h"
+#include "specula/cache/cube_map.h"
+#include "specula/cache/ray_cache.h"
+#include "specula/core/error.h"
+#include "specula/gpu/device_renderer.h"
+#include "specula/gpu/gpu_scene.h"
+#include "specula/gpu/shaders.h"
+#include "specula/gpu/vulkan_tracer.h"
+#include "specula/image/metrics.h"
+#include "specula/render/render_job.h"
+#include "specula/scene/components/ray_cache_cube.h"
+#include "specula/systems/schedule.h"
+#include "specula/trace/render_frame.h"
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <iostream>
+#include <random>
+
+namespace specula {
+namespace {
+
+using cache::CachePolicy;
+using cache::CacheSettings;
+using cache::LookupMode;
+using cache::RayCacheStore;
+
+bool have_device() {
+  try {
+    (void)gpu::Context::create();
+    return true;
+  } catch (const UnavailableError&) {
+    return false;
+  }
+}
+
+#define SPECULA_NEED_DEVICE()                                                                      \
+  if (!have_device()) GTEST_SKIP() << "no Vulkan device on this machine"
+
+/// Directions that probe cube_coord's branches: the axes, face edges and corners (ties between
+/// axes), signed zeros, texel boundaries on every face (u·res exactly an integer), and seeded
+/// random ones of random length.
+std::vector<vec3> probe_directions(std::uint32_t resolution) {
+  std::vector<vec3> d;
+  for (int axis = 0; axis < 3; ++axis)
+    for (const float s : {1.0f, -1.0f, 0.25f, -3.0f}) {
+      vec3 v(0.0f);
+      v[axis] = s;
+      d.push_back(v);
+      v[(axis + 1) % 3] = -0.0f;
+      d.push_back(v);
+    }
+  for (const float a : {1.0f, -1.0f})
+    for (const float b : {1.0f, -1.0f})
+      for (const float c : {1.0f, -1.0f, 0.5f, -0.5f, 0.0f}) {
+        d.emplace_back(a, b, c); // x = y ties
+        d.emplace_back(c, a, b); // y = z ties
+        d.emplace_back(a, c, b); // x = z ties
+      }
+  for (std::uint32_t face = 0; face < cache::kFaceCount; ++face)
+    for (std::uint32_t i = 0; i <= resolution; ++i)
+      for (std::uint32_t j = 0; j <= resolution; j += std::max(1u, resolution / 8))
+        d.push_back(cache::cube_direction(face, float(i) / float(resolution),
+                                          float(j) / float(resolution)));
+  std::mt19937 rng(1234u + resolution);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f), scale(0.01f, 100.0f);
+  while (d.size() < 4096) {
+    const vec3 v(u(rng), u(rng), u(rng));
+    if (glm::dot(v, v) > 0.0f) d.push_back(v * scale(rng));
+  }
+  return d;
+}
+
+TEST(DeviceCache, CubeAddressingMatchesCubeMapBitForBit) {
+  SPECULA_NEED_DEVICE();
+  auto ctx = gpu::Context::create();
+  gpu::Pipeline pipeline = ctx->make_pipeline(
+      {gpu::shader_spirv("cube_address"), 2, 2 * sizeof(std::uint32_t), {}, "cube_address"});
+  for (const std::uint32_t res : {1u, 5u, 32u, 64u}) {
+    const std::vector<vec3> dirs = probe_directions(res);
+    std::vector<vec4> in(dirs.size());
+    for (std::size_t i = 0; i < dirs.size(); ++i) in[i] = vec4(dirs[i], 0.0f);
+    gpu::Buffer input = ctx->make_buffer(in.size() * sizeof(vec4));
+    gpu::Buffer output = ctx->make_buffer(in.size() * 2 * sizeof(std::uint32_t));
+    input.upload(in.data(), in.size() * sizeof(vec4));
+    const std::uint32_t push[2] = {std::uint32_t(in.size()), res};
+    gpu::Commands cmd(*ctx, 1);
+    cmd.dispatch(pipeline, {&input, &output}, push, (std::uint32_t(in.size()) + 63) / 64);
+    cmd.submit();
+    std::vector<std::uint32_t> out(in.size() * 2);
+    output.download(out.data(), out.size() * sizeof(std::uint32_t));
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < dirs.size(); ++i) {
+      const cache::CubeCoord c = cache::cube_coord(dirs[i]);
+      const std::uint32_t texel = cache::texel_index(c, res);
+      if (out[2 * i] != c.face || out[2 * i + 1] != texel) {
+        if (++differ <= 5)
+          ADD_FAILURE() << "res " << res << " direction (" << dirs[i].x << ", " << dirs[i].y << ", "
+                        << dirs[i].z << "): device face " << out[2 * i] << " texel "
+                        << out[2 * i + 1] << ", CPU face " << c.face << " texel " << texel;
+      }
+    }
+    EXPECT_EQ(differ, 0u) << "of " << dirs.size() << " directions at resolution " << res;
+  }
+}
+
+constexpr std::uint32_t kSize = 40;
+
+Material mirror(float reflectivity) {
+  Material m;
+  m.base_color = vec3(0.9f);
+  m.reflectivity = reflectivity;
+  return m;
+}
+
+Material diffuse(const vec3& c) {
+  Material m;
+  m.base_color = c;
+  return m;
+}
+
+/// Two cached mirror spheres that see each other (nested leaving rays), a glass sphere with a
+/// cube (exiting refractions), a diffuse sphere that moves, a ground and a light.
+struct CacheScene {
+  ecs::Registry reg;
+  ecs::Entity mover;
+  Camera camera;
+
+  CacheScene() {
+    using test::add_mesh;
+    using test::at;
+    using test::primitive;
+    const ecs::Entity a = add_mesh(reg, primitive("sphere", 1.0f, vec3(1), 16, 8),
+                                   at(vec3(-1.1f, 1, 0)), mirror(0.9f));
+    const ecs::Entity b = add_mesh(reg, primitive("sphere", 0.7f, vec3(1), 16, 8),
+                                   at(vec3(1.2f, 0.7f, 0.3f)), mirror(0.6f));
+    Material glass;
+    glass.base_color = vec3(1.0f);
+    glass.transmission = 0.9f;
+    glass.ior = 1.5f;
+    const ecs::Entity c =
+        add_mesh(reg, primitive("sphere", 0.5f, vec3(1), 12, 6), at(vec3(0.2f, 0.5f, 1.4f)), glass);
+    for (const ecs::Entity e : {a, b, c}) reg.emplace<RayCacheCube>(e, RayCacheCube{16});
+    mover = add_mesh(reg, primitive("sphere", 0.4f, vec3(1), 12, 6), at(vec3(0.1f, 0.4f, -1.2f)),
+                     diffuse(vec3(0.9f, 0.3f, 0.2f)), Kinematics::Type::Free);
+    add_mesh(reg, primitive("plane", 1, vec3(8.0f)), at(vec3(0)), diffuse(vec3(0.6f, 0.65f, 0.7f)));
+    test::add_point_light(reg, vec3(1.5f, 4.0f, 2.5f), 40.0f);
+    camera.position = dvec3(0.3, 1.6, 5.0);
+    camera.look_at = dvec3(0, 0.7, 0);
+    camera.vertical_fov = glm::radians(45.0f);
+  }
+};
+
+struct Param {
+  LookupMode mode;
+  gpu::Execution execution;
+};
+
+class DeviceCacheFrames : public ::testing::TestWithParam<Param> {};
+
+/// Renders `frames` frames on the CPU (native-bvh) and on the device, each with its own store of
+/// the same settings, moving the mover before frame `move_at`; checks each frame.
+void compare_frames(const Param& p, int frames, int move_at) {
+  CacheScene scene;
+  test::TracedWorld world(scene.reg, "native-bvh");
+  CacheSettings cs;
+  cs.policy = CachePolicy::On;
+  cs.lookup = p.mode;
+  cs.tau_deg = 1.0f;
+  RayCacheStore cpu_store(cs), device_store(cs);
+  auto context = gpu::Context::create();
+  gpu::GpuScene gpu_scene(*context, gpu::GpuStructure::bvh);
+  gpu_scene.update(world.layer);
+  gpu::DeviceRenderer renderer(*context, gpu_scene, p.execution);
+  TraceSettings s;
+  s.mode = TraceMode::Whitted;
+  s.max_depth = 4;
+  s.threads = 2;
+  s.background = vec3(0.1f, 0.15f, 0.3f);
+  ASSERT_TRUE(renderer.supports(s, &device_store, false));
+  std::uint64_t hits = 0;
+  for (int f = 0; f < frames; ++f) {
+    // A tick: the layer synced (its delta: what changed since the last frame), then the cubes
+    // invalidated from it, as the schedule runs them.
+    if (f == move_at)
+      scene.reg.patch<Transform>(scene.mover, [](Transform& t) { t.translation.x += 0.8f; });
+    if (f > 0) {
+      world.update(scene.reg);
+      gpu_scene.update(world.layer);
+    }
+    const cache::InvalidationStats ci = cpu_store.invalidate(scene.reg, world.layer);
+    const cache::InvalidationStats di = device_store.invalidate(scene.reg, world.layer);
+    EXPECT_EQ(ci.outdated, di.outdated);
+    if (f == move_at) {
+      EXPECT_GT(di.outdated, 0u) << "the move outdated nothing: no test of it";
+    }
+    Framebuffer cpu(kSize, kSize), device(kSize, kSize);
+    (void)render_frame(*world.tracer, world.layer, scene.camera, s, cpu, &cpu_store);
+    FrameStats stats;
+    gpu::GpuTraceCounters counters;
+    renderer.render(world.layer, scene.camera, s, device, stats, counters, &device_store);
+    std::uint32_t differ = 0;
+    for (std::size_t i = 0; i < cpu.pixels().size(); ++i)
+      differ += cpu.pixels()[i] != device.pixels()[i] ? 1u : 0u;
+    const CacheCounts& a = cpu_store.counts();
+    const CacheCounts& b = device_store.counts();
+    std::cout << "frame " << f << ": " << differ << " pixels differ, PSNR " << psnr(cpu, device)
+              << " dB; lookups " << b.lookups << " (CPU " << a.lookups << "), hits " << b.hits
+              << " (" << a.hits << "), written " << b.written << " (" << a.written << "), valid "
+              << b.valid << " (" << a.valid << "), records " << renderer.cache_records()
+              << ", texels uploaded " << renderer.cache_texels_uploaded() << "\n";
+    EXPECT_EQ(differ, 0u) << "frame " << f;
+    EXPECT_EQ(counters.cut, 0u);
+    EXPECT_EQ(renderer.cache_mismatches(), 0u) << "device lookups the store answers otherwise";
+    EXPECT_GT(renderer.cache_records(), 0u);
+    EXPECT_EQ(b.lookups, a.lookups) << "frame " << f;
+    EXPECT_EQ(b.hits, a.hits) << "frame " << f;
+    EXPECT_EQ(b.rejected, a.rejected) << "frame " << f;
+    EXPECT_EQ(b.written, a.written) << "frame " << f;
+    EXPECT_EQ(b.valid, a.valid) << "frame " << f;
+    hits += b.hits;
+    // The stores hold the same texels, bit for bit.
+    ASSERT_EQ(cpu_store.cube_count(), device_store.cube_count());
+    for (std::size_t c = 0; c < cpu_store.cube_count(); ++c) {
+      const auto ta = cpu_store.cube(c).texels, tb = device_store.cube(c).texels;
+      ASSERT_EQ(ta.size(), tb.size());
+      EXPECT_EQ(std::memcmp(ta.data(), tb.data(), ta.size_bytes()), 0) << "cube " << c;
+    }
+  }
+  EXPECT_GT(hits, 0u) << "no lookup was served: the test compares uncached frames only";
+}
+
+TEST_P(DeviceCacheFrames, StaticFramesEqualTheCpuFrames) {
+  SPECULA_NEED_DEVICE();
+  compare_frames(GetParam(), 3, -1);
+}
+
+TEST_P(DeviceCacheFrames, AfterAMoveAndInvalidationTheFrameEqualsTheCpuFrame) {
+  SPECULA_NEED_DEVICE();
+  compare_frames(GetParam(), 4, 2);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Modes, DeviceCacheFrames,
+    ::testing::Values(Param{LookupMode::Direction, gpu::Execution::wavefront},
+                      Param{LookupMode::Tau, gpu::Execution::wavefront},
+                      Param{LookupMode::Direction, gpu::Execution::single_kernel},
+                      Param{LookupMode::Tau, gpu::Execution::single_kernel}),
+    [](const auto& param_info) {
+      return std::string(cache::lookup_mode_name(param_info.param.mode)) +
+             (param_info.param.execution == gpu::Execution::wavefront ? "_wavefront" : "_single");
+    });
+
+TEST(DeviceCache, ARenderJobWithCachesRendersOnTheDeviceAsOnTheCpu) {
+  // `--backend vulkan --cache on` through prepare_rendering and the schedule (invalidation
+  // system, render system): the job's hook is the store, and the device frames take it.
+  SPECULA_NEED_DEVICE();
+  std::vector<Framebuffer> images[2];
+  std::uint64_t hits[2] = {0, 0}, cut = 0, records = 0;
+  for (int k = 0; k < 2; ++k) {
+    CacheScene scene;
+    test::add_camera(scene.reg, vec3(scene.camera.position), vec3(scene.camera.look_at), 45.0f);
+    RenderJob job;
+    job.backend = k == 0 ? "native-bvh" : "vulkan";
+    job.settings.mode = TraceMode::Whitted;
+    job.settings.max_depth = 4;
+    job.settings.threads = 2;
+    job.image = Framebuffer(kSize, kSize);
+    job.cache.policy = CachePolicy::On;
+    job.cache.lookup = LookupMode::Tau;
+    prepare_rendering(scene.reg, std::move(job));
+    Schedule schedule;
+    for (int f = 0; f < 3; ++f) {
+      if (f == 2)
+        scene.reg.patch<Transform>(scene.mover, [](Transform& t) { t.translation.x += 0.8f; });
+      schedule.tick(scene.reg, 1.0 / 60.0);
+      const RenderJob& done = scene.reg.resource<RenderJob>();
+      images[k].push_back(done.image);
+      hits[k] += scene.reg.resource<cache::RayCaches>().store->counts().hits;
+      if (const auto* vulkan = dynamic_cast<const gpu::VulkanTracer*>(
+              scene.reg.resource<ActiveTracer>().tracer.get())) {
+        cut += vulkan->counters().cut;
+        records += vulkan->renderer().cache_records(); // 0 unless a device frame took the store
+      }
+    }
+  }
+  for (std::size_t f = 0; f < images[0].size(); ++f) {
+    std::uint32_t differ = 0;
+    for (std::size_t i = 0; i < images[0][f].pixels().size(); ++i)
+      differ += images[0][f].pixels()[i] != images[1][f].pixels()[i] ? 1u : 0u;
+    EXPECT_EQ(differ, 0u) << "frame " << f;
+  }
+  EXPECT_EQ(hits[1], hits[0]);
+  EXPECT_GT(hits[1], 0u);
+  EXPECT_GT(records, 0u) << "the vulkan frames did not run on the device";
+  EXPECT_EQ(cut, 0u);
+}
+
+TEST(DeviceCache, OnlyStoresTheDeviceServesAreAccepted) {
+  SPECULA_NEED_DEVICE();
+  CacheScene scene;
+  test::TracedWorld world(scene.reg, "native-bvh");
+  auto context = gpu::Context::create();
+  gpu::GpuScene gpu_scene(*context, gpu::GpuStructure::bvh);
+  gpu_scene.update(world.layer);
+  gpu::DeviceRenderer renderer(*context, gpu_scene, gpu::Execution::wavefront);
+  TraceSettings s;
+  s.mode = TraceMode::Whitted;
+  CacheSettings on;
+  on.policy = CachePolicy::On;
+  CacheSettings march = on, automatic = on;
+  march.lookup = LookupMode::March;
+  automatic.policy = CachePolicy::Auto;
+  RayCacheStore a(on), b(march), c(automatic);
+  EXPECT_TRUE(renderer.supports(s, nullptr, false));
+  EXPECT_TRUE(renderer.supports(s, &a, false));
+  EXPECT_FALSE(renderer.supports(s, &b, false));
+  EXPECT_FALSE(renderer.supports(s, &c, false));
+  struct Other final : RadianceHook {
+    void leaving(std::span<const LeavingRadiance>) override {}
+  } other;
+  EXPECT_FALSE(renderer.supports(s, &other, false));
+  Framebuffer out(8, 8);
+  FrameStats stats;
+  gpu::GpuTraceCounters counters;
+  EXPECT_THROW(renderer.render(world.layer, scene.camera, s, out, stats, counters, &other), Error);
+}
+
+} // namespace
+} // namespace specula
