@@ -1,6 +1,7 @@
 #include "specula/gpu/device_renderer.h"
 
 #include "specula/core/error.h"
+#include "specula/gpu/device_path.h"
 #include "specula/gpu/shaders.h"
 #include "specula/gpu/vulkan_tracer.h"
 #include "specula/render/scene_layer.h"
@@ -65,8 +66,10 @@ DeviceRenderer::~DeviceRenderer() = default;
 
 bool DeviceRenderer::supports(const TraceSettings& settings, bool has_hook,
                               bool has_guides) const {
-  return (settings.mode == TraceMode::Cast || settings.mode == TraceMode::Whitted) && !has_hook &&
-         !has_guides;
+  // Path and shadow frames run wavefront only (DevicePath); the single kernel falls back to the
+  // CPU integrators for them.
+  const bool stochastic = settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow;
+  return (!stochastic || execution_ == Execution::wavefront) && !has_hook && !has_guides;
 }
 
 void DeviceRenderer::upload_tables(const SceneLayer& layer) {
@@ -111,12 +114,16 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
   pipelines_ = std::move(p);
 }
 
-void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
-  const VkDeviceSize range = context_.info().max_storage_buffer_range;
+void DeviceRenderer::ensure_frame_buffers(std::uint32_t pixels) {
   ensure_size(context_, params_, sizeof(GpuFrameParams), MemoryKind::host);
   ensure_size(context_, counters_buffer_, sizeof(GpuFrameCounters), MemoryKind::host);
   ensure_size(context_, image_, VkDeviceSize(pixels) * 16);
   ensure_size(context_, primary_buffer_, VkDeviceSize(pixels) * 4);
+}
+
+void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
+  const VkDeviceSize range = context_.info().max_storage_buffer_range;
+  ensure_frame_buffers(pixels);
   if (execution_ == Execution::wavefront) {
     const std::uint64_t per_pixel = f.whitted && f.specular ? kNodesPerPixel : 1;
     node_capacity_ = std::uint32_t(std::min<std::uint64_t>(
@@ -271,10 +278,16 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     upload_tables(layer);
     const SceneFeatures& scene = layer.emitters().features();
     const bool whitted = settings.mode == TraceMode::Whitted;
+    const bool stochastic =
+        settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow;
     Features f{whitted, whitted && settings.shadows, whitted && scene.dielectrics,
                whitted && (scene.mirrors || scene.dielectrics), light_count_};
-    ensure_pipelines(f);
-    ensure_buffers(pixels, f);
+    if (stochastic) {
+      ensure_frame_buffers(pixels);
+    } else {
+      ensure_pipelines(f);
+      ensure_buffers(pixels, f);
+    }
 
     const CameraRays rays(camera, width, height, layer.render_origin());
     GpuFrameParams params{};
@@ -300,7 +313,15 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
 
     gpu_ms_ = 0.0;
     dispatches_ = 0;
-    if (execution_ == Execution::wavefront)
+    if (stochastic) {
+      const GpuFrameCounters zero{};
+      counters_buffer_.upload(&zero, sizeof zero);
+      if (!path_) path_ = std::make_unique<DevicePath>(context_, scene_);
+      path_->render(layer, settings, params,
+                    FrameBuffers{&params_, &materials_, &lights_, &normals_, &counters_buffer_,
+                                 &image_, &primary_buffer_},
+                    gpu_ms_, dispatches_);
+    } else if (execution_ == Execution::wavefront)
       run_wavefront(settings, pixels);
     else
       run_single(pixels);

@@ -35,6 +35,7 @@ namespace specula::gpu {
 
 enum class Execution : std::uint8_t;
 struct GpuTraceCounters;
+class DevicePath;
 
 class DeviceRenderer {
 public:
@@ -43,8 +44,8 @@ public:
   DeviceRenderer(const DeviceRenderer&) = delete;
   DeviceRenderer& operator=(const DeviceRenderer&) = delete;
 
-  /// Whether these settings run on the device: cast and Whitted without a radiance hook and
-  /// without denoiser guides.
+  /// Whether these settings run on the device: cast and Whitted, and path and shadow in the
+  /// wavefront style (DevicePath), without a radiance hook and without denoiser guides.
   [[nodiscard]] bool supports(const TraceSettings& settings, bool has_hook, bool has_guides) const;
   /// Renders one frame of `layer` (GpuScene already updated from it) into `out`; `stats` gets the
   /// ray counts and trace_ms, `counters` the device's counts and GPU time. Throws GpuError
@@ -71,6 +72,7 @@ private:
 
   void upload_tables(const SceneLayer& layer);
   void ensure_pipelines(const Features& features);
+  void ensure_frame_buffers(std::uint32_t pixels);
   void ensure_buffers(std::uint32_t pixels, const Features& features);
   void run_wavefront(const TraceSettings& settings, std::uint32_t pixels);
   void run_single(std::uint32_t pixels);
@@ -81,6 +83,7 @@ private:
   Execution execution_;
   std::uint32_t budget_ = kDefaultBudget;
   std::unique_ptr<Pipelines> pipelines_;
+  std::unique_ptr<DevicePath> path_; ///< path and shadow frames, made on first use
   // Tables at bindings 8.. (frame_layout.h).
   Buffer params_, materials_, lights_, normals_, counters_buffer_, image_, primary_buffer_;
   Buffer nodes_, hits_, queues_, shadows_, shadow_queues_;
