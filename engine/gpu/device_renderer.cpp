@@ -3,6 +3,7 @@
 #include "specula/cache/ray_cache.h"
 #include "specula/core/error.h"
 #include "specula/gpu/device_cache.h"
+#include "specula/gpu/device_path.h"
 #include "specula/gpu/shaders.h"
 #include "specula/gpu/vulkan_tracer.h"
 #include "specula/render/scene_layer.h"
@@ -69,8 +70,12 @@ DeviceRenderer::~DeviceRenderer() = default;
 
 bool DeviceRenderer::supports(const TraceSettings& settings, RadianceHook* hook,
                               bool has_guides) const {
-  return (settings.mode == TraceMode::Cast || settings.mode == TraceMode::Whitted) &&
-         (hook == nullptr || DeviceCache::store_of(hook) != nullptr) && !has_guides;
+  if (has_guides) return false;
+  // Path and shadow frames run wavefront only (DevicePath); the single kernel falls back to the
+  // CPU integrators for them.
+  if (settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow)
+    return execution_ == Execution::wavefront && hook == nullptr;
+  return hook == nullptr || DeviceCache::store_of(hook) != nullptr;
 }
 
 std::uint64_t DeviceRenderer::cache_texels_uploaded() const { return cache_->texels_uploaded(); }
@@ -117,12 +122,16 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
   pipelines_ = std::move(p);
 }
 
-void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
-  const VkDeviceSize range = context_.info().max_storage_buffer_range;
+void DeviceRenderer::ensure_frame_buffers(std::uint32_t pixels) {
   ensure_size(context_, params_, sizeof(GpuFrameParams), MemoryKind::host);
   ensure_size(context_, counters_buffer_, sizeof(GpuFrameCounters), MemoryKind::host);
   ensure_size(context_, image_, VkDeviceSize(pixels) * 16);
   ensure_size(context_, primary_buffer_, VkDeviceSize(pixels) * 4);
+}
+
+void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
+  const VkDeviceSize range = context_.info().max_storage_buffer_range;
+  ensure_frame_buffers(pixels);
   if (execution_ == Execution::wavefront) {
     const std::uint64_t per_pixel = f.whitted && f.specular ? kNodesPerPixel : 1;
     node_capacity_ = std::uint32_t(std::min<std::uint64_t>(
@@ -288,13 +297,19 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     upload_tables(layer);
     const SceneFeatures& scene = layer.emitters().features();
     const bool whitted = settings.mode == TraceMode::Whitted;
+    const bool stochastic =
+        settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow;
     const bool specular = whitted && (scene.mirrors || scene.dielectrics);
     // Cubes only matter where rays leave objects: the cache code is compiled in for those frames.
     const bool cache = specular && store != nullptr && store->cube_count() > 0;
-    Features f{whitted, whitted && settings.shadows, whitted && scene.dielectrics, specular,
-               cache,   light_count_};
-    ensure_pipelines(f);
-    ensure_buffers(pixels, f);
+    if (stochastic) {
+      ensure_frame_buffers(pixels);
+    } else {
+      const Features f{whitted, whitted && settings.shadows, whitted && scene.dielectrics,
+                       specular, cache, light_count_};
+      ensure_pipelines(f);
+      ensure_buffers(pixels, f);
+    }
     if (cache) {
       cache_->upload(*store, std::uint32_t(layer.tables().instances.size()),
                      store->wants_lookups());
@@ -330,7 +345,15 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
 
     gpu_ms_ = 0.0;
     dispatches_ = 0;
-    if (execution_ == Execution::wavefront)
+    if (stochastic) {
+      const GpuFrameCounters zero{};
+      counters_buffer_.upload(&zero, sizeof zero);
+      if (!path_) path_ = std::make_unique<DevicePath>(context_, scene_);
+      path_->render(layer, settings, params,
+                    FrameBuffers{&params_, &materials_, &lights_, &normals_, &counters_buffer_,
+                                 &image_, &primary_buffer_},
+                    gpu_ms_, dispatches_);
+    } else if (execution_ == Execution::wavefront)
       run_wavefront(settings, pixels);
     else
       run_single(pixels);

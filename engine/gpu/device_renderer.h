@@ -37,6 +37,7 @@ namespace specula::gpu {
 enum class Execution : std::uint8_t;
 struct GpuTraceCounters;
 class DeviceCache;
+class DevicePath;
 
 class DeviceRenderer {
 public:
@@ -45,8 +46,9 @@ public:
   DeviceRenderer(const DeviceRenderer&) = delete;
   DeviceRenderer& operator=(const DeviceRenderer&) = delete;
 
-  /// Whether these settings run on the device: cast and Whitted without denoiser guides, with
-  /// no radiance hook or a ray-cache store the device can serve (DeviceCache::store_of).
+  /// Whether these settings run on the device, never with denoiser guides: cast and Whitted with
+  /// no radiance hook or a ray-cache store the device can serve (DeviceCache::store_of); path and
+  /// shadow in the wavefront style (DevicePath) without a hook.
   [[nodiscard]] bool supports(const TraceSettings& settings, RadianceHook* hook,
                               bool has_guides) const;
   /// Renders one frame of `layer` (GpuScene already updated from it) into `out`; `stats` gets the
@@ -83,6 +85,7 @@ private:
 
   void upload_tables(const SceneLayer& layer);
   void ensure_pipelines(const Features& features);
+  void ensure_frame_buffers(std::uint32_t pixels);
   void ensure_buffers(std::uint32_t pixels, const Features& features);
   void run_wavefront(const TraceSettings& settings, std::uint32_t pixels);
   void run_single(std::uint32_t pixels);
@@ -99,6 +102,7 @@ private:
   const Buffer* cache_buffers_[3] = {nullptr, nullptr, nullptr};
   std::uint64_t cache_mismatches_ = 0;
   std::uint32_t cache_records_ = 0;
+  std::unique_ptr<DevicePath> path_; ///< path and shadow frames, made on first use
   // Tables at bindings 8.. (frame_layout.h).
   Buffer params_, materials_, lights_, normals_, counters_buffer_, image_, primary_buffer_;
   Buffer nodes_, hits_, queues_, shadows_, shadow_queues_;

@@ -1,0 +1,74 @@
+#pragma once
+/// \file
+/// Path and shadow frames on the device (DeviceRenderer's stochastic modes), wavefront only:
+/// path_integrator.cpp and shadow_integrator.cpp as kernels (shaders/path_*.comp), with the same
+/// sample sequences (shaders/include/sampler.glsl is trace/sampler.h bit for bit), so CPU and GPU
+/// images converge to the same reference. Each path is a record in a buffer and a chain of
+/// depths (no recursion): per depth, trace passes over an indirect-dispatched queue until every
+/// ray is done (a ray that uses up a pass's budget keeps its closest hit and resumes in the next),
+/// one shading dispatch (emission, shadow rays into the path's own slots, the sampled
+/// continuation queued), shadow passes as the Whitted wavefront's (frame_shadow.comp), and a
+/// gather adding the visible shadow rays in the CPU's order. A resolve sums each pixel's samples.
+/// Paths are run in chunks of pixels × sample batches that fit a storage buffer.
+
+#include "specula/gpu/vk_context.h"
+#include "specula/shared/frame_layout.h"
+
+#include <cstdint>
+#include <memory>
+
+namespace specula {
+class SceneLayer;
+struct TraceSettings;
+} // namespace specula
+
+namespace specula::gpu {
+
+class GpuScene;
+
+/// DeviceRenderer's frame buffers that the path kernels share (bindings 8-14).
+struct FrameBuffers {
+  Buffer* params;
+  Buffer* materials;
+  Buffer* lights;
+  Buffer* normals;
+  Buffer* counters;
+  Buffer* image;
+  Buffer* primary;
+};
+
+class DevicePath {
+public:
+  DevicePath(Context& context, const GpuScene& scene);
+  ~DevicePath();
+  DevicePath(const DevicePath&) = delete;
+  DevicePath& operator=(const DevicePath&) = delete;
+
+  /// Runs a path or shadow frame: `params` filled for the frame (camera, budget, lights), the
+  /// tables uploaded, the counters zeroed; leaves the image, primary slots and counters in
+  /// `frame`. Adds GPU time and dispatches.
+  void render(const SceneLayer& layer, const TraceSettings& settings, GpuFrameParams params,
+              const FrameBuffers& frame, double& gpu_ms, std::uint64_t& dispatches);
+
+private:
+  struct Features {
+    bool shadow_mode, shadows, dielectrics, mirrors, area;
+    std::uint32_t lights, sampling;
+    friend bool operator==(const Features&, const Features&) = default;
+  };
+  struct Pipelines;
+
+  void upload_emitters(const SceneLayer& layer);
+  void ensure_pipelines(const Features& features);
+
+  Context& context_;
+  const GpuScene& scene_;
+  std::unique_ptr<Pipelines> pipelines_;
+  Buffer paths_, hits_, queues_, shadows_, shadow_queues_, path_params_, emitters_,
+      emitter_first_, sums_, sobol_;
+  Buffer no_cache_; ///< bound at the cache's bindings 20-22, which path frames do not use
+  std::uint64_t emitters_sync_ = 0;
+  std::uint32_t emitter_count_ = 0;
+};
+
+} // namespace specula::gpu
