@@ -120,7 +120,8 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
   const std::uint64_t fit = std::min<std::uint64_t>(
       {kMaxPaths, range / sizeof(GpuPath), range / (sizeof(GpuShadowRay) * std::max(1u, slots))});
   const std::uint32_t max_paths = std::uint32_t(std::max<std::uint64_t>(1, fit));
-  const std::uint32_t batch = std::clamp(max_paths / std::max(1u, pixels), 1u, spp);
+  const std::uint32_t batch =
+      std::clamp(max_paths / std::max(1u, pixels), 1u, std::min(spp, kMaxBatch));
   const std::uint32_t chunk = std::max(1u, std::min(pixels, max_paths / batch));
   const std::uint32_t capacity = chunk * batch;
   const std::uint32_t shadow_capacity = capacity * std::max(1u, slots);

@@ -44,6 +44,14 @@ public:
   DevicePath(const DevicePath&) = delete;
   DevicePath& operator=(const DevicePath&) = delete;
 
+  /// Area-light samples per pixel a device shadow frame may take: path_shade draws them in one
+  /// loop (with a binary search of the emitter table in each step), and lavapipe ends any loop
+  /// silently once the 8 lanes of a SIMD vector have spent 65,535 iterations between them.
+  /// Shadow frames asking more run on the CPU integrator (DeviceRenderer::supports).
+  static constexpr std::uint32_t kMaxShadowSamples = 64;
+  /// Samples of a pixel one resolve invocation sums in its loop, for the same reason.
+  static constexpr std::uint32_t kMaxBatch = 256;
+
   /// Runs a path or shadow frame: `params` filled for the frame (camera, budget, lights), the
   /// tables uploaded, the counters zeroed; leaves the image, primary slots and counters in
   /// `frame`. Adds GPU time and dispatches.

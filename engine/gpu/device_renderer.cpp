@@ -73,6 +73,8 @@ bool DeviceRenderer::supports(const TraceSettings& settings, RadianceHook* hook,
   if (has_guides) return false;
   // Path and shadow frames run wavefront only (DevicePath); the single kernel falls back to the
   // CPU integrators for them.
+  if (settings.mode == TraceMode::Shadow && settings.shadow_samples > DevicePath::kMaxShadowSamples)
+    return false;
   if (settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow)
     return execution_ == Execution::wavefront && hook == nullptr;
   return hook == nullptr || DeviceCache::store_of(hook) != nullptr;

@@ -48,7 +48,8 @@ public:
 
   /// Whether these settings run on the device, never with denoiser guides: cast and Whitted with
   /// no radiance hook or a ray-cache store the device can serve (DeviceCache::store_of); path and
-  /// shadow in the wavefront style (DevicePath) without a hook.
+  /// shadow in the wavefront style (DevicePath) without a hook, shadow with at most
+  /// DevicePath::kMaxShadowSamples area-light samples.
   [[nodiscard]] bool supports(const TraceSettings& settings, RadianceHook* hook,
                               bool has_guides) const;
   /// Renders one frame of `layer` (GpuScene already updated from it) into `out`; `stats` gets the

@@ -8,6 +8,7 @@
 #include "device_scenes.h"
 #include "specula/core/error.h"
 #include "specula/gpu/device_renderer.h"
+#include "specula/gpu/device_path.h"
 #include "specula/gpu/gpu_scene.h"
 #include "specula/gpu/shaders.h"
 #include "specula/gpu/vulkan_tracer.h"
@@ -243,6 +244,21 @@ TEST(DevicePath, SingleKernelFallsBackToTheCpu) {
   EXPECT_FALSE(single.supports(s, nullptr, false));
   EXPECT_TRUE(wavefront.supports(s, nullptr, false));
   EXPECT_FALSE(wavefront.supports(s, nullptr, true)); // denoiser guides: on the CPU
+}
+
+// path_shade draws a pixel's area-light samples in one loop: more than lavapipe's loop cap allows
+// a SIMD vector would be cut silently, so such frames stay on the CPU.
+TEST(DevicePath, ShadowFramesBeyondTheSampleLoopBoundRunOnTheCpu) {
+  SPECULA_NEED_DEVICE();
+  auto ctx = gpu::Context::create();
+  gpu::GpuScene scene(*ctx, gpu::GpuStructure::bvh);
+  const gpu::DeviceRenderer wavefront(*ctx, scene, gpu::Execution::wavefront);
+  TraceSettings s;
+  s.mode = TraceMode::Shadow;
+  s.shadow_samples = gpu::DevicePath::kMaxShadowSamples;
+  EXPECT_TRUE(wavefront.supports(s, nullptr, false));
+  s.shadow_samples = gpu::DevicePath::kMaxShadowSamples + 1;
+  EXPECT_FALSE(wavefront.supports(s, nullptr, false));
 }
 
 } // namespace
