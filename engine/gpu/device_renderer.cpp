@@ -55,11 +55,21 @@ void ensure_size(Context& ctx, Buffer& buffer, VkDeviceSize bytes,
 
 struct DeviceRenderer::Pipelines {
   Features features;
-  Pipeline args, eye, trace, shade, shadow, fold, single;
+  Pipeline args, eye, visibility, trace, shade, shadow, fold, single;
 };
 
-DeviceRenderer::DeviceRenderer(Context& context, const GpuScene& scene, Execution execution)
-    : context_(context), scene_(scene), execution_(execution) {}
+DeviceRenderer::DeviceRenderer(Context& context, const GpuScene& scene, Execution execution,
+                               PrimaryVisibility primary)
+    : context_(context), scene_(scene), execution_(execution) {
+  if (primary != PrimaryVisibility::raster) return;
+  if (execution != Execution::wavefront)
+    throw Error("vulkan", "rasterised primary visibility (--gpu-primary raster) needs wavefront "
+                          "execution (--gpu-execution wavefront)");
+  if (!context.info().graphics)
+    throw Error("vulkan", "rasterised primary visibility (--gpu-primary raster): device '" +
+                              context.info().name + "' cannot draw on its compute queue");
+  raster_ = std::make_unique<RasterPrimary>(context, scene);
+}
 
 DeviceRenderer::~DeviceRenderer() = default;
 
@@ -101,6 +111,10 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
   if (execution_ == Execution::wavefront) {
     p->args = make("frame_args");
     p->eye = make("frame_eye");
+    if (raster_)
+      p->visibility = context_.make_pipeline(
+          {shader_spirv("frame_visibility"), kFrameHybridBindings, sizeof(WavePush), spec,
+           "frame_visibility"});
     p->trace = make("frame_trace");
     p->shade = make("frame_shade");
     p->shadow = make("frame_shadow");
@@ -165,6 +179,17 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
   cmd.dispatch(p.eye, buffers, &push, groups(pixels));
   cmd.barrier();
   ++dispatches_;
+  if (raster_) {
+    // Hybrid mode: the primary hits from the raster pass; frame_trace skips the rays they settle.
+    raster_->record(cmd);
+    cmd.barrier();
+    std::vector<const Buffer*> hybrid = buffers;
+    hybrid.push_back(&raster_->visibility());
+    hybrid.push_back(&raster_->slot_boxes());
+    cmd.dispatch(p.visibility, hybrid, &push, groups(pixels));
+    cmd.barrier();
+    ++dispatches_;
+  }
   const std::uint32_t batch =
       settings.mode == TraceMode::Cast ? 1 + kExtraWaves : settings.max_depth + 1 + kExtraWaves;
   std::uint32_t parity = 0;
@@ -258,6 +283,14 @@ void DeviceRenderer::run_single(std::uint32_t pixels) {
   }
 }
 
+std::vector<GpuHit> DeviceRenderer::primary_hits() const {
+  if (execution_ != Execution::wavefront)
+    throw Error("vulkan", "primary hits are kept by wavefront device frames only");
+  std::vector<GpuHit> hits(primary_.size());
+  if (!hits.empty()) hits_.download(hits.data(), hits.size() * sizeof(GpuHit));
+  return hits;
+}
+
 void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
                             const TraceSettings& settings, Framebuffer& out, FrameStats& stats,
                             GpuTraceCounters& counters) {
@@ -297,6 +330,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     params.first_pixel = 0;
     params.chunk_pixels = pixels;
     params_.upload(&params, sizeof params);
+    if (raster_) raster_->prepare(layer, rays, width, height);
 
     gpu_ms_ = 0.0;
     dispatches_ = 0;
@@ -321,6 +355,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     counters.rays = stats.rays.total();
     counters.resumed = c.resumed;
     counters.cut = c.cut;
+    counters.retraced = c.retraced;
     counters.dispatches = dispatches_;
     counters.gpu_ms = gpu_ms_;
   } catch (const GpuError& e) {

@@ -13,9 +13,11 @@
 /// The shading mirrors engine/trace (shaders/include/shading.glsl). Loops are bounded for
 /// lavapipe's silent loop cap: every trace gets a per-dispatch budget; a ray (wavefront) or a
 /// walk (single kernel) that uses it up is resumed by a later dispatch, and rays the driver cut
-/// are counted (GpuTraceCounters::cut, must be 0).
+/// are counted (GpuTraceCounters::cut, must be 0). In hybrid mode (PrimaryVisibility::raster,
+/// wavefront) the primary hits come from a raster pass (raster_primary.h) instead of frame_trace.
 
 #include "specula/gpu/gpu_scene.h"
+#include "specula/gpu/raster_primary.h"
 #include "specula/gpu/vk_context.h"
 
 #include <cstdint>
@@ -38,7 +40,10 @@ struct GpuTraceCounters;
 
 class DeviceRenderer {
 public:
-  DeviceRenderer(Context& context, const GpuScene& scene, Execution execution);
+  /// `primary` raster (hybrid mode) needs wavefront execution and a device that draws: throws
+  /// specula::Error otherwise.
+  DeviceRenderer(Context& context, const GpuScene& scene, Execution execution,
+                 PrimaryVisibility primary = PrimaryVisibility::trace);
   ~DeviceRenderer();
   DeviceRenderer(const DeviceRenderer&) = delete;
   DeviceRenderer& operator=(const DeviceRenderer&) = delete;
@@ -55,6 +60,10 @@ public:
   /// The instance slot each pixel's primary ray hit in the last frame (kNoIndex: a miss), row
   /// major: for comparing primary visibility with the CPU backends.
   [[nodiscard]] std::span<const std::uint32_t> primary_instances() const { return primary_; }
+  /// Each pixel's primary hit in the last frame, row major, read back from the device
+  /// (wavefront execution only: throws specula::Error otherwise): traced and rasterised primary
+  /// visibility compared hit by hit.
+  [[nodiscard]] std::vector<GpuHit> primary_hits() const;
 
   /// Traversal iterations one invocation may spend per dispatch (default kDefaultBudget); lower
   /// values force resumption (tests).
@@ -81,6 +90,7 @@ private:
   Execution execution_;
   std::uint32_t budget_ = kDefaultBudget;
   std::unique_ptr<Pipelines> pipelines_;
+  std::unique_ptr<RasterPrimary> raster_; ///< hybrid mode only
   // Tables at bindings 8.. (frame_layout.h).
   Buffer params_, materials_, lights_, normals_, counters_buffer_, image_, primary_buffer_;
   Buffer nodes_, hits_, queues_, shadows_, shadow_queues_;

@@ -32,6 +32,11 @@ SPECULA_CONST uint kFrameQueuesBinding = 17u;
 SPECULA_CONST uint kFrameShadowsBinding = 18u;
 SPECULA_CONST uint kFrameShadowQueuesBinding = 19u;
 SPECULA_CONST uint kFrameBindings = 20u;
+/// Hybrid mode (frame_visibility.comp): the visibility buffer (per pixel the instance slot and
+/// triangle rasterised, kNoIndex: none) and, per instance slot, its top-level box (kNoIndex: static).
+SPECULA_CONST uint kFrameVisibilityBinding = 20u;
+SPECULA_CONST uint kFrameSlotBoxesBinding = 21u;
+SPECULA_CONST uint kFrameHybridBindings = 22u;
 
 /// Single kernel: stack frames per pixel. A pixel's Whitted tree is walked depth first, so it
 /// needs max_depth + 1 frames; children deeper than the stack are not traced and counted as
@@ -153,7 +158,7 @@ struct GpuFrameCounters {
   uint dropped;  ///< rays not traced: node or shadow buffer full, or the stack full
   uint nonfinite; ///< pixels that came out Inf or NaN (written as 0)
   uint pending;   ///< single kernel: pixels not finished after a dispatch (resumed)
-  uint _pad0;
+  uint retraced;  ///< hybrid: primary rays traced after all (instance boundaries, raster misses)
   uint _pad1;
   uint _pad2;
 };

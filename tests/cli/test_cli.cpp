@@ -333,6 +333,8 @@ TEST(Cli, GpuOptionsRejectBadValuesNamingTheOption) {
   for (const auto& [option, value] :
        std::vector<std::pair<std::string, std::string>>{{"--gpu-execution", "fast"},
                                                         {"--gpu-execution", ""},
+                                                        {"--gpu-primary", "gbuffer"},
+                                                        {"--gpu-primary", ""},
                                                         {"--gpu-frames", "yes"},
                                                         {"--grid-density", "0"},
                                                         {"--grid-density", "-2"},
@@ -346,11 +348,19 @@ TEST(Cli, GpuOptionsRejectBadValuesNamingTheOption) {
     EXPECT_NE(r.err.find(option), std::string::npos) << r.err;
     EXPECT_TRUE(r.out.empty()) << r.out;
   }
+  // Hybrid mode has no single-kernel form: the pair is refused, naming the option.
+  const Result pair = run({"render", scene, "--width", "8", "--height", "8", "--backend", "native",
+                           "--gpu-execution", "single", "--gpu-primary", "raster"});
+  EXPECT_EQ(pair.code, 1) << pair.err;
+  EXPECT_NE(pair.err.find("--gpu-primary"), std::string::npos) << pair.err;
   // Valid values pass on every backend (CPU backends ignore them).
   const Result ok =
       run({"render", scene, "--width", "8", "--height", "8", "--backend", "native",
            "--gpu-execution", "single", "--gpu-frames", "off", "--grid-density", "0.5"});
   EXPECT_EQ(ok.code, 0) << ok.err;
+  const Result raster = run({"render", scene, "--width", "8", "--height", "8", "--backend",
+                             "native", "--gpu-primary", "raster"});
+  EXPECT_EQ(raster.code, 0) << raster.err;
 }
 
 /// Renders a tiny cast frame on a Vulkan backend; skips while the traversal kernels are the

@@ -3,7 +3,7 @@
 // visibility agreeing on 99.9% of pixels, the wavefront and the single kernel giving the same
 // image, no ray cut by the driver, resumption after a small traversal budget, a moved object
 // seen where it moved, and a lost device reported as such.
-#include "../trace/scene_builder.h"
+#include "frame_scenes.h"
 #include "specula/core/error.h"
 #include "specula/gpu/device_renderer.h"
 #include "specula/gpu/gpu_scene.h"
@@ -26,51 +26,6 @@ constexpr std::uint32_t kWidth = 64, kHeight = 48;
 /// at edges lying on pixel centres (this box's walls meet there): native-bvh itself agrees with
 /// Embree on 99.6-99.8% of primary hits here, and the device on exactly as many.
 std::string reference_backend() { return "native-bvh"; }
-
-/// A small Cornell box: coloured walls, a block, a mirror sphere and a glass sphere (smooth
-/// normals), a point light; coarse spheres keep it fast on lavapipe.
-void cornell(ecs::Registry& reg) {
-  using test::add_mesh;
-  using test::at;
-  using test::primitive;
-  const quat flip(0.0f, 1.0f, 0.0f, 0.0f); // 180° about x: planes facing down
-  Material white;
-  white.base_color = vec3(0.725f, 0.71f, 0.68f);
-  Material red = white, green = white, panel;
-  red.base_color = vec3(0.63f, 0.065f, 0.05f);
-  green.base_color = vec3(0.14f, 0.45f, 0.091f);
-  panel.base_color = vec3(0.0f);
-  panel.emission = vec3(4.0f, 3.4f, 2.8f);
-  add_mesh(reg, primitive("plane", 1, vec3(2.0f)), at(vec3(0)), white);
-  add_mesh(reg, primitive("plane", 1, vec3(2.0f)), at(vec3(0, 2, 0), vec3(1), flip), white);
-  add_mesh(reg, primitive("plane", 1, vec3(2.0f)),
-           at(vec3(0, 1, -1), vec3(1), quat(0.70710678f, 0.70710678f, 0, 0)), white);
-  add_mesh(reg, primitive("plane", 1, vec3(2.0f)),
-           at(vec3(-1, 1, 0), vec3(1), quat(0.70710678f, 0, 0, -0.70710678f)), red);
-  add_mesh(reg, primitive("plane", 1, vec3(2.0f)),
-           at(vec3(1, 1, 0), vec3(1), quat(0.70710678f, 0, 0, 0.70710678f)), green);
-  add_mesh(reg, primitive("plane", 1, vec3(0.5f)), at(vec3(0, 1.995f, 0), vec3(1), flip), panel);
-  add_mesh(reg, primitive("box", 1, vec3(0.6f, 1.2f, 0.6f)),
-           at(vec3(-0.35f, 0.6f, -0.35f), vec3(1), quat(0.98901586f, 0, 0.14780942f, 0)), white);
-  Material mirror;
-  mirror.base_color = vec3(0.95f);
-  mirror.reflectivity = 0.9f;
-  add_mesh(reg, primitive("sphere", 0.3f, vec3(1), 16, 8), at(vec3(-0.45f, 0.3f, 0.45f)), mirror);
-  Material glass;
-  glass.base_color = vec3(1.0f);
-  glass.transmission = 0.9f;
-  glass.ior = 1.5f;
-  add_mesh(reg, primitive("sphere", 0.3f, vec3(1), 16, 8), at(vec3(0.4f, 0.3f, 0.3f)), glass);
-  test::add_point_light(reg, vec3(0, 1.85f, 0), 3.0f);
-}
-
-Camera cornell_camera() {
-  Camera c;
-  c.position = dvec3(0, 1, 3.9);
-  c.look_at = dvec3(0, 1, 0);
-  c.vertical_fov = glm::radians(40.0f);
-  return c;
-}
 
 /// A device, its scene and a renderer of one execution style over a layer.
 struct Device {
@@ -129,9 +84,9 @@ class DeviceFrames : public ::testing::TestWithParam<TraceMode> {};
 TEST_P(DeviceFrames, MatchTheCpuImageAndPrimaryHits) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   test::TracedWorld world(reg, reference_backend());
-  const Camera camera = cornell_camera();
+  const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(GetParam());
   Framebuffer cpu(kWidth, kHeight);
   const FrameStats cpu_stats = render_frame(*world.tracer, world.layer, camera, s, cpu);
@@ -152,9 +107,9 @@ TEST_P(DeviceFrames, MatchTheCpuImageAndPrimaryHits) {
 TEST_P(DeviceFrames, WavefrontAndSingleKernelGiveTheSameImage) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   test::TracedWorld world(reg, reference_backend());
-  const Camera camera = cornell_camera();
+  const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(GetParam());
   Device wavefront(world.layer, gpu::Execution::wavefront);
   Device single(world.layer, gpu::Execution::single_kernel);
@@ -172,9 +127,9 @@ TEST_P(DeviceFrames, WavefrontAndSingleKernelGiveTheSameImage) {
 TEST_P(DeviceFrames, DISABLED_SmallBudgetResumesToTheSameImage) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   test::TracedWorld world(reg, reference_backend());
-  const Camera camera = cornell_camera();
+  const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(GetParam());
   // The single kernel's walks share one budget per dispatch across all their rays; its frames
   // resume through trace_closest_resume (trace.glsl). Disabled: written against the groundwork's
@@ -200,14 +155,14 @@ INSTANTIATE_TEST_SUITE_P(Modes, DeviceFrames,
 TEST(DeviceFramesScene, AMovedObjectRendersAtItsNewPosition) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   Material m;
   m.base_color = vec3(0.2f, 0.2f, 0.9f);
   const ecs::Entity ball = test::add_mesh(reg, test::primitive("sphere", 0.2f, vec3(1), 12, 6),
                                           test::at(vec3(0.0f, 1.0f, 0.5f)), m,
                                           Kinematics::Type::Free);
   test::TracedWorld world(reg, reference_backend());
-  const Camera camera = cornell_camera();
+  const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(TraceMode::Whitted);
   Device device(world.layer, gpu::Execution::wavefront);
   (void)device.render(world.layer, camera, s);
@@ -224,12 +179,12 @@ TEST(DeviceFramesScene, AMovedObjectRendersAtItsNewPosition) {
 TEST(DeviceFramesScene, FactoryBackendRendersOnTheDevice) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   test::TracedWorld world(reg, "vulkan");
   const auto& vk = dynamic_cast<const gpu::VulkanTracer&>(*world.tracer);
   Framebuffer image(kWidth, kHeight);
   const FrameStats stats =
-      render_frame(*world.tracer, world.layer, cornell_camera(), settings_for(TraceMode::Whitted), image);
+      render_frame(*world.tracer, world.layer, test::cornell_camera(), settings_for(TraceMode::Whitted), image);
   EXPECT_EQ(stats.rays[RayKind::Primary], std::uint64_t(kWidth) * kHeight);
   EXPECT_GT(vk.counters().dispatches, 0u);
   EXPECT_EQ(vk.counters().cut, 0u);
@@ -238,12 +193,12 @@ TEST(DeviceFramesScene, FactoryBackendRendersOnTheDevice) {
 TEST(DeviceFramesScene, DeviceLossIsAClearError) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   test::TracedWorld world(reg, reference_backend());
   Device device(world.layer, gpu::Execution::wavefront);
   device.context->simulate_device_loss();
   try {
-    (void)device.render(world.layer, cornell_camera(), settings_for(TraceMode::Whitted));
+    (void)device.render(world.layer, test::cornell_camera(), settings_for(TraceMode::Whitted));
     FAIL() << "expected GpuError";
   } catch (const gpu::GpuError& e) {
     EXPECT_TRUE(e.device_lost());

@@ -1,0 +1,49 @@
+#pragma once
+// Scenes the device-frame tests share (test_device_frames, test_hybrid).
+#include "../trace/scene_builder.h"
+
+namespace specula::test {
+
+/// A small Cornell box: coloured walls, a block, a mirror sphere and a glass sphere (smooth
+/// normals), a point light; coarse spheres keep it fast on lavapipe.
+inline void cornell(ecs::Registry& reg) {
+  const quat flip(0.0f, 1.0f, 0.0f, 0.0f); // 180° about x: planes facing down
+  Material white;
+  white.base_color = vec3(0.725f, 0.71f, 0.68f);
+  Material red = white, green = white, panel;
+  red.base_color = vec3(0.63f, 0.065f, 0.05f);
+  green.base_color = vec3(0.14f, 0.45f, 0.091f);
+  panel.base_color = vec3(0.0f);
+  panel.emission = vec3(4.0f, 3.4f, 2.8f);
+  add_mesh(reg, primitive("plane", 1, vec3(2.0f)), at(vec3(0)), white);
+  add_mesh(reg, primitive("plane", 1, vec3(2.0f)), at(vec3(0, 2, 0), vec3(1), flip), white);
+  add_mesh(reg, primitive("plane", 1, vec3(2.0f)),
+           at(vec3(0, 1, -1), vec3(1), quat(0.70710678f, 0.70710678f, 0, 0)), white);
+  add_mesh(reg, primitive("plane", 1, vec3(2.0f)),
+           at(vec3(-1, 1, 0), vec3(1), quat(0.70710678f, 0, 0, -0.70710678f)), red);
+  add_mesh(reg, primitive("plane", 1, vec3(2.0f)),
+           at(vec3(1, 1, 0), vec3(1), quat(0.70710678f, 0, 0, 0.70710678f)), green);
+  add_mesh(reg, primitive("plane", 1, vec3(0.5f)), at(vec3(0, 1.995f, 0), vec3(1), flip), panel);
+  add_mesh(reg, primitive("box", 1, vec3(0.6f, 1.2f, 0.6f)),
+           at(vec3(-0.35f, 0.6f, -0.35f), vec3(1), quat(0.98901586f, 0, 0.14780942f, 0)), white);
+  Material mirror;
+  mirror.base_color = vec3(0.95f);
+  mirror.reflectivity = 0.9f;
+  add_mesh(reg, primitive("sphere", 0.3f, vec3(1), 16, 8), at(vec3(-0.45f, 0.3f, 0.45f)), mirror);
+  Material glass;
+  glass.base_color = vec3(1.0f);
+  glass.transmission = 0.9f;
+  glass.ior = 1.5f;
+  add_mesh(reg, primitive("sphere", 0.3f, vec3(1), 16, 8), at(vec3(0.4f, 0.3f, 0.3f)), glass);
+  add_point_light(reg, vec3(0, 1.85f, 0), 3.0f);
+}
+
+inline Camera cornell_camera() {
+  Camera c;
+  c.position = dvec3(0, 1, 3.9);
+  c.look_at = dvec3(0, 1, 0);
+  c.vertical_fov = glm::radians(40.0f);
+  return c;
+}
+
+} // namespace specula::test
