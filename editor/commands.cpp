@@ -243,9 +243,6 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   else
     throw Error("--gpu-primary",
                 "expected trace or raster, got '" + printable(options.gpu_primary) + "'");
-  if (gpu.primary == GpuTracerOptions::Primary::raster &&
-      gpu.execution != GpuTracerOptions::Execution::wavefront)
-    throw Error("--gpu-primary", "raster needs --gpu-execution wavefront");
   if (options.gpu_frames != "on" && options.gpu_frames != "off")
     throw Error("--gpu-frames", "expected on or off, got '" + printable(options.gpu_frames) + "'");
   gpu.device_frames = options.gpu_frames == "on";

@@ -147,7 +147,7 @@ int main(int argc, char** argv) {
   render_cmd
       ->add_option("--gpu-primary", render.gpu_primary,
                    "Vulkan backends: primary hits of device frames traced, or rasterised by a "
-                   "graphics pipeline (raster: hybrid mode, wavefront only)")
+                   "graphics pipeline (raster: hybrid mode)")
       ->check(one_of({"trace", "raster"}))
       ->capture_default_str();
   render_cmd

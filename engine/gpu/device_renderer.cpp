@@ -62,9 +62,6 @@ DeviceRenderer::DeviceRenderer(Context& context, const GpuScene& scene, Executio
                                PrimaryVisibility primary)
     : context_(context), scene_(scene), execution_(execution) {
   if (primary != PrimaryVisibility::raster) return;
-  if (execution != Execution::wavefront)
-    throw Error("vulkan", "rasterised primary visibility (--gpu-primary raster) needs wavefront "
-                          "execution (--gpu-execution wavefront)");
   if (!context.info().graphics)
     throw Error("vulkan", "rasterised primary visibility (--gpu-primary raster): device '" +
                               context.info().name + "' cannot draw on its compute queue");
@@ -103,24 +100,26 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
   p->features = f;
   const std::vector<std::uint32_t> spec = {f.whitted ? 1u : 0u, f.shadows ? 1u : 0u,
                                            f.dielectrics ? 1u : 0u, f.specular ? 1u : 0u,
-                                           f.lights};
+                                           f.lights, raster_ ? 1u : 0u};
   const auto make = [&](const char* name) {
     return context_.make_pipeline(
         {shader_spirv(name), kFrameBindings, sizeof(WavePush), spec, name});
   };
+  // Kernels that read the visibility buffer (frame_single's bindings are there either way).
+  const auto make_hybrid = [&](const char* name) {
+    return context_.make_pipeline(
+        {shader_spirv(name), kFrameHybridBindings, sizeof(WavePush), spec, name});
+  };
   if (execution_ == Execution::wavefront) {
     p->args = make("frame_args");
     p->eye = make("frame_eye");
-    if (raster_)
-      p->visibility = context_.make_pipeline(
-          {shader_spirv("frame_visibility"), kFrameHybridBindings, sizeof(WavePush), spec,
-           "frame_visibility"});
+    if (raster_) p->visibility = make_hybrid("frame_visibility");
     p->trace = make("frame_trace");
     p->shade = make("frame_shade");
     p->shadow = make("frame_shadow");
     p->fold = make("frame_fold");
   } else {
-    p->single = make("frame_single");
+    p->single = make_hybrid("frame_single");
   }
   pipelines_ = std::move(p);
 }
@@ -131,6 +130,7 @@ void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
   ensure_size(context_, counters_buffer_, sizeof(GpuFrameCounters), MemoryKind::host);
   ensure_size(context_, image_, VkDeviceSize(pixels) * 16);
   ensure_size(context_, primary_buffer_, VkDeviceSize(pixels) * 4);
+  ensure_size(context_, unused_, 16);
   if (execution_ == Execution::wavefront) {
     const std::uint64_t per_pixel = f.whitted && f.specular ? kNodesPerPixel : 1;
     node_capacity_ = std::uint32_t(std::min<std::uint64_t>(
@@ -154,6 +154,13 @@ void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
     ensure_size(context_, shadows_, 16);
     ensure_size(context_, shadow_queues_, 16);
   }
+}
+
+std::vector<const Buffer*> DeviceRenderer::hybrid_bindings() const {
+  std::vector<const Buffer*> b = bindings();
+  b.push_back(raster_ ? &raster_->visibility() : &unused_);
+  b.push_back(raster_ ? &raster_->slot_boxes() : &unused_);
+  return b;
 }
 
 std::vector<const Buffer*> DeviceRenderer::bindings() const {
@@ -183,10 +190,7 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
     // Hybrid mode: the primary hits from the raster pass; frame_trace skips the rays they settle.
     raster_->record(cmd);
     cmd.barrier();
-    std::vector<const Buffer*> hybrid = buffers;
-    hybrid.push_back(&raster_->visibility());
-    hybrid.push_back(&raster_->slot_boxes());
-    cmd.dispatch(p.visibility, hybrid, &push, groups(pixels));
+    cmd.dispatch(p.visibility, hybrid_bindings(), &push, groups(pixels));
     cmd.barrier();
     ++dispatches_;
   }
@@ -243,13 +247,22 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
 
 void DeviceRenderer::run_single(std::uint32_t pixels) {
   const Pipelines& p = *pipelines_;
-  const std::vector<const Buffer*> buffers = bindings();
+  const std::vector<const Buffer*> buffers = hybrid_bindings();
   const GpuFrameCounters init{};
   counters_buffer_.upload(&init, sizeof init);
   GpuFrameParams params{};
   params_.download(&params, sizeof params);
   Commands cmd(context_, 4);
   const WavePush push;
+  if (raster_) {
+    // Hybrid mode: the whole frame's visibility buffer before the first walk.
+    const std::uint32_t begin = cmd.timestamp();
+    raster_->record(cmd);
+    cmd.barrier();
+    const std::uint32_t end = cmd.timestamp();
+    cmd.submit();
+    gpu_ms_ += cmd.elapsed_ms(begin, end);
+  }
   for (std::uint32_t first = 0; first < pixels; first += chunk_pixels_) {
     params.first_pixel = first;
     params.chunk_pixels = std::min(chunk_pixels_, pixels - first);

@@ -13,8 +13,8 @@
 /// The shading mirrors engine/trace (shaders/include/shading.glsl). Loops are bounded for
 /// lavapipe's silent loop cap: every trace gets a per-dispatch budget; a ray (wavefront) or a
 /// walk (single kernel) that uses it up is resumed by a later dispatch, and rays the driver cut
-/// are counted (GpuTraceCounters::cut, must be 0). In hybrid mode (PrimaryVisibility::raster,
-/// wavefront) the primary hits come from a raster pass (raster_primary.h) instead of frame_trace.
+/// are counted (GpuTraceCounters::cut, must be 0). In hybrid mode (PrimaryVisibility::raster)
+/// the primary hits come from a raster pass (raster_primary.h) where it settles them.
 
 #include "specula/gpu/gpu_scene.h"
 #include "specula/gpu/raster_primary.h"
@@ -40,8 +40,7 @@ struct GpuTraceCounters;
 
 class DeviceRenderer {
 public:
-  /// `primary` raster (hybrid mode) needs wavefront execution and a device that draws: throws
-  /// specula::Error otherwise.
+  /// `primary` raster (hybrid mode) needs a device that draws: throws specula::Error otherwise.
   DeviceRenderer(Context& context, const GpuScene& scene, Execution execution,
                  PrimaryVisibility primary = PrimaryVisibility::trace);
   ~DeviceRenderer();
@@ -84,6 +83,9 @@ private:
   void run_wavefront(const TraceSettings& settings, std::uint32_t pixels);
   void run_single(std::uint32_t pixels);
   [[nodiscard]] std::vector<const Buffer*> bindings() const;
+  /// bindings() and the visibility buffer and slot → box table (frame_layout.h's
+  /// kFrameHybridBindings), `unused_` in their place when primary hits are traced.
+  [[nodiscard]] std::vector<const Buffer*> hybrid_bindings() const;
 
   Context& context_;
   const GpuScene& scene_;
@@ -93,7 +95,7 @@ private:
   std::unique_ptr<RasterPrimary> raster_; ///< hybrid mode only
   // Tables at bindings 8.. (frame_layout.h).
   Buffer params_, materials_, lights_, normals_, counters_buffer_, image_, primary_buffer_;
-  Buffer nodes_, hits_, queues_, shadows_, shadow_queues_;
+  Buffer nodes_, hits_, queues_, shadows_, shadow_queues_, unused_;
   std::uint64_t tables_sync_ = 0; ///< SceneLayer::syncs() of the tables uploaded (0: none)
   std::uint32_t node_capacity_ = 0, shadow_capacity_ = 0, chunk_pixels_ = 0;
   std::uint32_t light_count_ = 0;

@@ -6,8 +6,8 @@
 /// depth buffer — with the camera of trace/camera_rays.h in render space, so a pixel centre
 /// covers the triangle its primary ray meets. The vertex shader pulls the vertices from the
 /// scene's pools (shaders/gbuffer.vert); frame_visibility.comp then re-intersects each pixel's ray
-/// with exactly that triangle for bit-exact hits, and the Whitted frame goes on in compute
-/// (DeviceRenderer, wavefront execution).
+/// with exactly that triangle for bit-exact hits (frame_single.comp does the same at the root of
+/// each walk), and the Whitted frame goes on in compute (DeviceRenderer).
 
 #include "specula/gpu/gpu_scene.h"
 #include "specula/gpu/vk_context.h"
@@ -25,7 +25,7 @@ namespace specula::gpu {
 /// Where whole device frames get their primary hits (VulkanOptions::primary, --gpu-primary).
 enum class PrimaryVisibility : std::uint8_t {
   trace,  ///< eye rays traced like every other ray
-  raster, ///< hybrid mode: rasterised into a visibility buffer (wavefront execution only)
+  raster, ///< hybrid mode: rasterised into a visibility buffer
 };
 
 class RasterPrimary {

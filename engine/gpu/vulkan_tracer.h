@@ -33,7 +33,7 @@ enum class Execution : std::uint8_t {
 struct VulkanOptions {
   GpuStructure structure = GpuStructure::bvh;
   Execution execution = Execution::wavefront;
-  /// Device frames' primary hits: traced, or rasterised (hybrid mode; wavefront execution only).
+  /// Device frames' primary hits: traced, or rasterised (hybrid mode).
   PrimaryVisibility primary = PrimaryVisibility::trace;
   /// Grid resolution: target cells per triangle of the static set (accel::GridBuildOptions).
   float grid_density = 4.0f;

@@ -14,5 +14,6 @@ layout(constant_id = 1) const bool kShadows = true;     // trace shadow rays
 layout(constant_id = 2) const bool kDielectrics = true; // some material transmits
 layout(constant_id = 3) const bool kSpecular = true;    // some material reflects or transmits
 layout(constant_id = 4) const uint kLightCount = 0u;
+layout(constant_id = 5) const bool kRasterPrimary = false; // hybrid mode (single kernel)
 
 #endif

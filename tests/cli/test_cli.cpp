@@ -348,11 +348,6 @@ TEST(Cli, GpuOptionsRejectBadValuesNamingTheOption) {
     EXPECT_NE(r.err.find(option), std::string::npos) << r.err;
     EXPECT_TRUE(r.out.empty()) << r.out;
   }
-  // Hybrid mode has no single-kernel form: the pair is refused, naming the option.
-  const Result pair = run({"render", scene, "--width", "8", "--height", "8", "--backend", "native",
-                           "--gpu-execution", "single", "--gpu-primary", "raster"});
-  EXPECT_EQ(pair.code, 1) << pair.err;
-  EXPECT_NE(pair.err.find("--gpu-primary"), std::string::npos) << pair.err;
   // Valid values pass on every backend (CPU backends ignore them).
   const Result ok =
       run({"render", scene, "--width", "8", "--height", "8", "--backend", "native",
@@ -405,6 +400,19 @@ TEST(Cli, VulkanRunsWriteTheDeviceAndGpuCountersIntoTheStats) {
   EXPECT_EQ(gpu.at("grid_density"), 2.0);
   EXPECT_EQ(j.at("frames").at(0).at("gpu").at("cut"), 0) << "no ray cut off by the driver";
   EXPECT_NE(r.out.find("  device: "), std::string::npos) << r.out;
+}
+
+TEST(Cli, HybridRunsRecordTheirPrimaryVisibilityInTheStats) {
+  if (!specula::backend_info("vulkan").available) GTEST_SKIP() << "no Vulkan device here";
+  const fs::path stats =
+      fs::temp_directory_path() / ("specula_cli_hybrid_" + std::to_string(::getpid()) + ".json");
+  const Result r =
+      render_on_vulkan({"--backend", "vulkan", "--gpu-primary", "raster", "--stats", stats.string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(slurp(stats));
+  fs::remove(stats);
+  EXPECT_EQ(j.at("settings").at("gpu").at("primary"), "raster");
+  EXPECT_EQ(j.at("frames").at(0).at("gpu").at("cut"), 0) << "no ray cut off by the driver";
 }
 
 TEST(Cli, InfoWithoutASceneListsBackendsAndVulkanDevices) {
