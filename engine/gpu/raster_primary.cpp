@@ -44,9 +44,9 @@ void RasterPrimary::prepare(const SceneLayer& layer, const CameraRays& rays, std
   slot_boxes_.upload(boxes.data(), boxes.size() * 4);
 
   if (!colour_.valid() || colour_.width() != width || colour_.height() != height) {
-    colour_ = context_.make_image(width, height, VK_FORMAT_R32G32_UINT,
-                                  VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT |
-                                      VK_IMAGE_USAGE_TRANSFER_SRC_BIT);
+    colour_ =
+        context_.make_image(width, height, VK_FORMAT_R32G32_UINT,
+                            VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT);
     depth_ = context_.make_image(width, height, VK_FORMAT_D32_SFLOAT,
                                  VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT);
     visibility_ = context_.make_buffer(VkDeviceSize(width) * height * 8);

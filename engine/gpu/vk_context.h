@@ -223,8 +223,8 @@ public:
                          const void* push_constants, const Buffer& args, VkDeviceSize offset = 0);
   /// Starts rendering into `colour` and `depth` (their previous contents discarded), cleared to
   /// `clear_colour` and `clear_depth`, over their whole extent.
-  void begin_rendering(const Image& colour, const Image& depth, const VkClearColorValue& clear_colour,
-                       float clear_depth);
+  void begin_rendering(const Image& colour, const Image& depth,
+                       const VkClearColorValue& clear_colour, float clear_depth);
   /// Binds a graphics pipeline, its buffers and push constants once, then issues `draws`
   /// (between begin_rendering and end_rendering).
   void draw(const Pipeline& pipeline, std::span<const Buffer* const> buffers,

@@ -270,6 +270,7 @@ std::optional<TracerDevice> tracer_device(const Tracer& tracer) {
     d.rays = c.rays;
     d.resumed = c.resumed;
     d.cut = c.cut;
+    d.retraced = c.retraced;
     d.dispatches = c.dispatches;
     d.gpu_ms = c.gpu_ms;
     return d;

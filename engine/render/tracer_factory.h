@@ -103,6 +103,7 @@ struct TracerDevice {
   std::uint64_t rays = 0;
   std::uint64_t resumed = 0;
   std::uint64_t cut = 0;
+  std::uint64_t retraced = 0; ///< hybrid mode: primary rays traced after all
   std::uint64_t dispatches = 0;
   double gpu_ms = 0.0;
 };

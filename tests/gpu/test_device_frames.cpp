@@ -184,7 +184,8 @@ TEST(DeviceFramesScene, FactoryBackendRendersOnTheDevice) {
   const auto& vk = dynamic_cast<const gpu::VulkanTracer&>(*world.tracer);
   Framebuffer image(kWidth, kHeight);
   const FrameStats stats =
-      render_frame(*world.tracer, world.layer, test::cornell_camera(), settings_for(TraceMode::Whitted), image);
+      render_frame(*world.tracer, world.layer, test::cornell_camera(),
+                   settings_for(TraceMode::Whitted), image);
   EXPECT_EQ(stats.rays[RayKind::Primary], std::uint64_t(kWidth) * kHeight);
   EXPECT_GT(vk.counters().dispatches, 0u);
   EXPECT_EQ(vk.counters().cut, 0u);

@@ -50,7 +50,8 @@ void mesh_scene(ecs::Registry& reg) {
   add_mesh(reg, primitive("plane", 1, vec3(6.0f)), at(vec3(0)), grey);
   add_mesh(reg, primitive("sphere", 0.8f, vec3(1), 96, 48), at(vec3(-0.6f, 0.8f, 0.0f)), mirror);
   add_mesh(reg, primitive("sphere", 0.5f, vec3(1), 64, 32),
-           at(vec3(0.9f, 0.6f, 0.4f), vec3(1.4f, 0.8f, 1.0f), glm::normalize(quat(0.9f, 0.2f, 0.3f, 0.1f))),
+           at(vec3(0.9f, 0.6f, 0.4f), vec3(1.4f, 0.8f, 1.0f),
+              glm::normalize(quat(0.9f, 0.2f, 0.3f, 0.1f))),
            blue, Kinematics::Type::Free);
   test::add_point_light(reg, vec3(1.0f, 3.0f, 2.0f), 6.0f);
 }
@@ -114,8 +115,8 @@ void expect_hybrid_matches(const SceneLayer& layer, const Camera& camera, TraceM
   const double p = psnr(traced.image, hybrid.image);
   std::cout << scene << " " << trace_mode_name(mode) << ": primary agreement " << 100.0 * agree
             << "% of " << traced.hits.size() << " pixels (" << covered << " covered), PSNR " << p
-            << " dB, retraced " << hybrid.counters.retraced << ", rays "
-            << hybrid.counters.rays << " (traced " << traced.counters.rays << ")\n";
+            << " dB, retraced " << hybrid.counters.retraced << ", rays " << hybrid.counters.rays
+            << " (traced " << traced.counters.rays << ")\n";
   EXPECT_GT(covered, traced.hits.size() / 2) << "the camera must see the scene";
   // Instance boundaries are traced after all (frame_visibility.comp); the rest must come from
   // the raster pass, or the comparison would be of two traced frames.
