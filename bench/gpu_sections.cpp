@@ -3,7 +3,8 @@
 // on the device as a wavefront and as a single kernel, the CPU cast integrator over GPU
 // traversal, the uniform grid — against native-bvh and Embree, as ratios; then a sweep of the
 // grid's resolution (Purcell et al. chose theirs by the balance of traversal steps against
-// intersection tests).
+// intersection tests); last hybrid mode (primary visibility rasterised, the rest traced) against
+// fully traced device frames, frames per second in the same run and the PSNR between the images.
 //
 // Every tracer comes from the factory (make_tracer), so this file names no backend type, and a
 // configuration the machine or build cannot run is reported in its row ("n/a: why") rather than
@@ -161,13 +162,72 @@ void grid_sweep(const Options& o, Scene& scene) {
   std::fflush(stdout);
 }
 
+/// Hybrid mode against traced primary visibility: the same device frames (wavefront) but for
+/// where the primary hits come from, cast and Whitted, with the share of primary rays hybrid mode
+/// still traces (instance boundaries, raster misses) and the PSNR of the hybrid image against the
+/// traced one (its error: pixels whose nearest triangle the raster decides differently).
+void hybrid_table(const Options& o, const char* title, Scene& scene) {
+  SceneLayer layer;
+  layer.sync(scene.registry);
+  const Camera camera = *active_camera(scene.registry);
+  const std::uint32_t width = scene.settings.width;
+  const std::uint32_t height = scene.settings.height;
+  std::printf("\n### Hybrid mode (--gpu-primary raster) against traced primary rays: %s, %ux%u, "
+              "wavefront device frames\n\n",
+              title, width, height);
+  std::printf("| mode | traced frames/s | hybrid frames/s | × traced | traced GPU ms | hybrid GPU "
+              "ms | primary rays traced in hybrid | PSNR hybrid vs traced (dB) |\n"
+              "|---|---:|---:|---:|---:|---:|---:|---:|\n");
+  for (const TraceMode mode : {TraceMode::Cast, TraceMode::Whitted}) {
+    struct Run {
+      double ms = 0.0, gpu_ms = 0.0;
+      std::uint64_t retraced = 0;
+      Framebuffer image;
+    };
+    const auto run = [&](GpuTracerOptions::Primary primary) {
+      TracerOptions options;
+      options.gpu.primary = primary;
+      const std::unique_ptr<Tracer> tracer = make_tracer("vulkan", options);
+      tracer->update(layer);
+      TraceSettings settings;
+      settings.mode = mode;
+      settings.threads = o.threads;
+      Run r{0.0, 0.0, 0, Framebuffer(width, height)};
+      (void)render_frame(*tracer, layer, camera, settings, r.image); // warm-up
+      std::vector<double> ms, gpu_ms;
+      for (int i = 0; i < o.repetitions; ++i) {
+        ms.push_back(
+            time_ms([&] { (void)render_frame(*tracer, layer, camera, settings, r.image); }));
+        gpu_ms.push_back(tracer_device(*tracer).value_or(TracerDevice{}).gpu_ms);
+      }
+      r.ms = median(ms);
+      r.gpu_ms = median(gpu_ms);
+      r.retraced = tracer_device(*tracer).value_or(TracerDevice{}).retraced;
+      return r;
+    };
+    try {
+      const Run traced = run(GpuTracerOptions::Primary::trace);
+      const Run hybrid = run(GpuTracerOptions::Primary::raster);
+      std::printf("| %s | %.2f | %.2f | %s | %.2f | %.2f | %.1f%% | %.1f |\n",
+                  trace_mode_name(mode), 1000.0 / traced.ms, 1000.0 / hybrid.ms,
+                  ratio(traced.ms, hybrid.ms).c_str(), traced.gpu_ms, hybrid.gpu_ms,
+                  100.0 * double(hybrid.retraced) / (double(width) * height),
+                  psnr(traced.image, hybrid.image));
+    } catch (const std::exception& e) {
+      std::printf("| %s | n/a | | | | | | %s |\n", trace_mode_name(mode),
+                  one_line(e.what(), 120).c_str());
+    }
+  }
+  std::fflush(stdout);
+}
+
+} // namespace
+
 /// Ray-cache cubes on the device (issue 10): the mirror-spheres scene with 32 spheres on the
 /// vulkan backend's device Whitted frames, uncached and with --cache on (direction mode) ticked
 /// in turn in one run while the camera pans, frames/s of each and the PSNR of every cached frame
 /// against the uncached frame of the same view. The first frames fill the cubes; the figures
 /// after them are the steady state.
-} // namespace
-
 void section_gpu_cache(const Options& o) {
   std::printf("\n### Ray-cache cubes on the device (mirror_spheres_32, vulkan wavefront, %ux%u, "
               "direction mode, pan 0.25°/frame)\n\n",
@@ -252,6 +312,10 @@ void section_gpu(const Options& o) {
   cornell.settings.width = cornell.settings.height = o.size;
   table(o, "Cornell box", cornell);
   grid_sweep(o, bunny);
+  hybrid_table(o, "Cornell box", cornell);
+  Scene spheres = load_scene(o.source_dir + "/samples/scenes/mirror_spheres_8.json");
+  spheres.settings.width = spheres.settings.height = o.size;
+  hybrid_table(o, "mirror spheres (8)", spheres);
   section_gpu_cache(o);
 }
 

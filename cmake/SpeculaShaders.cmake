@@ -1,6 +1,8 @@
-# GLSL compute kernels (shaders/*.comp) compiled to SPIR-V with glslangValidator at build time and
-# embedded into the engine as uint32 arrays (no .spv in git, none installed beside the program).
-# Each kernel becomes ${SPECULA_INCLUDE_ROOT}/specula/spv/<name>.h (glslangValidator --vn), rebuilt
+# GLSL shaders (compute kernels shaders/*.comp, and the raster pass's *.vert / *.frag) compiled to
+# SPIR-V with glslangValidator at build time (the stage from the extension) and embedded into the
+# engine as uint32 arrays (no .spv in git, none installed beside the program). A kernel
+# <name>.comp is named <name>, a vertex or fragment shader <name>_vert / <name>_frag, and becomes
+# ${SPECULA_INCLUDE_ROOT}/specula/spv/<name>.h (glslangValidator --vn), rebuilt
 # when the kernel or anything it includes changes (depfile). shader_table.inc lists them all for
 # engine/gpu/shaders.cpp, the one translation unit that includes them.
 function(specula_add_shaders target)
@@ -11,6 +13,11 @@ function(specula_add_shaders target)
   set(entries "")
   foreach(src IN LISTS ARGN)
     get_filename_component(name ${src} NAME_WE)
+    get_filename_component(ext ${src} LAST_EXT)
+    if(NOT ext STREQUAL ".comp")
+      string(SUBSTRING ${ext} 1 -1 stage)
+      set(name ${name}_${stage})
+    endif()
     set(abs ${PROJECT_SOURCE_DIR}/shaders/${src})
     set(out ${spv_dir}/${name}.h)
     set(dep ${spv_dir}/${name}.d)

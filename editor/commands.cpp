@@ -236,6 +236,13 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   else
     throw Error("--gpu-execution",
                 "expected wavefront or single, got '" + printable(options.gpu_execution) + "'");
+  if (options.gpu_primary == "trace")
+    gpu.primary = GpuTracerOptions::Primary::trace;
+  else if (options.gpu_primary == "raster")
+    gpu.primary = GpuTracerOptions::Primary::raster;
+  else
+    throw Error("--gpu-primary",
+                "expected trace or raster, got '" + printable(options.gpu_primary) + "'");
   if (options.gpu_frames != "on" && options.gpu_frames != "off")
     throw Error("--gpu-frames", "expected on or off, got '" + printable(options.gpu_frames) + "'");
   gpu.device_frames = options.gpu_frames == "on";
@@ -329,6 +336,7 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
     stats.settings.gpu_device = tracer_dev->name;
     stats.settings.gpu_device_type = tracer_dev->type;
     stats.settings.gpu_execution = tracer_dev->execution;
+    stats.settings.gpu_primary = tracer_dev->primary;
     stats.settings.gpu_device_frames = tracer_dev->device_frames;
     stats.settings.grid_density = gpu.grid_density;
   }

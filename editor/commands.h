@@ -33,6 +33,7 @@ struct RenderOptions {
   std::string scene;
   std::string backend = "auto"; ///< auto | a backends() name (vulkan, embree, native, ...)
   std::string gpu_execution = "wavefront"; ///< wavefront | single (the Vulkan backends)
+  std::string gpu_primary = "trace";       ///< trace | raster (hybrid mode, the Vulkan backends)
   std::string gpu_frames = "on";           ///< on | off: whole frames on the device
   float grid_density = 4.0f;               ///< vulkan-grid: cells per triangle
   std::string mode = "whitted"; ///< cast | whitted | path | shadow

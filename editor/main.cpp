@@ -145,6 +145,12 @@ int main(int argc, char** argv) {
       ->check(one_of({"wavefront", "single"}))
       ->capture_default_str();
   render_cmd
+      ->add_option("--gpu-primary", render.gpu_primary,
+                   "Vulkan backends: primary hits of device frames traced, or rasterised by a "
+                   "graphics pipeline (raster: hybrid mode)")
+      ->check(one_of({"trace", "raster"}))
+      ->capture_default_str();
+  render_cmd
       ->add_option("--gpu-frames", render.gpu_frames,
                    "Vulkan backends: render whole frames on the device where the mode has "
                    "kernels (off: the CPU integrators over GPU traversal)")

@@ -5,10 +5,12 @@
 // where it stopped. Each frame folds into its parent when complete: its starting radiance plus
 // its visible shadow rays in light order, then its refraction child, then its reflection child ×
 // their weights, the CPU's order. A child that would need a frame beyond the stack (max_depth ≥
-// kStackFrames) is not traced and is counted as dropped.
+// kStackFrames) is not traced and is counted as dropped. In hybrid mode (kRasterPrimary) a walk's
+// primary hit comes from the raster pass where include/visibility.glsl settles it.
 #extension GL_GOOGLE_include_directive : require
 #include "include/common.glsl"
 #include "include/frame_common.glsl"
+#include "include/visibility.glsl"
 
 layout(local_size_x = 64) in;
 
@@ -100,8 +102,12 @@ void main() {
     if (state == kFrameTrace) {
       GpuHit hit;
       hit.instance = kNoIndex;
-      if (trace_closest(stack[f].origin, stack[f].direction, 0.0, kInfinity, budget, hit) !=
-          kRayDone) {
+      // Hybrid mode: the primary hit from the raster pass where it settles one.
+      bool settled = kRasterPrimary && stack[f].depth == 0u &&
+                     visibility_hit(pixel, stack[f].origin, stack[f].direction, hit);
+      if (!settled &&
+          trace_closest(stack[f].origin, stack[f].direction, 0.0, kInfinity, budget, hit) !=
+              kRayDone) {
         stopped = true;
         break;
       }

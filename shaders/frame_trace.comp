@@ -12,6 +12,8 @@ void main() {
   uint i = gl_GlobalInvocationID.x;
   if (i >= min(counters.queue_count[pc.parity], params.node_capacity)) return;
   uint n = queues[pc.parity * params.node_capacity + i];
+  // Hybrid mode: frame_visibility.comp already found this primary ray's hit.
+  if (nodes[n].status == kRayDone) return;
   // Pending until one of the exits below: a ray still pending afterwards was cut by the driver.
   nodes[n].status = kRayPending;
   GpuFrameNode node = nodes[n];

@@ -82,9 +82,10 @@ void DevicePath::ensure_pipelines(const Features& f) {
   if (pipelines_ && pipelines_->features == f) return;
   auto p = std::make_unique<Pipelines>();
   p->features = f;
-  // frame_common.glsl's ids 0-5 (0, 3 and 5, the cache, unused here), path.glsl's 6-9.
+  // frame_common.glsl's ids 0-6 (0, 3, 5 the cache and 6 hybrid mode unused here), path.glsl's
+  // 7-10.
   const std::vector<std::uint32_t> spec = {
-      0u, f.shadows ? 1u : 0u, f.dielectrics ? 1u : 0u, 0u, f.lights, 0u, f.area ? 1u : 0u,
+      0u, f.shadows ? 1u : 0u, f.dielectrics ? 1u : 0u, 0u, f.lights, 0u, 0u, f.area ? 1u : 0u,
       f.mirrors ? 1u : 0u, f.shadow_mode ? 1u : 0u, f.sampling};
   const auto make = [&](const char* name) {
     return context_.make_pipeline({shader_spirv(name), kPathBindings, sizeof(PathPush), spec, name});

@@ -59,12 +59,19 @@ void ensure_size(Context& ctx, Buffer& buffer, VkDeviceSize bytes,
 
 struct DeviceRenderer::Pipelines {
   Features features;
-  Pipeline args, eye, trace, shade, shadow, fold, single;
+  Pipeline args, eye, visibility, trace, shade, shadow, fold, single;
 };
 
-DeviceRenderer::DeviceRenderer(Context& context, const GpuScene& scene, Execution execution)
+DeviceRenderer::DeviceRenderer(Context& context, const GpuScene& scene, Execution execution,
+                               PrimaryVisibility primary)
     : context_(context), scene_(scene), execution_(execution),
-      cache_(std::make_unique<DeviceCache>(context)) {}
+      cache_(std::make_unique<DeviceCache>(context)) {
+  if (primary != PrimaryVisibility::raster) return;
+  if (!context.info().graphics)
+    throw Error("vulkan", "rasterised primary visibility (--gpu-primary raster): device '" +
+                              context.info().name + "' cannot draw on its compute queue");
+  raster_ = std::make_unique<RasterPrimary>(context, scene);
+}
 
 DeviceRenderer::~DeviceRenderer() = default;
 
@@ -106,20 +113,26 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
   p->features = f;
   const std::vector<std::uint32_t> spec = {f.whitted ? 1u : 0u, f.shadows ? 1u : 0u,
                                            f.dielectrics ? 1u : 0u, f.specular ? 1u : 0u,
-                                           f.lights, f.cache ? 1u : 0u};
+                                           f.lights, f.cache ? 1u : 0u, raster_ ? 1u : 0u};
   const auto make = [&](const char* name) {
     return context_.make_pipeline(
         {shader_spirv(name), kCacheBindings, sizeof(WavePush), spec, name});
   };
+  // Kernels that read the visibility buffer (frame_single's bindings are there either way).
+  const auto make_hybrid = [&](const char* name) {
+    return context_.make_pipeline(
+        {shader_spirv(name), kFrameHybridBindings, sizeof(WavePush), spec, name});
+  };
   if (execution_ == Execution::wavefront) {
     p->args = make("frame_args");
     p->eye = make("frame_eye");
+    if (raster_) p->visibility = make_hybrid("frame_visibility");
     p->trace = make("frame_trace");
     p->shade = make("frame_shade");
     p->shadow = make("frame_shadow");
     p->fold = make("frame_fold");
   } else {
-    p->single = make("frame_single");
+    p->single = make_hybrid("frame_single");
   }
   pipelines_ = std::move(p);
 }
@@ -129,6 +142,7 @@ void DeviceRenderer::ensure_frame_buffers(std::uint32_t pixels) {
   ensure_size(context_, counters_buffer_, sizeof(GpuFrameCounters), MemoryKind::host);
   ensure_size(context_, image_, VkDeviceSize(pixels) * 16);
   ensure_size(context_, primary_buffer_, VkDeviceSize(pixels) * 4);
+  ensure_size(context_, unused_, 16);
 }
 
 void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
@@ -159,6 +173,13 @@ void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
   }
 }
 
+std::vector<const Buffer*> DeviceRenderer::hybrid_bindings() const {
+  std::vector<const Buffer*> b = bindings();
+  b.push_back(raster_ ? &raster_->visibility() : &unused_);
+  b.push_back(raster_ ? &raster_->slot_boxes() : &unused_);
+  return b;
+}
+
 std::vector<const Buffer*> DeviceRenderer::bindings() const {
   std::vector<const Buffer*> b(scene_.bindings().begin(), scene_.bindings().end());
   for (const Buffer* own : {&params_, &materials_, &lights_, &normals_, &counters_buffer_, &image_,
@@ -170,10 +191,9 @@ std::vector<const Buffer*> DeviceRenderer::bindings() const {
 }
 
 void DeviceRenderer::bind_cache(bool cache) {
-  ensure_size(context_, no_cache_, 16);
-  cache_buffers_[0] = cache ? &cache_->cubes() : &no_cache_;
-  cache_buffers_[1] = cache ? &cache_->texels() : &no_cache_;
-  cache_buffers_[2] = cache ? &cache_->records() : &no_cache_;
+  cache_buffers_[0] = cache ? &cache_->cubes() : &unused_;
+  cache_buffers_[1] = cache ? &cache_->texels() : &unused_;
+  cache_buffers_[2] = cache ? &cache_->records() : &unused_;
 }
 
 void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t pixels) {
@@ -190,6 +210,14 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
   cmd.dispatch(p.eye, buffers, &push, groups(pixels));
   cmd.barrier();
   ++dispatches_;
+  if (raster_) {
+    // Hybrid mode: the primary hits from the raster pass; frame_trace skips the rays they settle.
+    raster_->record(cmd);
+    cmd.barrier();
+    cmd.dispatch(p.visibility, hybrid_bindings(), &push, groups(pixels));
+    cmd.barrier();
+    ++dispatches_;
+  }
   const std::uint32_t batch =
       settings.mode == TraceMode::Cast ? 1 + kExtraWaves : settings.max_depth + 1 + kExtraWaves;
   std::uint32_t parity = 0;
@@ -243,13 +271,22 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
 
 void DeviceRenderer::run_single(std::uint32_t pixels) {
   const Pipelines& p = *pipelines_;
-  const std::vector<const Buffer*> buffers = bindings();
+  const std::vector<const Buffer*> buffers = hybrid_bindings();
   const GpuFrameCounters init{};
   counters_buffer_.upload(&init, sizeof init);
   GpuFrameParams params{};
   params_.download(&params, sizeof params);
   Commands cmd(context_, 4);
   const WavePush push;
+  if (raster_) {
+    // Hybrid mode: the whole frame's visibility buffer before the first walk.
+    const std::uint32_t begin = cmd.timestamp();
+    raster_->record(cmd);
+    cmd.barrier();
+    const std::uint32_t end = cmd.timestamp();
+    cmd.submit();
+    gpu_ms_ += cmd.elapsed_ms(begin, end);
+  }
   for (std::uint32_t first = 0; first < pixels; first += chunk_pixels_) {
     params.first_pixel = first;
     params.chunk_pixels = std::min(chunk_pixels_, pixels - first);
@@ -281,6 +318,14 @@ void DeviceRenderer::run_single(std::uint32_t pixels) {
                                   " too small for this scene)");
     }
   }
+}
+
+std::vector<GpuHit> DeviceRenderer::primary_hits() const {
+  if (execution_ != Execution::wavefront)
+    throw Error("vulkan", "primary hits are kept by wavefront device frames only");
+  std::vector<GpuHit> hits(primary_.size());
+  if (!hits.empty()) hits_.download(hits.data(), hits.size() * sizeof(GpuHit));
+  return hits;
 }
 
 void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
@@ -344,6 +389,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     params.chunk_pixels = pixels;
     params.record_capacity = cache ? cache_->record_capacity() : 0;
     params_.upload(&params, sizeof params);
+    if (raster_ && !stochastic) raster_->prepare(layer, rays, width, height);
 
     gpu_ms_ = 0.0;
     dispatches_ = 0;
@@ -376,6 +422,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     counters.rays = stats.rays.total();
     counters.resumed = c.resumed;
     counters.cut = c.cut;
+    counters.retraced = c.retraced;
     counters.dispatches = dispatches_;
     counters.gpu_ms = gpu_ms_;
     cache_records_ = cache ? c.records : 0;

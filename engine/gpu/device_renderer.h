@@ -13,9 +13,11 @@
 /// The shading mirrors engine/trace (shaders/include/shading.glsl). Loops are bounded for
 /// lavapipe's silent loop cap: every trace gets a per-dispatch budget; a ray (wavefront) or a
 /// walk (single kernel) that uses it up is resumed by a later dispatch, and rays the driver cut
-/// are counted (GpuTraceCounters::cut, must be 0).
+/// are counted (GpuTraceCounters::cut, must be 0). In hybrid mode (PrimaryVisibility::raster)
+/// the primary hits come from a raster pass (raster_primary.h) where it settles them.
 
 #include "specula/gpu/gpu_scene.h"
+#include "specula/gpu/raster_primary.h"
 #include "specula/gpu/vk_context.h"
 
 #include <cstdint>
@@ -41,7 +43,9 @@ class DevicePath;
 
 class DeviceRenderer {
 public:
-  DeviceRenderer(Context& context, const GpuScene& scene, Execution execution);
+  /// `primary` raster (hybrid mode) needs a device that draws: throws specula::Error otherwise.
+  DeviceRenderer(Context& context, const GpuScene& scene, Execution execution,
+                 PrimaryVisibility primary = PrimaryVisibility::trace);
   ~DeviceRenderer();
   DeviceRenderer(const DeviceRenderer&) = delete;
   DeviceRenderer& operator=(const DeviceRenderer&) = delete;
@@ -70,6 +74,10 @@ public:
   /// The instance slot each pixel's primary ray hit in the last frame (kNoIndex: a miss), row
   /// major: for comparing primary visibility with the CPU backends.
   [[nodiscard]] std::span<const std::uint32_t> primary_instances() const { return primary_; }
+  /// Each pixel's primary hit in the last frame, row major, read back from the device
+  /// (wavefront execution only: throws specula::Error otherwise): traced and rasterised primary
+  /// visibility compared hit by hit.
+  [[nodiscard]] std::vector<GpuHit> primary_hits() const;
 
   /// Traversal iterations one invocation may spend per dispatch (default kDefaultBudget); lower
   /// values force resumption (tests).
@@ -92,6 +100,9 @@ private:
   void run_single(std::uint32_t pixels);
   void bind_cache(bool cache);
   [[nodiscard]] std::vector<const Buffer*> bindings() const;
+  /// bindings() and the visibility buffer and slot → box table (frame_layout.h's
+  /// kFrameHybridBindings), `unused_` in their place when primary hits are traced.
+  [[nodiscard]] std::vector<const Buffer*> hybrid_bindings() const;
 
   Context& context_;
   const GpuScene& scene_;
@@ -99,14 +110,15 @@ private:
   std::uint32_t budget_ = kDefaultBudget;
   std::unique_ptr<Pipelines> pipelines_;
   std::unique_ptr<DeviceCache> cache_;
-  Buffer no_cache_; ///< bound at the cache bindings of frames without cubes
   const Buffer* cache_buffers_[3] = {nullptr, nullptr, nullptr};
   std::uint64_t cache_mismatches_ = 0;
   std::uint32_t cache_records_ = 0;
   std::unique_ptr<DevicePath> path_; ///< path and shadow frames, made on first use
+  std::unique_ptr<RasterPrimary> raster_; ///< hybrid mode only
   // Tables at bindings 8.. (frame_layout.h).
   Buffer params_, materials_, lights_, normals_, counters_buffer_, image_, primary_buffer_;
   Buffer nodes_, hits_, queues_, shadows_, shadow_queues_;
+  Buffer unused_; ///< 16 bytes, bound where a frame has no cubes or no visibility buffer
   std::uint64_t tables_sync_ = 0; ///< SceneLayer::syncs() of the tables uploaded (0: none)
   std::uint32_t node_capacity_ = 0, shadow_capacity_ = 0, chunk_pixels_ = 0;
   std::uint32_t light_count_ = 0;

@@ -60,6 +60,9 @@ public:
   [[nodiscard]] Context& context() const { return context_; }
   /// Stack entries a ray's walk may need (at most kTraceStackSize).
   [[nodiscard]] std::uint32_t stack_depth() const { return stack_depth_; }
+  /// The top level's boxes as uploaded (binding 4 after the header), in box order: each dynamic
+  /// instance's slot and object_from_world (hybrid mode maps slots to boxes with them).
+  [[nodiscard]] std::span<const GpuTopEntry> top_entries() const { return top_.entries; }
   /// The CPU structures the device copies (tests compare against them).
   [[nodiscard]] const NativeTracer& native() const { return native_; }
 

@@ -1,6 +1,6 @@
 #pragma once
 /// \file
-/// The SPIR-V of every kernel in shaders/, compiled at build time (cmake/SpeculaShaders.cmake).
+/// The SPIR-V of every shader in shaders/, compiled at build time (cmake/SpeculaShaders.cmake).
 
 #include <cstdint>
 #include <span>
@@ -8,7 +8,8 @@
 
 namespace specula::gpu {
 
-/// The SPIR-V words of kernel `name` (the file name in shaders/ without .comp); throws
+/// The SPIR-V words of shader `name` (a kernel: its file name in shaders/ without .comp; a vertex
+/// or fragment shader: <name>_vert / <name>_frag); throws
 /// specula::Error for a name no build has.
 [[nodiscard]] std::span<const std::uint32_t> shader_spirv(std::string_view name);
 

@@ -120,7 +120,12 @@ std::int32_t compute_family(VkPhysicalDevice device) {
   vkGetPhysicalDeviceQueueFamilyProperties(device, &count, nullptr);
   std::vector<VkQueueFamilyProperties> families(count);
   vkGetPhysicalDeviceQueueFamilyProperties(device, &count, families.data());
-  // A compute queue with timestamps first, then any compute queue.
+  // A compute queue with timestamps that also draws (hybrid mode's raster pass), then one with
+  // timestamps, then any compute queue.
+  const VkQueueFlags universal = VK_QUEUE_COMPUTE_BIT | VK_QUEUE_GRAPHICS_BIT;
+  for (std::uint32_t i = 0; i < count; ++i)
+    if ((families[i].queueFlags & universal) == universal && families[i].timestampValidBits > 0)
+      return std::int32_t(i);
   for (std::uint32_t i = 0; i < count; ++i)
     if ((families[i].queueFlags & VK_QUEUE_COMPUTE_BIT) && families[i].timestampValidBits > 0)
       return std::int32_t(i);
@@ -262,6 +267,10 @@ std::unique_ptr<Context> Context::create(const Options& options) {
   vkGetPhysicalDeviceProperties2(best, &props);
   VkPhysicalDeviceFeatures features;
   vkGetPhysicalDeviceFeatures(best, &features);
+  VkPhysicalDeviceVulkan13Features f13{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_3_FEATURES};
+  VkPhysicalDeviceFeatures2 features2{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
+  features2.pNext = &f13;
+  vkGetPhysicalDeviceFeatures2(best, &features2);
   std::uint32_t fam_count = 0;
   vkGetPhysicalDeviceQueueFamilyProperties(best, &fam_count, nullptr);
   std::vector<VkQueueFamilyProperties> families(fam_count);
@@ -279,6 +288,8 @@ std::unique_ptr<Context> Context::create(const Options& options) {
   info.subgroup_size = p11.subgroupSize;
   info.max_storage_buffer_range = props.properties.limits.maxStorageBufferRange;
   info.max_workgroup_count_x = props.properties.limits.maxComputeWorkGroupCount[0];
+  info.graphics = (families[ctx->family_].queueFlags & VK_QUEUE_GRAPHICS_BIT) != 0 &&
+                  f13.dynamicRendering == VK_TRUE;
 
   const float priority = 1.0f;
   VkDeviceQueueCreateInfo qci{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
@@ -288,7 +299,10 @@ std::unique_ptr<Context> Context::create(const Options& options) {
   VkPhysicalDeviceFeatures enable{};
   enable.shaderFloat64 = features.shaderFloat64;
   enable.shaderInt64 = features.shaderInt64;
+  VkPhysicalDeviceVulkan13Features enable13{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_3_FEATURES};
+  enable13.dynamicRendering = info.graphics ? VK_TRUE : VK_FALSE;
   VkDeviceCreateInfo dci{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
+  dci.pNext = &enable13;
   dci.queueCreateInfoCount = 1;
   dci.pQueueCreateInfos = &qci;
   dci.pEnabledFeatures = &enable;
@@ -470,12 +484,17 @@ Pipeline& Pipeline::operator=(Pipeline&& o) noexcept {
     pipeline_ = std::exchange(o.pipeline_, VK_NULL_HANDLE);
     bindings_ = o.bindings_;
     push_bytes_ = o.push_bytes_;
+    bind_point_ = o.bind_point_;
+    stages_ = o.stages_;
+    fragment_ = std::exchange(o.fragment_, VK_NULL_HANDLE);
   }
   return *this;
 }
 void Pipeline::release() noexcept {
   if (context_ == nullptr) return;
   VkDevice d = context_->device();
+  if (fragment_ != VK_NULL_HANDLE) vkDestroyShaderModule(d, fragment_, nullptr);
+  fragment_ = VK_NULL_HANDLE;
   if (pipeline_ != VK_NULL_HANDLE) vkDestroyPipeline(d, pipeline_, nullptr);
   if (layout_ != VK_NULL_HANDLE) vkDestroyPipelineLayout(d, layout_, nullptr);
   if (set_layout_ != VK_NULL_HANDLE) vkDestroyDescriptorSetLayout(d, set_layout_, nullptr);
@@ -484,30 +503,197 @@ void Pipeline::release() noexcept {
   context_ = nullptr;
 }
 
+namespace {
+VkShaderModule make_module(VkDevice device, std::span<const std::uint32_t> spirv) {
+  VkShaderModuleCreateInfo smci{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
+  smci.codeSize = spirv.size_bytes();
+  smci.pCode = spirv.data();
+  VkShaderModule module = VK_NULL_HANDLE;
+  check(vkCreateShaderModule(device, &smci, nullptr, &module), "vkCreateShaderModule");
+  return module;
+}
+} // namespace
+
+void Context::make_layouts(VkDevice device, Pipeline& p, VkShaderStageFlags stages,
+                  VkShaderStageFlags push_stages) {
+  std::vector<VkDescriptorSetLayoutBinding> bindings(p.bindings_);
+  for (std::uint32_t i = 0; i < p.bindings_; ++i)
+    bindings[i] = {i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, stages, nullptr};
+  VkDescriptorSetLayoutCreateInfo dlci{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
+  dlci.bindingCount = p.bindings_;
+  dlci.pBindings = bindings.data();
+  check(vkCreateDescriptorSetLayout(device, &dlci, nullptr, &p.set_layout_),
+        "vkCreateDescriptorSetLayout");
+  VkPushConstantRange range{push_stages, 0, p.push_bytes_};
+  VkPipelineLayoutCreateInfo plci{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
+  plci.setLayoutCount = 1;
+  plci.pSetLayouts = &p.set_layout_;
+  plci.pushConstantRangeCount = p.push_bytes_ > 0 ? 1 : 0;
+  plci.pPushConstantRanges = &range;
+  check(vkCreatePipelineLayout(device, &plci, nullptr, &p.layout_), "vkCreatePipelineLayout");
+  p.stages_ = push_stages;
+}
+
+Pipeline Context::make_graphics_pipeline(const GraphicsPipelineDesc& desc) {
+  if (!info_.graphics)
+    throw GpuError(std::string(desc.debug_name) + ": the device's queue cannot draw (no graphics "
+                                                  "bit or no dynamic rendering)",
+                   VK_ERROR_FEATURE_NOT_PRESENT);
+  Pipeline p;
+  p.context_ = this;
+  p.bindings_ = desc.storage_buffers;
+  p.push_bytes_ = desc.push_constant_bytes;
+  p.bind_point_ = VK_PIPELINE_BIND_POINT_GRAPHICS;
+  p.module_ = make_module(device_, desc.vertex_spirv);
+  p.fragment_ = make_module(device_, desc.fragment_spirv);
+  make_layouts(device_, p, VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT,
+               VK_SHADER_STAGE_VERTEX_BIT);
+
+  VkPipelineShaderStageCreateInfo stages[2] = {
+      {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO},
+      {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO}};
+  stages[0].stage = VK_SHADER_STAGE_VERTEX_BIT;
+  stages[0].module = p.module_;
+  stages[0].pName = "main";
+  stages[1].stage = VK_SHADER_STAGE_FRAGMENT_BIT;
+  stages[1].module = p.fragment_;
+  stages[1].pName = "main";
+  VkPipelineVertexInputStateCreateInfo vertex_input{
+      VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO};
+  VkPipelineInputAssemblyStateCreateInfo assembly{
+      VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO};
+  assembly.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
+  VkPipelineViewportStateCreateInfo viewport{VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO};
+  viewport.viewportCount = 1;
+  viewport.scissorCount = 1;
+  VkPipelineRasterizationStateCreateInfo raster{
+      VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO};
+  raster.polygonMode = VK_POLYGON_MODE_FILL;
+  raster.cullMode = VK_CULL_MODE_NONE;
+  raster.frontFace = VK_FRONT_FACE_COUNTER_CLOCKWISE;
+  raster.lineWidth = 1.0f;
+  VkPipelineMultisampleStateCreateInfo multisample{
+      VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO};
+  multisample.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
+  VkPipelineDepthStencilStateCreateInfo depth{
+      VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO};
+  depth.depthTestEnable = VK_TRUE;
+  depth.depthWriteEnable = VK_TRUE;
+  depth.depthCompareOp = desc.depth_compare;
+  VkPipelineColorBlendAttachmentState attachment{};
+  attachment.colorWriteMask = VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT |
+                              VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
+  VkPipelineColorBlendStateCreateInfo blend{
+      VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO};
+  blend.attachmentCount = 1;
+  blend.pAttachments = &attachment;
+  const VkDynamicState dynamic_states[2] = {VK_DYNAMIC_STATE_VIEWPORT, VK_DYNAMIC_STATE_SCISSOR};
+  VkPipelineDynamicStateCreateInfo dynamic{VK_STRUCTURE_TYPE_PIPELINE_DYNAMIC_STATE_CREATE_INFO};
+  dynamic.dynamicStateCount = 2;
+  dynamic.pDynamicStates = dynamic_states;
+  VkPipelineRenderingCreateInfo rendering{VK_STRUCTURE_TYPE_PIPELINE_RENDERING_CREATE_INFO};
+  rendering.colorAttachmentCount = 1;
+  rendering.pColorAttachmentFormats = &desc.colour_format;
+  rendering.depthAttachmentFormat = desc.depth_format;
+
+  VkGraphicsPipelineCreateInfo gpci{VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO};
+  gpci.pNext = &rendering;
+  gpci.stageCount = 2;
+  gpci.pStages = stages;
+  gpci.pVertexInputState = &vertex_input;
+  gpci.pInputAssemblyState = &assembly;
+  gpci.pViewportState = &viewport;
+  gpci.pRasterizationState = &raster;
+  gpci.pMultisampleState = &multisample;
+  gpci.pDepthStencilState = &depth;
+  gpci.pColorBlendState = &blend;
+  gpci.pDynamicState = &dynamic;
+  gpci.layout = p.layout_;
+  check(vkCreateGraphicsPipelines(device_, VK_NULL_HANDLE, 1, &gpci, nullptr, &p.pipeline_),
+        desc.debug_name);
+  return p;
+}
+
+// ---- Image ----------------------------------------------------------------------------------------
+
+Image::~Image() { release(); }
+Image::Image(Image&& o) noexcept { *this = std::move(o); }
+Image& Image::operator=(Image&& o) noexcept {
+  if (this != &o) {
+    release();
+    context_ = std::exchange(o.context_, nullptr);
+    image_ = std::exchange(o.image_, VK_NULL_HANDLE);
+    memory_ = std::exchange(o.memory_, VK_NULL_HANDLE);
+    view_ = std::exchange(o.view_, VK_NULL_HANDLE);
+    format_ = o.format_;
+    width_ = o.width_;
+    height_ = o.height_;
+  }
+  return *this;
+}
+void Image::release() noexcept {
+  if (context_ == nullptr) return;
+  VkDevice d = context_->device();
+  if (view_ != VK_NULL_HANDLE) vkDestroyImageView(d, view_, nullptr);
+  if (image_ != VK_NULL_HANDLE) vkDestroyImage(d, image_, nullptr);
+  if (memory_ != VK_NULL_HANDLE) vkFreeMemory(d, memory_, nullptr);
+  view_ = VK_NULL_HANDLE;
+  image_ = VK_NULL_HANDLE;
+  memory_ = VK_NULL_HANDLE;
+  context_ = nullptr;
+}
+bool Image::is_depth() const {
+  return format_ == VK_FORMAT_D32_SFLOAT || format_ == VK_FORMAT_D16_UNORM ||
+         format_ == VK_FORMAT_X8_D24_UNORM_PACK32;
+}
+
+Image Context::make_image(std::uint32_t width, std::uint32_t height, VkFormat format,
+                          VkImageUsageFlags usage) {
+  Image img;
+  img.context_ = this;
+  img.format_ = format;
+  img.width_ = width;
+  img.height_ = height;
+  VkImageCreateInfo ici{VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO};
+  ici.imageType = VK_IMAGE_TYPE_2D;
+  ici.format = format;
+  ici.extent = {width, height, 1};
+  ici.mipLevels = 1;
+  ici.arrayLayers = 1;
+  ici.samples = VK_SAMPLE_COUNT_1_BIT;
+  ici.tiling = VK_IMAGE_TILING_OPTIMAL;
+  ici.usage = usage;
+  ici.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+  ici.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  check(vkCreateImage(device_, &ici, nullptr, &img.image_), "vkCreateImage");
+  VkMemoryRequirements req;
+  vkGetImageMemoryRequirements(device_, img.image_, &req);
+  std::uint32_t type = memory_type(req.memoryTypeBits, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+  if (type == ~0u) type = memory_type(req.memoryTypeBits, 0);
+  if (type == ~0u) throw GpuError("no memory type for an image", VK_ERROR_OUT_OF_DEVICE_MEMORY);
+  VkMemoryAllocateInfo mai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+  mai.allocationSize = req.size;
+  mai.memoryTypeIndex = type;
+  check(vkAllocateMemory(device_, &mai, nullptr, &img.memory_), "vkAllocateMemory");
+  check(vkBindImageMemory(device_, img.image_, img.memory_, 0), "vkBindImageMemory");
+  VkImageViewCreateInfo vci{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
+  vci.image = img.image_;
+  vci.viewType = VK_IMAGE_VIEW_TYPE_2D;
+  vci.format = format;
+  vci.subresourceRange = {
+      VkImageAspectFlags(img.is_depth() ? VK_IMAGE_ASPECT_DEPTH_BIT : VK_IMAGE_ASPECT_COLOR_BIT), 0,
+      1, 0, 1};
+  check(vkCreateImageView(device_, &vci, nullptr, &img.view_), "vkCreateImageView");
+  return img;
+}
+
 Pipeline Context::make_pipeline(const PipelineDesc& desc) {
   Pipeline p;
   p.context_ = this;
   p.bindings_ = desc.storage_buffers;
   p.push_bytes_ = desc.push_constant_bytes;
-  VkShaderModuleCreateInfo smci{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
-  smci.codeSize = desc.spirv.size_bytes();
-  smci.pCode = desc.spirv.data();
-  check(vkCreateShaderModule(device_, &smci, nullptr, &p.module_), "vkCreateShaderModule");
-  std::vector<VkDescriptorSetLayoutBinding> bindings(desc.storage_buffers);
-  for (std::uint32_t i = 0; i < desc.storage_buffers; ++i)
-    bindings[i] = {i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr};
-  VkDescriptorSetLayoutCreateInfo dlci{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
-  dlci.bindingCount = desc.storage_buffers;
-  dlci.pBindings = bindings.data();
-  check(vkCreateDescriptorSetLayout(device_, &dlci, nullptr, &p.set_layout_),
-        "vkCreateDescriptorSetLayout");
-  VkPushConstantRange range{VK_SHADER_STAGE_COMPUTE_BIT, 0, desc.push_constant_bytes};
-  VkPipelineLayoutCreateInfo plci{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
-  plci.setLayoutCount = 1;
-  plci.pSetLayouts = &p.set_layout_;
-  plci.pushConstantRangeCount = desc.push_constant_bytes > 0 ? 1 : 0;
-  plci.pPushConstantRanges = &range;
-  check(vkCreatePipelineLayout(device_, &plci, nullptr, &p.layout_), "vkCreatePipelineLayout");
+  p.module_ = make_module(device_, desc.spirv);
+  make_layouts(device_, p, VK_SHADER_STAGE_COMPUTE_BIT, VK_SHADER_STAGE_COMPUTE_BIT);
   std::vector<VkSpecializationMapEntry> entries(desc.specialization.size());
   for (std::uint32_t i = 0; i < entries.size(); ++i)
     entries[i] = {i, std::uint32_t(i * sizeof(std::uint32_t)), sizeof(std::uint32_t)};
@@ -602,7 +788,8 @@ VkDescriptorSet Commands::allocate_set(const Pipeline& pipeline) {
 namespace {
 void bind(VkDevice device, VkCommandBuffer cmd, VkDescriptorSet set, VkPipeline pipeline,
           VkPipelineLayout layout, std::span<const Buffer* const> buffers, const void* push,
-          std::uint32_t push_bytes) {
+          std::uint32_t push_bytes, VkPipelineBindPoint bind_point = VK_PIPELINE_BIND_POINT_COMPUTE,
+          VkShaderStageFlags push_stages = VK_SHADER_STAGE_COMPUTE_BIT) {
   std::vector<VkDescriptorBufferInfo> infos(buffers.size());
   std::vector<VkWriteDescriptorSet> writes(buffers.size());
   for (std::size_t i = 0; i < buffers.size(); ++i) {
@@ -615,10 +802,27 @@ void bind(VkDevice device, VkCommandBuffer cmd, VkDescriptorSet set, VkPipeline 
     writes[i].pBufferInfo = &infos[i];
   }
   vkUpdateDescriptorSets(device, std::uint32_t(writes.size()), writes.data(), 0, nullptr);
-  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
-  vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout, 0, 1, &set, 0, nullptr);
+  vkCmdBindPipeline(cmd, bind_point, pipeline);
+  vkCmdBindDescriptorSets(cmd, bind_point, layout, 0, 1, &set, 0, nullptr);
   if (push_bytes > 0 && push != nullptr)
-    vkCmdPushConstants(cmd, layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, push_bytes, push);
+    vkCmdPushConstants(cmd, layout, push_stages, 0, push_bytes, push);
+}
+
+/// A layout transition of a whole single-level image.
+void transition(VkCommandBuffer cmd, const Image& image, VkImageLayout from, VkImageLayout to,
+                VkPipelineStageFlags src_stage, VkAccessFlags src_access,
+                VkPipelineStageFlags dst_stage, VkAccessFlags dst_access) {
+  VkImageMemoryBarrier b{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER};
+  b.srcAccessMask = src_access;
+  b.dstAccessMask = dst_access;
+  b.oldLayout = from;
+  b.newLayout = to;
+  b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  b.image = image.handle();
+  b.subresourceRange = {
+      VkImageAspectFlags(image.is_depth() ? VK_IMAGE_ASPECT_DEPTH_BIT : VK_IMAGE_ASPECT_COLOR_BIT),
+      0, 1, 0, 1};
+  vkCmdPipelineBarrier(cmd, src_stage, dst_stage, 0, 0, nullptr, 0, nullptr, 1, &b);
 }
 } // namespace
 
@@ -645,6 +849,74 @@ void Commands::dispatch_indirect(const Pipeline& pipeline, std::span<const Buffe
   bind(context_.device(), cmd_, set, pipeline.pipeline_, pipeline.layout_, buffers, push_constants,
        pipeline.push_bytes_);
   vkCmdDispatchIndirect(cmd_, args.handle(), offset);
+}
+
+void Commands::begin_rendering(const Image& colour, const Image& depth,
+                               const VkClearColorValue& clear_colour, float clear_depth) {
+  begin_if_needed();
+  // From UNDEFINED: the previous contents are not wanted, only the end of earlier reads (a copy).
+  transition(cmd_, colour, VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL,
+             VK_PIPELINE_STAGE_ALL_COMMANDS_BIT, 0, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT,
+             VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
+  transition(cmd_, depth, VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_DEPTH_ATTACHMENT_OPTIMAL,
+             VK_PIPELINE_STAGE_ALL_COMMANDS_BIT, 0,
+             VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT,
+             VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT |
+                 VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT);
+  VkRenderingAttachmentInfo colour_info{VK_STRUCTURE_TYPE_RENDERING_ATTACHMENT_INFO};
+  colour_info.imageView = colour.view();
+  colour_info.imageLayout = VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL;
+  colour_info.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
+  colour_info.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
+  colour_info.clearValue.color = clear_colour;
+  VkRenderingAttachmentInfo depth_info{VK_STRUCTURE_TYPE_RENDERING_ATTACHMENT_INFO};
+  depth_info.imageView = depth.view();
+  depth_info.imageLayout = VK_IMAGE_LAYOUT_DEPTH_ATTACHMENT_OPTIMAL;
+  depth_info.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
+  depth_info.storeOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+  depth_info.clearValue.depthStencil = {clear_depth, 0};
+  VkRenderingInfo ri{VK_STRUCTURE_TYPE_RENDERING_INFO};
+  ri.renderArea = {{0, 0}, {colour.width(), colour.height()}};
+  ri.layerCount = 1;
+  ri.colorAttachmentCount = 1;
+  ri.pColorAttachments = &colour_info;
+  ri.pDepthAttachment = &depth_info;
+  vkCmdBeginRendering(cmd_, &ri);
+  const VkViewport viewport{0.0f, 0.0f, float(colour.width()), float(colour.height()), 0.0f, 1.0f};
+  const VkRect2D scissor{{0, 0}, {colour.width(), colour.height()}};
+  vkCmdSetViewport(cmd_, 0, 1, &viewport);
+  vkCmdSetScissor(cmd_, 0, 1, &scissor);
+}
+
+void Commands::draw(const Pipeline& pipeline, std::span<const Buffer* const> buffers,
+                    const void* push_constants, std::span<const Draw> draws) {
+  if (buffers.size() != pipeline.bindings_ ||
+      pipeline.bind_point_ != VK_PIPELINE_BIND_POINT_GRAPHICS)
+    throw GpuError("draw: not a graphics pipeline, or the wrong buffer count", VK_ERROR_UNKNOWN);
+  begin_if_needed();
+  const VkDescriptorSet set = allocate_set(pipeline);
+  bind(context_.device(), cmd_, set, pipeline.pipeline_, pipeline.layout_, buffers, push_constants,
+       pipeline.push_bytes_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline.stages_);
+  for (const Draw& d : draws)
+    if (d.vertex_count > 0) vkCmdDraw(cmd_, d.vertex_count, 1, 0, d.instance);
+}
+
+void Commands::end_rendering() {
+  begin_if_needed();
+  vkCmdEndRendering(cmd_);
+}
+
+void Commands::copy(const Image& from, const Buffer& to) {
+  begin_if_needed();
+  transition(cmd_, from, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL,
+             VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT,
+             VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT,
+             VK_ACCESS_TRANSFER_READ_BIT);
+  VkBufferImageCopy region{};
+  region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+  region.imageExtent = {from.width(), from.height(), 1};
+  vkCmdCopyImageToBuffer(cmd_, from.handle(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, to.handle(), 1,
+                         &region);
 }
 
 void Commands::barrier() {

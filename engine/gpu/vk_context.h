@@ -1,7 +1,8 @@
 #pragma once
 /// \file
-/// The Vulkan side of Specula at its lowest level: one instance, one device, one compute queue,
-/// buffers, compute pipelines over storage buffers, and a command recorder with timestamps. Plain
+/// The Vulkan side of Specula at its lowest level: one instance, one device, one compute queue
+/// (which also draws where the device allows: hybrid mode's raster pass), buffers, images, compute
+/// and graphics pipelines over storage buffers, and a command recorder with timestamps. Plain
 /// Vulkan 1.3 C API; every failing call throws GpuError naming the call and the VkResult.
 ///
 /// Device choice (Context::create): SPECULA_VK_DEVICE (or Options::device_name) picks the first
@@ -50,6 +51,8 @@ struct DeviceInfo {
   std::uint32_t subgroup_size = 0;
   std::uint64_t max_storage_buffer_range = 0;
   std::uint32_t max_workgroup_count_x = 0;
+  /// The queue also draws (graphics bit) and dynamic rendering is on: graphics pipelines work.
+  bool graphics = false;
   /// A software rasteriser (lavapipe, SwiftShader): slower than the CPU backends, never `auto`'s.
   [[nodiscard]] bool is_cpu() const { return type == VK_PHYSICAL_DEVICE_TYPE_CPU; }
   [[nodiscard]] const char* type_name() const;
@@ -133,7 +136,64 @@ private:
   VkPipeline pipeline_ = VK_NULL_HANDLE;
   std::uint32_t bindings_ = 0;
   std::uint32_t push_bytes_ = 0;
+  VkPipelineBindPoint bind_point_ = VK_PIPELINE_BIND_POINT_COMPUTE;
+  VkShaderStageFlags stages_ = VK_SHADER_STAGE_COMPUTE_BIT;
+  VkShaderModule fragment_ = VK_NULL_HANDLE;
   void release() noexcept;
+};
+
+/// A graphics pipeline for dynamic rendering (no render pass objects) into one colour attachment
+/// of `colour_format` and a depth attachment of `depth_format`: triangle lists without vertex
+/// inputs (the vertex shader pulls its vertices from storage buffers by gl_VertexIndex), no
+/// culling, depth test `depth_compare` with writes, viewport and scissor set per draw. Set 0
+/// binds `storage_buffers` storage buffers as PipelineDesc does, visible to both stages; push
+/// constants go to the vertex stage.
+struct GraphicsPipelineDesc {
+  std::span<const std::uint32_t> vertex_spirv;
+  std::span<const std::uint32_t> fragment_spirv;
+  std::uint32_t storage_buffers = 0;
+  std::uint32_t push_constant_bytes = 0;
+  VkFormat colour_format = VK_FORMAT_R32G32_UINT;
+  VkFormat depth_format = VK_FORMAT_D32_SFLOAT;
+  VkCompareOp depth_compare = VK_COMPARE_OP_GREATER;
+  const char* debug_name = "graphics";
+};
+
+/// A 2D device-local image with its memory and a view (one mip level, one layer). Move-only;
+/// destroyed with its context alive.
+class Image {
+public:
+  Image() = default;
+  ~Image();
+  Image(Image&& other) noexcept;
+  Image& operator=(Image&& other) noexcept;
+  Image(const Image&) = delete;
+  Image& operator=(const Image&) = delete;
+
+  [[nodiscard]] bool valid() const { return image_ != VK_NULL_HANDLE; }
+  [[nodiscard]] VkImage handle() const { return image_; }
+  [[nodiscard]] VkImageView view() const { return view_; }
+  [[nodiscard]] VkFormat format() const { return format_; }
+  [[nodiscard]] std::uint32_t width() const { return width_; }
+  [[nodiscard]] std::uint32_t height() const { return height_; }
+  [[nodiscard]] bool is_depth() const;
+
+private:
+  friend class Context;
+  Context* context_ = nullptr;
+  VkImage image_ = VK_NULL_HANDLE;
+  VkDeviceMemory memory_ = VK_NULL_HANDLE;
+  VkImageView view_ = VK_NULL_HANDLE;
+  VkFormat format_ = VK_FORMAT_UNDEFINED;
+  std::uint32_t width_ = 0, height_ = 0;
+  void release() noexcept;
+};
+
+/// One non-indexed draw of a graphics pipeline: vertices [0, vertex_count) of instance
+/// `instance` (gl_InstanceIndex).
+struct Draw {
+  std::uint32_t vertex_count = 0;
+  std::uint32_t instance = 0;
 };
 
 /// One command buffer recorded and submitted at once: dispatches with their buffers bound,
@@ -161,6 +221,18 @@ public:
   /// As dispatch, with the workgroup count read from `args` at `offset` (3 uints).
   void dispatch_indirect(const Pipeline& pipeline, std::span<const Buffer* const> buffers,
                          const void* push_constants, const Buffer& args, VkDeviceSize offset = 0);
+  /// Starts rendering into `colour` and `depth` (their previous contents discarded), cleared to
+  /// `clear_colour` and `clear_depth`, over their whole extent.
+  void begin_rendering(const Image& colour, const Image& depth,
+                       const VkClearColorValue& clear_colour, float clear_depth);
+  /// Binds a graphics pipeline, its buffers and push constants once, then issues `draws`
+  /// (between begin_rendering and end_rendering).
+  void draw(const Pipeline& pipeline, std::span<const Buffer* const> buffers,
+            const void* push_constants, std::span<const Draw> draws);
+  void end_rendering();
+  /// Copies a colour image just rendered (after end_rendering) into `to`, rows tightly packed;
+  /// a barrier() makes the copy visible to shaders.
+  void copy(const Image& from, const Buffer& to);
   /// Every shader write before is visible to every shader read/write and indirect read after.
   void barrier();
   void fill(const Buffer& buffer, std::uint32_t value, VkDeviceSize offset = 0,
@@ -225,6 +297,11 @@ public:
   /// A storage buffer of `bytes` (at least 4) with transfer src/dst usage (and indirect).
   [[nodiscard]] Buffer make_buffer(VkDeviceSize bytes, MemoryKind kind = MemoryKind::device);
   [[nodiscard]] Pipeline make_pipeline(const PipelineDesc& desc);
+  /// Throws GpuError when the device cannot draw (DeviceInfo::graphics false).
+  [[nodiscard]] Pipeline make_graphics_pipeline(const GraphicsPipelineDesc& desc);
+  /// A `width` × `height` image of `format`, device-local, for `usage`.
+  [[nodiscard]] Image make_image(std::uint32_t width, std::uint32_t height, VkFormat format,
+                                 VkImageUsageFlags usage);
 
   /// For tests of the recovery paths: the next submit reports VK_ERROR_DEVICE_LOST (and every
   /// later one, as a real lost device would) without touching the device.
@@ -248,6 +325,9 @@ private:
   DeviceInfo info_;
   bool validation_ = false;
   bool lost_ = false;
+  /// Set 0 of p's storage buffers visible to `stages`; push constants to `push_stages`.
+  static void make_layouts(VkDevice device, Pipeline& p, VkShaderStageFlags stages,
+                           VkShaderStageFlags push_stages);
   [[nodiscard]] std::uint32_t memory_type(std::uint32_t bits, VkMemoryPropertyFlags want,
                                           VkMemoryPropertyFlags avoid = 0) const;
 };

@@ -84,7 +84,8 @@ VulkanTracer::VulkanTracer(std::uint32_t packet_width, VulkanOptions options)
   desc.push_constant_bytes = sizeof(TracePush);
   desc.debug_name = "trace_rays";
   kernels_->trace = context_->make_pipeline(desc);
-  renderer_ = std::make_unique<DeviceRenderer>(*context_, *scene_, options_.execution);
+  renderer_ = std::make_unique<DeviceRenderer>(*context_, *scene_, options_.execution,
+                                               options_.primary);
 }
 
 VulkanTracer::~VulkanTracer() = default;

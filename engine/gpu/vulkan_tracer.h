@@ -13,6 +13,7 @@
 /// budget is resumed in a further dispatch, and rays left pending (a driver cut) are counted.
 
 #include "specula/gpu/gpu_scene.h"
+#include "specula/gpu/raster_primary.h"
 #include "specula/gpu/vk_context.h"
 #include "specula/shared/trace_layout.h"
 #include "specula/trace/tracer.h"
@@ -32,6 +33,8 @@ enum class Execution : std::uint8_t {
 struct VulkanOptions {
   GpuStructure structure = GpuStructure::bvh;
   Execution execution = Execution::wavefront;
+  /// Device frames' primary hits: traced, or rasterised (hybrid mode).
+  PrimaryVisibility primary = PrimaryVisibility::trace;
   /// Grid resolution: target cells per triangle of the static set (accel::GridBuildOptions).
   float grid_density = 4.0f;
   /// Traversal steps (nodes, triangles, cells, pops) a ray may take per dispatch of
@@ -53,6 +56,7 @@ struct GpuTraceCounters {
   std::uint64_t rays = 0;
   std::uint64_t resumed = 0;    ///< rays that used up a dispatch's budget and were resumed
   std::uint64_t cut = 0;        ///< rays the driver cut off (status still pending): must be 0
+  std::uint64_t retraced = 0;   ///< hybrid mode: primary rays traced after all (frame_visibility)
   std::uint64_t dispatches = 0; ///< traversal dispatches
   double gpu_ms = 0.0;          ///< timestamp time of the dispatches
 };

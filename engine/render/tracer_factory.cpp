@@ -226,6 +226,9 @@ std::unique_ptr<Tracer> make_tracer(std::string_view name, const TracerOptions& 
     vk.execution = options.gpu.execution == GpuTracerOptions::Execution::single_kernel
                        ? gpu::Execution::single_kernel
                        : gpu::Execution::wavefront;
+    vk.primary = options.gpu.primary == GpuTracerOptions::Primary::raster
+                     ? gpu::PrimaryVisibility::raster
+                     : gpu::PrimaryVisibility::trace;
     vk.device_frames = options.gpu.device_frames;
     vk.grid_density = options.gpu.grid_density;
     auto tracer = std::make_unique<gpu::VulkanTracer>(packet_width, vk);
@@ -261,11 +264,13 @@ std::optional<TracerDevice> tracer_device(const Tracer& tracer) {
     d.type = vk->context().info().type_name();
     d.execution =
         vk->options().execution == gpu::Execution::single_kernel ? "single kernel" : "wavefront";
+    d.primary = vk->options().primary == gpu::PrimaryVisibility::raster ? "raster" : "trace";
     d.device_frames = vk->options().device_frames;
     const gpu::GpuTraceCounters& c = vk->counters();
     d.rays = c.rays;
     d.resumed = c.resumed;
     d.cut = c.cut;
+    d.retraced = c.retraced;
     d.dispatches = c.dispatches;
     d.gpu_ms = c.gpu_ms;
     return d;

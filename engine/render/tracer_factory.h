@@ -62,10 +62,13 @@ enum class SceneKind : std::uint8_t { static_only, rigid_dynamic, deforming };
 [[nodiscard]] std::optional<std::string> auto_cpu_reason(SceneKind kind = SceneKind::static_only);
 
 /// How the Vulkan backends run (gpu::VulkanOptions, spelled without naming the backend's types):
-/// the CLI's --gpu-execution, --gpu-frames and --grid-density. CPU backends ignore it.
+/// the CLI's --gpu-execution, --gpu-primary, --gpu-frames and --grid-density. CPU backends ignore it.
 struct GpuTracerOptions {
   enum class Execution : std::uint8_t { wavefront, single_kernel };
   Execution execution = Execution::wavefront;
+  /// Device frames' primary hits: traced, or rasterised (hybrid mode, --gpu-primary raster).
+  enum class Primary : std::uint8_t { trace, raster };
+  Primary primary = Primary::trace;
   /// Whole cast and Whitted frames on the device; false: CPU integrators over GPU traversal.
   bool device_frames = true;
   /// vulkan-grid's target cells per triangle of the static set.
@@ -94,11 +97,13 @@ struct TracerDevice {
   std::string name; ///< the device's name ("NVIDIA H100 80GB HBM3", "llvmpipe (LLVM ...)")
   std::string type; ///< "discrete GPU", "integrated GPU", "virtual GPU", "CPU (software)", "other"
   std::string execution; ///< "wavefront" or "single kernel"
+  std::string primary;   ///< "trace" or "raster" (hybrid mode)
   bool device_frames = true;
   /// The tracer's counters after its latest frame or batch (gpu::GpuTraceCounters).
   std::uint64_t rays = 0;
   std::uint64_t resumed = 0;
   std::uint64_t cut = 0;
+  std::uint64_t retraced = 0; ///< hybrid mode: primary rays traced after all
   std::uint64_t dispatches = 0;
   double gpu_ms = 0.0;
 };

@@ -120,6 +120,7 @@ std::string stats_to_json(const RunStats& stats) {
     settings["gpu"] = {{"device", s.gpu_device},
                        {"device_type", s.gpu_device_type},
                        {"execution", s.gpu_execution},
+                       {"primary", s.gpu_primary},
                        {"device_frames", s.gpu_device_frames},
                        {"grid_density", s.grid_density}};
   json frames = json::array();
@@ -244,6 +245,8 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
     s.gpu_device = read<std::string>(g, "device", name, at);
     s.gpu_device_type = read<std::string>(g, "device_type", name, at);
     s.gpu_execution = read<std::string>(g, "execution", name, at);
+    // Arrived with hybrid mode: older files traced their primary rays.
+    if (g.contains("primary")) s.gpu_primary = read<std::string>(g, "primary", name, at);
     s.gpu_device_frames = read<bool>(g, "device_frames", name, at);
     s.grid_density = read<float>(g, "grid_density", name, at);
   }

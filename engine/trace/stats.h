@@ -142,6 +142,7 @@ struct RunSettings {
   std::string gpu_device = {};      ///< the device's name
   std::string gpu_device_type = {}; ///< "discrete GPU", "integrated GPU", "CPU (software)", ...
   std::string gpu_execution = "wavefront"; ///< wavefront | single kernel
+  std::string gpu_primary = "trace";       ///< trace | raster (hybrid mode)
   bool gpu_device_frames = true;
   float grid_density = 4.0f; ///< vulkan-grid's cells per triangle
   friend bool operator==(const RunSettings&, const RunSettings&) = default;

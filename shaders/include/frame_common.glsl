@@ -15,6 +15,7 @@ layout(constant_id = 2) const bool kDielectrics = true; // some material transmi
 layout(constant_id = 3) const bool kSpecular = true;    // some material reflects or transmits
 layout(constant_id = 4) const uint kLightCount = 0u;
 // constant_id 5: kCache (frame_cache.glsl), the frame has ray-cache cubes.
+layout(constant_id = 6) const bool kRasterPrimary = false; // hybrid mode (single kernel)
 #include "include/frame_cache.glsl"
 
 #endif

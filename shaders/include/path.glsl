@@ -1,17 +1,17 @@
 // What every path and shadow frame kernel shares (engine/gpu/device_path.h): the frame kernels'
 // scene, tables and counters (frame_common.glsl), the path records and their queues, the
-// emitter table, the sampler, and the scene features as specialisation constants (ids 6-9 beside
-// frame_common's 0-5), so that a scene pays only for what it has.
+// emitter table, the sampler, and the scene features as specialisation constants (ids 7-10 beside
+// frame_common's 0-6), so that a scene pays only for what it has.
 #ifndef SPECULA_PATH_GLSL
 #define SPECULA_PATH_GLSL
 
 #include "include/frame_common.glsl"
 #include "shared/path_layout.h"
 
-layout(constant_id = 6) const bool kAreaLights = false; // the emitter table is not empty
-layout(constant_id = 7) const bool kMirrors = false;    // some material reflects
-layout(constant_id = 8) const bool kShadowMode = false; // shadow caster instead of path tracer
-layout(constant_id = 9) const uint kSampling = 0u;      // kSampling{Mis,Bsdf,Light}
+layout(constant_id = 7) const bool kAreaLights = false; // the emitter table is not empty
+layout(constant_id = 8) const bool kMirrors = false;    // some material reflects
+layout(constant_id = 9) const bool kShadowMode = false; // shadow caster instead of path tracer
+layout(constant_id = 10) const uint kSampling = 0u;      // kSampling{Mis,Bsdf,Light}
 
 layout(std430, set = 0, binding = 15) buffer Paths { GpuPath paths[]; };
 layout(std430, set = 0, binding = 16) buffer PathHits { GpuHit hits[]; };

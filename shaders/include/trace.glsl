@@ -506,6 +506,18 @@ uint trace_run(inout uint budget) {
   return kRayPending;
 }
 
+// The unnormalised geometric normal (e1 × e2) as the CPU backends compute it.
+void trace_set_normal(inout GpuHit hit, vec3 p0, vec3 p1, vec3 p2) {
+  precise vec3 e1 = p1 - p0;
+  precise vec3 e2 = p2 - p0;
+  precise float nx = e1.y * e2.z - e2.y * e1.z;
+  precise float ny = e1.z * e2.x - e2.z * e1.x;
+  precise float nz = e1.x * e2.y - e2.x * e1.y;
+  hit.ng_x = nx;
+  hit.ng_y = ny;
+  hit.ng_z = nz;
+}
+
 // The hit as the CPU backends report it (NativeTracer::resolve_static for the static set).
 GpuHit trace_result() {
   GpuHit hit;
@@ -538,15 +550,8 @@ GpuHit trace_result() {
     hit.instance = scene_words[scene_header.static_slot_base + k];
     hit.primitive = tr.hit_prim - scene_words[base + k];
   }
-  vec3 p0 = traced_vertex(tr.hit_tri, 0u);
-  precise vec3 e1 = traced_vertex(tr.hit_tri, 1u) - p0;
-  precise vec3 e2 = traced_vertex(tr.hit_tri, 2u) - p0;
-  precise float nx = e1.y * e2.z - e2.y * e1.z;
-  precise float ny = e1.z * e2.x - e2.z * e1.x;
-  precise float nz = e1.x * e2.y - e2.x * e1.y;
-  hit.ng_x = nx;
-  hit.ng_y = ny;
-  hit.ng_z = nz;
+  trace_set_normal(hit, traced_vertex(tr.hit_tri, 0u), traced_vertex(tr.hit_tri, 1u),
+                   traced_vertex(tr.hit_tri, 2u));
   return hit;
 }
 

@@ -32,6 +32,14 @@ SPECULA_CONST uint kFrameQueuesBinding = 17u;
 SPECULA_CONST uint kFrameShadowsBinding = 18u;
 SPECULA_CONST uint kFrameShadowQueuesBinding = 19u;
 SPECULA_CONST uint kFrameBindings = 20u;
+/// Bindings 20-22: the ray-cache cubes (cache_layout.h), bound in every frame (placeholders
+/// without cubes). From 23 on, one family of kernels or the other: path frames (path_layout.h),
+/// or hybrid mode's (frame_visibility.comp, frame_single.comp): the visibility buffer (per pixel
+/// the instance slot and triangle rasterised, kNoIndex: none) and, per instance slot, its
+/// top-level box (kNoIndex: static).
+SPECULA_CONST uint kFrameVisibilityBinding = 23u;
+SPECULA_CONST uint kFrameSlotBoxesBinding = 24u;
+SPECULA_CONST uint kFrameHybridBindings = 25u;
 
 /// Single kernel: stack frames per pixel. A pixel's Whitted tree is walked depth first, so it
 /// needs max_depth + 1 frames; children deeper than the stack are not traced and counted as
@@ -168,7 +176,7 @@ struct GpuFrameCounters {
   uint nonfinite; ///< pixels that came out Inf or NaN (written as 0)
   uint pending;   ///< single kernel: pixels not finished after a dispatch (resumed)
   uint records;   ///< ray-cache records written (past GpuFrameParams::record_capacity: lost)
-  uint _pad1;
+  uint retraced;  ///< hybrid: primary rays traced after all (instance boundaries, raster misses)
   uint _pad2;
 };
 

@@ -333,6 +333,8 @@ TEST(Cli, GpuOptionsRejectBadValuesNamingTheOption) {
   for (const auto& [option, value] :
        std::vector<std::pair<std::string, std::string>>{{"--gpu-execution", "fast"},
                                                         {"--gpu-execution", ""},
+                                                        {"--gpu-primary", "gbuffer"},
+                                                        {"--gpu-primary", ""},
                                                         {"--gpu-frames", "yes"},
                                                         {"--grid-density", "0"},
                                                         {"--grid-density", "-2"},
@@ -351,6 +353,9 @@ TEST(Cli, GpuOptionsRejectBadValuesNamingTheOption) {
       run({"render", scene, "--width", "8", "--height", "8", "--backend", "native",
            "--gpu-execution", "single", "--gpu-frames", "off", "--grid-density", "0.5"});
   EXPECT_EQ(ok.code, 0) << ok.err;
+  const Result raster = run({"render", scene, "--width", "8", "--height", "8", "--backend",
+                             "native", "--gpu-primary", "raster"});
+  EXPECT_EQ(raster.code, 0) << raster.err;
 }
 
 /// Renders a tiny cast frame on a Vulkan backend; skips while the traversal kernels are the
@@ -395,6 +400,19 @@ TEST(Cli, VulkanRunsWriteTheDeviceAndGpuCountersIntoTheStats) {
   EXPECT_EQ(gpu.at("grid_density"), 2.0);
   EXPECT_EQ(j.at("frames").at(0).at("gpu").at("cut"), 0) << "no ray cut off by the driver";
   EXPECT_NE(r.out.find("  device: "), std::string::npos) << r.out;
+}
+
+TEST(Cli, HybridRunsRecordTheirPrimaryVisibilityInTheStats) {
+  if (!specula::backend_info("vulkan").available) GTEST_SKIP() << "no Vulkan device here";
+  const fs::path stats =
+      fs::temp_directory_path() / ("specula_cli_hybrid_" + std::to_string(::getpid()) + ".json");
+  const Result r =
+      render_on_vulkan({"--backend", "vulkan", "--gpu-primary", "raster", "--stats", stats.string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(slurp(stats));
+  fs::remove(stats);
+  EXPECT_EQ(j.at("settings").at("gpu").at("primary"), "raster");
+  EXPECT_EQ(j.at("frames").at(0).at("gpu").at("cut"), 0) << "no ray cut off by the driver";
 }
 
 TEST(Cli, InfoWithoutASceneListsBackendsAndVulkanDevices) {

@@ -1,5 +1,5 @@
 #pragma once
-// The GPU tests' scene: a small Cornell box (test_device_frames, test_device_path).
+// The GPU tests' scene: a small Cornell box (test_device_frames, test_device_path, test_hybrid).
 #include "../trace/scene_builder.h"
 
 namespace specula::test {

@@ -87,9 +87,9 @@ class DeviceFrames : public ::testing::TestWithParam<TraceMode> {};
 TEST_P(DeviceFrames, MatchTheCpuImageAndPrimaryHits) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   test::TracedWorld world(reg, reference_backend());
-  const Camera camera = cornell_camera();
+  const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(GetParam());
   Framebuffer cpu(kWidth, kHeight);
   const FrameStats cpu_stats = render_frame(*world.tracer, world.layer, camera, s, cpu);
@@ -110,9 +110,9 @@ TEST_P(DeviceFrames, MatchTheCpuImageAndPrimaryHits) {
 TEST_P(DeviceFrames, WavefrontAndSingleKernelGiveTheSameImage) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   test::TracedWorld world(reg, reference_backend());
-  const Camera camera = cornell_camera();
+  const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(GetParam());
   Device wavefront(world.layer, gpu::Execution::wavefront);
   Device single(world.layer, gpu::Execution::single_kernel);
@@ -130,9 +130,9 @@ TEST_P(DeviceFrames, WavefrontAndSingleKernelGiveTheSameImage) {
 TEST_P(DeviceFrames, DISABLED_SmallBudgetResumesToTheSameImage) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   test::TracedWorld world(reg, reference_backend());
-  const Camera camera = cornell_camera();
+  const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(GetParam());
   // The single kernel's walks share one budget per dispatch across all their rays; its frames
   // resume through trace_closest_resume (trace.glsl). Disabled: written against the groundwork's
@@ -158,14 +158,14 @@ INSTANTIATE_TEST_SUITE_P(Modes, DeviceFrames,
 TEST(DeviceFramesScene, AMovedObjectRendersAtItsNewPosition) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   Material m;
   m.base_color = vec3(0.2f, 0.2f, 0.9f);
   const ecs::Entity ball = test::add_mesh(reg, test::primitive("sphere", 0.2f, vec3(1), 12, 6),
                                           test::at(vec3(0.0f, 1.0f, 0.5f)), m,
                                           Kinematics::Type::Free);
   test::TracedWorld world(reg, reference_backend());
-  const Camera camera = cornell_camera();
+  const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(TraceMode::Whitted);
   Device device(world.layer, gpu::Execution::wavefront);
   (void)device.render(world.layer, camera, s);
@@ -182,12 +182,13 @@ TEST(DeviceFramesScene, AMovedObjectRendersAtItsNewPosition) {
 TEST(DeviceFramesScene, FactoryBackendRendersOnTheDevice) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   test::TracedWorld world(reg, "vulkan");
   const auto& vk = dynamic_cast<const gpu::VulkanTracer&>(*world.tracer);
   Framebuffer image(kWidth, kHeight);
   const FrameStats stats =
-      render_frame(*world.tracer, world.layer, cornell_camera(), settings_for(TraceMode::Whitted), image);
+      render_frame(*world.tracer, world.layer, test::cornell_camera(),
+                   settings_for(TraceMode::Whitted), image);
   EXPECT_EQ(stats.rays[RayKind::Primary], std::uint64_t(kWidth) * kHeight);
   EXPECT_GT(vk.counters().dispatches, 0u);
   EXPECT_EQ(vk.counters().cut, 0u);
@@ -196,12 +197,12 @@ TEST(DeviceFramesScene, FactoryBackendRendersOnTheDevice) {
 TEST(DeviceFramesScene, DeviceLossIsAClearError) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
-  cornell(reg);
+  test::cornell(reg);
   test::TracedWorld world(reg, reference_backend());
   Device device(world.layer, gpu::Execution::wavefront);
   device.context->simulate_device_loss();
   try {
-    (void)device.render(world.layer, cornell_camera(), settings_for(TraceMode::Whitted));
+    (void)device.render(world.layer, test::cornell_camera(), settings_for(TraceMode::Whitted));
     FAIL() << "expected GpuError";
   } catch (const gpu::GpuError& e) {
     EXPECT_TRUE(e.device_lost());

@@ -139,6 +139,19 @@ TEST(TracerFactory, GpuOptionsReachTheVulkanTracer) {
   EXPECT_THROW((void)make_tracer("vulkan-grid", options), Error);
 }
 
+TEST(TracerFactory, RasterisedPrimaryVisibilityReachesTheVulkanTracer) {
+  if (!backend_info("vulkan").available) GTEST_SKIP() << "no Vulkan device here";
+  if (!dynamic_cast<gpu::VulkanTracer&>(*make_tracer("vulkan")).context().info().graphics)
+    GTEST_SKIP() << "the device cannot draw";
+  TracerOptions options;
+  options.gpu.primary = GpuTracerOptions::Primary::raster;
+  const std::unique_ptr<Tracer> tracer = make_tracer("vulkan", options);
+  const auto* vk = dynamic_cast<const gpu::VulkanTracer*>(tracer.get());
+  ASSERT_NE(vk, nullptr);
+  EXPECT_EQ(vk->options().primary, gpu::PrimaryVisibility::raster);
+  EXPECT_EQ(tracer_device(*tracer)->primary, "raster");
+}
+
 TEST(TracerFactory, TheTestOnlyDeviceLossKnobLosesTheNewTracersDevice) {
   if (!backend_info("vulkan").available) GTEST_SKIP() << "no Vulkan device here";
   EXPECT_FALSE(dynamic_cast<gpu::VulkanTracer&>(*make_tracer("vulkan")).context().lost());

@@ -141,13 +141,19 @@ TEST(Stats, WritesTheDeviceAndGpuCountersOnlyForDeviceRuns) {
   s.settings.gpu_execution = "single kernel";
   s.settings.gpu_device_frames = false;
   s.settings.grid_density = 2.0f;
+  s.settings.gpu_primary = "raster";
   s.frames[0].gpu = {true, 4096, 12, 0, 3, 1.5};
   const auto j = nlohmann::json::parse(stats_to_json(s));
+  EXPECT_EQ(j.at("settings").at("gpu").at("primary"), "raster");
   EXPECT_EQ(j.at("settings").at("gpu").at("device_type"), "CPU (software)");
   EXPECT_EQ(j.at("settings").at("gpu").at("grid_density"), 2.0);
   EXPECT_EQ(j.at("frames").at(0).at("gpu").at("rays"), 4096);
   EXPECT_EQ(j.at("frames").at(0).at("gpu").at("cut"), 0);
   EXPECT_EQ(stats_from_json(stats_to_json(s), "gpu.json"), s);
+  // Files from before hybrid mode have no "primary": they traced their primary rays.
+  auto old = j;
+  old["settings"]["gpu"].erase("primary");
+  EXPECT_EQ(stats_from_json(old.dump(), "old.json").settings.gpu_primary, "trace");
 }
 
 TEST(Stats, DerivedRatesFollowFromCountsAndTime) {
