@@ -64,7 +64,7 @@ struct DeviceRenderer::Pipelines {
 
 DeviceRenderer::DeviceRenderer(Context& context, const GpuScene& scene, Execution execution)
     : context_(context), scene_(scene), execution_(execution),
-      cache_(std::make_unique<DeviceCache>(context)) {}
+      cache_(std::make_unique<DeviceCache>(context)), pool_(std::make_unique<StatePool>()) {}
 
 DeviceRenderer::~DeviceRenderer() = default;
 
@@ -107,7 +107,7 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
                                            f.lights, f.cache ? 1u : 0u};
   const auto make = [&](const char* name) {
     return context_.make_pipeline(
-        {shader_spirv(name), kCacheBindings, sizeof(WavePush), spec, name});
+        {shader_spirv(name), kFramePoolBindings, sizeof(WavePush), spec, name});
   };
   if (execution_ == Execution::wavefront) {
     p->args = make("frame_args");
@@ -146,6 +146,8 @@ void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
     ensure_size(context_, queues_, VkDeviceSize(node_capacity_) * 8);
     ensure_size(context_, shadows_, VkDeviceSize(shadow_capacity_) * sizeof(GpuShadowRay));
     ensure_size(context_, shadow_queues_, VkDeviceSize(shadow_capacity_) * 8);
+    pool_->reserve(context_, 2, std::uint64_t(node_capacity_) + shadow_capacity_,
+                   scene_.stack_depth());
   } else {
     chunk_pixels_ = std::min(pixels, kChunkPixels);
     ensure_size(context_, nodes_,
@@ -154,6 +156,7 @@ void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
     ensure_size(context_, hits_, 16);
     ensure_size(context_, shadows_, 16);
     ensure_size(context_, shadow_queues_, 16);
+    pool_->reserve(context_, 1, chunk_pixels_, scene_.stack_depth()); // a slot per chunk pixel
   }
 }
 
@@ -164,6 +167,10 @@ std::vector<const Buffer*> DeviceRenderer::bindings() const {
                             &shadow_queues_})
     b.push_back(own);
   for (const Buffer* own : cache_buffers_) b.push_back(own);
+  // The path frames' bindings (23-27), unused here, then the state pools.
+  while (b.size() < kFramePoolStatesBinding) b.push_back(&no_cache_);
+  b.push_back(&pool_->states);
+  b.push_back(&pool_->stacks);
   return b;
 }
 
@@ -341,6 +348,8 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     params.first_pixel = 0;
     params.chunk_pixels = pixels;
     params.record_capacity = cache ? cache_->record_capacity() : 0;
+    params.stack_stride = pool_->stride;
+    params.pool_slots = pool_->slots;
     params_.upload(&params, sizeof params);
 
     gpu_ms_ = 0.0;
@@ -374,6 +383,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     counters.rays = stats.rays.total();
     counters.resumed = c.resumed;
     counters.cut = c.cut;
+    counters.restarted = c.restarted;
     counters.dispatches = dispatches_;
     counters.gpu_ms = gpu_ms_;
     cache_records_ = cache ? c.records : 0;

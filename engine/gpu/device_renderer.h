@@ -38,6 +38,7 @@ enum class Execution : std::uint8_t;
 struct GpuTraceCounters;
 class DeviceCache;
 class DevicePath;
+struct StatePool;
 
 class DeviceRenderer {
 public:
@@ -106,6 +107,7 @@ private:
   // Tables at bindings 8.. (frame_layout.h).
   Buffer params_, materials_, lights_, normals_, counters_buffer_, image_, primary_buffer_;
   Buffer nodes_, hits_, queues_, shadows_, shadow_queues_;
+  std::unique_ptr<StatePool> pool_; ///< saved traversal states (trace_pool.glsl)
   std::uint64_t tables_sync_ = 0; ///< SceneLayer::syncs() of the tables uploaded (0: none)
   std::uint32_t node_capacity_ = 0, shadow_capacity_ = 0, chunk_pixels_ = 0;
   std::uint32_t light_count_ = 0;

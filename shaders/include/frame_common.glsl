@@ -16,5 +16,6 @@ layout(constant_id = 3) const bool kSpecular = true;    // some material reflect
 layout(constant_id = 4) const uint kLightCount = 0u;
 // constant_id 5: kCache (frame_cache.glsl), the frame has ray-cache cubes.
 #include "include/frame_cache.glsl"
+#include "include/trace_pool.glsl"
 
 #endif

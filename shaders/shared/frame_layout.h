@@ -32,6 +32,12 @@ SPECULA_CONST uint kFrameQueuesBinding = 17u;
 SPECULA_CONST uint kFrameShadowsBinding = 18u;
 SPECULA_CONST uint kFrameShadowQueuesBinding = 19u;
 SPECULA_CONST uint kFrameBindings = 20u;
+/// Saved traversal states (trace_pool.glsl): GpuTraceState per slot and params.stack_stride stack
+/// entries per slot. After the cache's (20-22) and the path frames' (23-27) bindings, so that
+/// frame_shadow.comp serves both renderers; the pipelines of either have kFramePoolBindings.
+SPECULA_CONST uint kFramePoolStatesBinding = 28u;
+SPECULA_CONST uint kFramePoolStacksBinding = 29u;
+SPECULA_CONST uint kFramePoolBindings = 30u;
 
 /// Single kernel: stack frames per pixel. A pixel's Whitted tree is walked depth first, so it
 /// needs max_depth + 1 frames; children deeper than the stack are not traced and counted as
@@ -60,8 +66,8 @@ struct GpuFrameParams {
   uint first_pixel; ///< single kernel: the chunk's first pixel
   uint chunk_pixels;
   uint record_capacity; ///< ray-cache records (cache_layout.h) the frame may write
-  uint _pad0;
-  uint _pad1;
+  uint stack_stride;    ///< saved stack entries per pool slot (GpuScene::stack_depth)
+  uint pool_slots;      ///< slots per state pool (wavefront: two pools; single kernel: one)
   uint _pad2;
 };
 
@@ -89,7 +95,7 @@ struct GpuFrameNode {
   uint rays;   ///< rays traced for it and its subtree (folded)
   uint leaves; ///< the slot whose cube gets its record (kNoIndex: none)
   uint answer; ///< kAnswer* | kAnswerLookedUp (frame_cache.glsl)
-  uint _pad0;
+  uint resume; ///< while kRayBudget: the pool slot of its saved walk (kNoIndex: starts over)
   uint _pad1;
 };
 
@@ -100,7 +106,8 @@ struct GpuShadowRay {
   vec3 direction;
   uint status; ///< kRayPending / kRayDone / kRayBudget
   vec3 value;
-  uint visible; ///< 1: counts (not blocked, or not traced because shadows are off)
+  uint visible; ///< 1: counts (not blocked, or not traced because shadows are off); while
+                ///< kRayBudget: the pool slot of its saved walk (kNoIndex: starts over)
 };
 
 /// One level of a pixel's depth-first walk (single kernel): the ray, and once it is shaded what
@@ -135,7 +142,7 @@ struct GpuStackFrame {
   uint answer;
   uint reflect_leaves; ///< the children's `leaves`, found when this frame is shaded
   uint refract_leaves;
-  uint _pad0;
+  uint resume; ///< 1: the trace of its current state stopped on the budget and was saved
   uint _pad1;
 };
 
@@ -168,6 +175,9 @@ struct GpuFrameCounters {
   uint nonfinite; ///< pixels that came out Inf or NaN (written as 0)
   uint pending;   ///< single kernel: pixels not finished after a dispatch (resumed)
   uint records;   ///< ray-cache records written (past GpuFrameParams::record_capacity: lost)
+  uint state_count[2]; ///< wavefront: slots taken in each state pool (by wave parity)
+  uint restarted; ///< traces out of budget that found their pool full: they start over
+  uint _pad0;
   uint _pad1;
   uint _pad2;
 };
@@ -178,7 +188,7 @@ static_assert(sizeof(GpuFrameParams) == 128 && offsetof(GpuFrameParams, backgrou
 static_assert(sizeof(GpuFrameNode) == 112 && offsetof(GpuFrameNode, kind) == 64);
 static_assert(sizeof(GpuShadowRay) == 48);
 static_assert(sizeof(GpuStackFrame) == 224 && offsetof(GpuStackFrame, refract_direction) == 192);
-static_assert(sizeof(GpuFrameCounters) == 96 && offsetof(GpuFrameCounters, queue_count) == 32 &&
+static_assert(sizeof(GpuFrameCounters) == 112 && offsetof(GpuFrameCounters, queue_count) == 32 &&
               offsetof(GpuFrameCounters, rays) == 48);
 } // namespace specula::gpu
 #endif
