@@ -12,7 +12,8 @@
 ///     first over a fixed stack of frames in a buffer (shaders/shared/frame_layout.h).
 /// The shading mirrors engine/trace (shaders/include/shading.glsl). Loops are bounded for
 /// lavapipe's silent loop cap: every trace gets a per-dispatch budget; a ray (wavefront) or a
-/// walk (single kernel) that uses it up is resumed by a later dispatch, and rays the driver cut
+/// walk (single kernel) that uses it up is resumed by a later dispatch, its trace from the saved
+/// traversal state (shaders/include/trace_pool.glsl), and rays the driver cut
 /// are counted (GpuTraceCounters::cut, must be 0).
 
 #include "specula/gpu/gpu_scene.h"
