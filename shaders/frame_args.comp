@@ -1,6 +1,6 @@
 #version 460
 // Wavefront: before a wave, the indirect dispatch sizes of its ray and shadow queues (the ones
-// the previous wave appended to), and the queues it appends to emptied.
+// the previous wave appended to), and the queues and the state pool it appends to emptied.
 #extension GL_GOOGLE_include_directive : require
 #include "include/common.glsl"
 #include "include/frame_wavefront.glsl"
@@ -18,4 +18,5 @@ void main() {
   counters.shadow_args.z = 1u;
   counters.queue_count[1u - pc.parity] = 0u;
   counters.shadow_queue_count[1u - pc.parity] = 0u;
+  counters.state_count[1u - pc.parity] = 0u;
 }

@@ -28,7 +28,7 @@ void main() {
   n.rays = 0u;
   n.leaves = kNoIndex;
   n.answer = kAnswerTrace;
-  n._pad0 = 0u;
+  n.resume = kNoIndex;
   n._pad1 = 0u;
   nodes[p] = n;
   queues[p] = p;

@@ -41,7 +41,7 @@ uint spawn(GpuFrameNode parent, vec3 origin, vec3 direction, float weight, uint 
   c.rays = 1u;
   c.leaves = leaves;
   c.answer = kAnswerTrace;
-  c._pad0 = 0u;
+  c.resume = kNoIndex;
   c._pad1 = 0u;
   if (kCache && leaves != kNoIndex) {
     vec3 cached;

@@ -5,8 +5,10 @@
 // where it stopped. Each frame folds into its parent when complete: its starting radiance plus
 // its visible shadow rays in light order, then its refraction child, then its reflection child ×
 // their weights, the CPU's order. A child that would need a frame beyond the stack (max_depth ≥
-// kStackFrames) is not traced and is counted as dropped. In hybrid mode (kRasterPrimary) a walk's
-// primary hit comes from the raster pass where include/visibility.glsl settles it.
+// kStackFrames) is not traced and is counted as dropped. A trace that uses up the budget saves its
+// walk in the pixel's pool slot (trace_pool.glsl) and goes on from there in the next dispatch. In
+// hybrid mode (kRasterPrimary) a walk's primary hit comes from the raster pass where
+// include/visibility.glsl settles it.
 #extension GL_GOOGLE_include_directive : require
 #include "include/common.glsl"
 #include "include/frame_common.glsl"
@@ -45,6 +47,21 @@ void init_frame(uint f, vec3 origin, vec3 direction, vec3 throughput, float weig
   stack[f].answer = kAnswerTrace;
   stack[f].reflect_leaves = kNoIndex;
   stack[f].refract_leaves = kNoIndex;
+  stack[f].resume = 0u;
+}
+
+// Frame f's trace of the pixel `local`: started, or continued where the previous dispatch's
+// budget stopped it; stopped again, it is saved in the pixel's slot.
+uint walk_trace(uint f, uint local, vec3 org, vec3 dir, float tfar, bool any_hit,
+                inout uint budget) {
+  uint status = pool_trace(stack[f].resume != 0u ? local : kNoIndex, org, dir, 0.0, tfar, any_hit,
+                           budget);
+  stack[f].resume = 0u;
+  if (status == kRayBudget) {
+    pool_store(local);
+    stack[f].resume = 1u;
+  }
+  return status;
 }
 
 // Pushes a child of frame f when its throughput passes min_weight; false when none was pushed.
@@ -102,14 +119,17 @@ void main() {
     if (state == kFrameTrace) {
       GpuHit hit;
       hit.instance = kNoIndex;
-      // Hybrid mode: the primary hit from the raster pass where it settles one.
-      bool settled = kRasterPrimary && stack[f].depth == 0u &&
+      // Hybrid mode: the primary hit from the raster pass where it settles one (asked once: a
+      // trace already under way resumes from the pool).
+      bool settled = kRasterPrimary && stack[f].depth == 0u && stack[f].resume == 0u &&
                      visibility_hit(pixel, stack[f].origin, stack[f].direction, hit);
-      if (!settled &&
-          trace_closest(stack[f].origin, stack[f].direction, 0.0, kInfinity, budget, hit) !=
-              kRayDone) {
-        stopped = true;
-        break;
+      if (!settled) {
+        if (walk_trace(f, local, stack[f].origin, stack[f].direction, kInfinity, false, budget) !=
+            kRayDone) {
+          stopped = true;
+          break;
+        }
+        hit = trace_result();
       }
       atomicAdd(counters.rays[stack[f].kind], 1u);
       if (stack[f].depth == 0u) primary_instance[pixel] = hit.instance;
@@ -169,11 +189,12 @@ void main() {
                               tfar, to_light, value)) {
         bool occluded = false;
         if (kShadows) {
-          if (trace_any(stack[f].shadow_origin, to_light, 0.0, tfar, budget, occluded) !=
+          if (walk_trace(f, local, stack[f].shadow_origin, to_light, tfar, true, budget) !=
               kRayDone) {
             stopped = true;
             break;
           }
+          occluded = tr_occluded;
           atomicAdd(counters.rays[kKindShadow], 1u);
           if (kCache) stack[f].rays += 1u;
         }
@@ -197,14 +218,13 @@ void main() {
         ++top;
     } else if (kCache && state == kFrameConfirm) {
       // As frame_trace.comp: clear, the cached miss is used; blocked, the ray is traced.
-      bool occluded = false;
-      if (trace_any(stack[f].origin, stack[f].direction, 0.0, kInfinity, budget, occluded) !=
+      if (walk_trace(f, local, stack[f].origin, stack[f].direction, kInfinity, true, budget) !=
           kRayDone) {
         stopped = true;
         break;
       }
       atomicAdd(counters.rays[kKindShadow], 1u);
-      if (!occluded) {
+      if (!tr_occluded) {
         stack[f].answer = kAnswerUse | kAnswerLookedUp;
         stack[f].rays = 1u;
         stack[f].state = kFrameReturn;

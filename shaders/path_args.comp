@@ -1,7 +1,7 @@
 #version 460
 // Path and shadow frames, before a trace pass: the indirect dispatch size of the queue it reads
 // (pc.count 0: paths, 1: shadow rays), and the other queue of that kind emptied for the rays the
-// pass re-queues.
+// pass re-queues, and the state pool it saves into (trace_pool.glsl).
 #extension GL_GOOGLE_include_directive : require
 #include "include/common.glsl"
 #include "include/path.glsl"
@@ -18,4 +18,5 @@ void main() {
     counters.shadow_args = GpuDispatch((n + 63u) / 64u, 1u, 1u);
     counters.shadow_queue_count[1u - pc.parity] = 0u;
   }
+  counters.state_count[1u - pc.parity] = 0u;
 }

@@ -46,7 +46,24 @@ void ensure_size(Context& ctx, Buffer& buffer, VkDeviceSize bytes,
   if (!buffer.valid() || buffer.size() < bytes) buffer = ctx.make_buffer(bytes, kind);
 }
 
+/// Slots per state pool at most: two such pools take 12 MiB of states and 1 MiB per stack entry;
+/// the default budget leaves far fewer rays than that out of budget at once.
+constexpr std::uint64_t kMaxPoolSlots = 1u << 16;
+
 } // namespace
+
+void StatePool::reserve(Context& context, std::uint32_t pools, std::uint64_t rays,
+                        std::uint32_t stack_stride) {
+  const VkDeviceSize range = context.info().max_storage_buffer_range;
+  const std::uint64_t entries = std::max(1u, stack_stride);
+  const std::uint64_t n = std::min<std::uint64_t>(
+      {std::max<std::uint64_t>(1, rays), kMaxPoolSlots, range / (pools * sizeof(GpuTraceState)),
+       range / (pools * entries * 8)});
+  slots = std::uint32_t(n);
+  stride = stack_stride;
+  ensure_size(context, states, pools * n * sizeof(GpuTraceState));
+  ensure_size(context, stacks, pools * n * entries * 8);
+}
 
 struct DevicePath::Pipelines {
   Features features;
@@ -88,7 +105,7 @@ void DevicePath::ensure_pipelines(const Features& f) {
       0u, f.shadows ? 1u : 0u, f.dielectrics ? 1u : 0u, 0u, f.lights, 0u, 0u, f.area ? 1u : 0u,
       f.mirrors ? 1u : 0u, f.shadow_mode ? 1u : 0u, f.sampling};
   const auto make = [&](const char* name) {
-    return context_.make_pipeline({shader_spirv(name), kPathBindings, sizeof(PathPush), spec, name});
+    return context_.make_pipeline({shader_spirv(name), kFramePoolBindings, sizeof(PathPush), spec, name});
   };
   p->eye = make("path_eye");
   p->args = make("path_args");
@@ -136,13 +153,17 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
   ensure_size(context_, no_cache_, 16);
   params.node_capacity = capacity;
   params.shadow_capacity = shadow_capacity;
+  pool_.reserve(context_, 2, std::uint64_t(capacity) + shadow_capacity, scene_.stack_depth());
+  params.stack_stride = pool_.stride;
+  params.pool_slots = pool_.slots;
   frame.params->upload(&params, sizeof params);
 
   std::vector<const Buffer*> buffers(scene_.bindings().begin(), scene_.bindings().end());
   for (const Buffer* b : {frame.params, frame.materials, frame.lights, frame.normals,
                           frame.counters, frame.image, frame.primary, &paths_, &hits_, &queues_,
                           &shadows_, &shadow_queues_, &no_cache_, &no_cache_, &no_cache_,
-                          &path_params_, &emitters_, &emitter_first_, &sums_, &sobol_})
+                          &path_params_, &emitters_, &emitter_first_, &sums_, &sobol_,
+                          &pool_.states, &pool_.stacks})
     buffers.push_back(b);
 
   Commands cmd(context_, 4);

@@ -5,7 +5,7 @@
 /// sample sequences (shaders/include/sampler.glsl is trace/sampler.h bit for bit), so CPU and GPU
 /// images converge to the same reference. Each path is a record in a buffer and a chain of
 /// depths (no recursion): per depth, trace passes over an indirect-dispatched queue until every
-/// ray is done (a ray that uses up a pass's budget keeps its closest hit and resumes in the next),
+/// ray is done (a ray that uses up a pass's budget saves its walk and goes on in the next),
 /// one shading dispatch (emission, shadow rays into the path's own slots, the sampled
 /// continuation queued), shadow passes as the Whitted wavefront's (frame_shadow.comp), and a
 /// gather adding the visible shadow rays in the CPU's order. A resolve sums each pixel's samples.
@@ -35,6 +35,18 @@ struct FrameBuffers {
   Buffer* counters;
   Buffer* image;
   Buffer* primary;
+};
+
+/// Saved traversal states of the frame kernels (shaders/include/trace_pool.glsl): pools of
+/// `slots` slots, each a GpuTraceState and `stride` stack entries.
+struct StatePool {
+  Buffer states, stacks;
+  std::uint32_t slots = 0;
+  std::uint32_t stride = 0;
+  /// Sizes `pools` pools for `rays` rays in flight each (fewer where a storage buffer would
+  /// overflow, or past a cap: a ray that then finds its pool full starts over, counted), each
+  /// with `stride` stack entries (GpuScene::stack_depth).
+  void reserve(Context& context, std::uint32_t pools, std::uint64_t rays, std::uint32_t stride);
 };
 
 class DevicePath {
@@ -75,6 +87,7 @@ private:
   Buffer paths_, hits_, queues_, shadows_, shadow_queues_, path_params_, emitters_,
       emitter_first_, sums_, sobol_;
   Buffer no_cache_; ///< bound at the cache's bindings 20-22, which path frames do not use
+  StatePool pool_;
   std::uint64_t emitters_sync_ = 0;
   std::uint32_t emitter_count_ = 0;
 };

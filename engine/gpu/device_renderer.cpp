@@ -65,7 +65,7 @@ struct DeviceRenderer::Pipelines {
 DeviceRenderer::DeviceRenderer(Context& context, const GpuScene& scene, Execution execution,
                                PrimaryVisibility primary)
     : context_(context), scene_(scene), execution_(execution),
-      cache_(std::make_unique<DeviceCache>(context)) {
+      cache_(std::make_unique<DeviceCache>(context)), pool_(std::make_unique<StatePool>()) {
   if (primary != PrimaryVisibility::raster) return;
   if (!context.info().graphics)
     throw Error("vulkan", "rasterised primary visibility (--gpu-primary raster): device '" +
@@ -116,23 +116,18 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
                                            f.lights, f.cache ? 1u : 0u, raster_ ? 1u : 0u};
   const auto make = [&](const char* name) {
     return context_.make_pipeline(
-        {shader_spirv(name), kCacheBindings, sizeof(WavePush), spec, name});
-  };
-  // Kernels that read the visibility buffer (frame_single's bindings are there either way).
-  const auto make_hybrid = [&](const char* name) {
-    return context_.make_pipeline(
-        {shader_spirv(name), kFrameHybridBindings, sizeof(WavePush), spec, name});
+        {shader_spirv(name), kFramePoolBindings, sizeof(WavePush), spec, name});
   };
   if (execution_ == Execution::wavefront) {
     p->args = make("frame_args");
     p->eye = make("frame_eye");
-    if (raster_) p->visibility = make_hybrid("frame_visibility");
+    if (raster_) p->visibility = make("frame_visibility");
     p->trace = make("frame_trace");
     p->shade = make("frame_shade");
     p->shadow = make("frame_shadow");
     p->fold = make("frame_fold");
   } else {
-    p->single = make_hybrid("frame_single");
+    p->single = make("frame_single");
   }
   pipelines_ = std::move(p);
 }
@@ -162,6 +157,8 @@ void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
     ensure_size(context_, queues_, VkDeviceSize(node_capacity_) * 8);
     ensure_size(context_, shadows_, VkDeviceSize(shadow_capacity_) * sizeof(GpuShadowRay));
     ensure_size(context_, shadow_queues_, VkDeviceSize(shadow_capacity_) * 8);
+    pool_->reserve(context_, 2, std::uint64_t(node_capacity_) + shadow_capacity_,
+                   scene_.stack_depth());
   } else {
     chunk_pixels_ = std::min(pixels, kChunkPixels);
     ensure_size(context_, nodes_,
@@ -170,15 +167,10 @@ void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
     ensure_size(context_, hits_, 16);
     ensure_size(context_, shadows_, 16);
     ensure_size(context_, shadow_queues_, 16);
+    pool_->reserve(context_, 1, chunk_pixels_, scene_.stack_depth()); // a slot per chunk pixel
   }
 }
 
-std::vector<const Buffer*> DeviceRenderer::hybrid_bindings() const {
-  std::vector<const Buffer*> b = bindings();
-  b.push_back(raster_ ? &raster_->visibility() : &unused_);
-  b.push_back(raster_ ? &raster_->slot_boxes() : &unused_);
-  return b;
-}
 
 std::vector<const Buffer*> DeviceRenderer::bindings() const {
   std::vector<const Buffer*> b(scene_.bindings().begin(), scene_.bindings().end());
@@ -187,6 +179,13 @@ std::vector<const Buffer*> DeviceRenderer::bindings() const {
                             &shadow_queues_})
     b.push_back(own);
   for (const Buffer* own : cache_buffers_) b.push_back(own);
+  // Hybrid mode's visibility buffer and slot boxes (23-24), the rest of the path frames' range
+  // (25-27), unused here, then the state pools.
+  b.push_back(raster_ ? &raster_->visibility() : &unused_);
+  b.push_back(raster_ ? &raster_->slot_boxes() : &unused_);
+  while (b.size() < kFramePoolStatesBinding) b.push_back(&unused_);
+  b.push_back(&pool_->states);
+  b.push_back(&pool_->stacks);
   return b;
 }
 
@@ -214,7 +213,7 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
     // Hybrid mode: the primary hits from the raster pass; frame_trace skips the rays they settle.
     raster_->record(cmd);
     cmd.barrier();
-    cmd.dispatch(p.visibility, hybrid_bindings(), &push, groups(pixels));
+    cmd.dispatch(p.visibility, bindings(), &push, groups(pixels));
     cmd.barrier();
     ++dispatches_;
   }
@@ -271,7 +270,7 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
 
 void DeviceRenderer::run_single(std::uint32_t pixels) {
   const Pipelines& p = *pipelines_;
-  const std::vector<const Buffer*> buffers = hybrid_bindings();
+  const std::vector<const Buffer*> buffers = bindings();
   const GpuFrameCounters init{};
   counters_buffer_.upload(&init, sizeof init);
   GpuFrameParams params{};
@@ -388,6 +387,8 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     params.first_pixel = 0;
     params.chunk_pixels = pixels;
     params.record_capacity = cache ? cache_->record_capacity() : 0;
+    params.stack_stride = pool_->stride;
+    params.pool_slots = pool_->slots;
     params_.upload(&params, sizeof params);
     if (raster_ && !stochastic) raster_->prepare(layer, rays, width, height);
 
@@ -423,6 +424,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     counters.resumed = c.resumed;
     counters.cut = c.cut;
     counters.retraced = c.retraced;
+    counters.restarted = c.restarted;
     counters.dispatches = dispatches_;
     counters.gpu_ms = gpu_ms_;
     cache_records_ = cache ? c.records : 0;

@@ -12,9 +12,10 @@
 ///     first over a fixed stack of frames in a buffer (shaders/shared/frame_layout.h).
 /// The shading mirrors engine/trace (shaders/include/shading.glsl). Loops are bounded for
 /// lavapipe's silent loop cap: every trace gets a per-dispatch budget; a ray (wavefront) or a
-/// walk (single kernel) that uses it up is resumed by a later dispatch, and rays the driver cut
-/// are counted (GpuTraceCounters::cut, must be 0). In hybrid mode (PrimaryVisibility::raster)
-/// the primary hits come from a raster pass (raster_primary.h) where it settles them.
+/// walk (single kernel) that uses it up is resumed by a later dispatch, its trace from the saved
+/// traversal state (shaders/include/trace_pool.glsl), and rays the driver cut are counted
+/// (GpuTraceCounters::cut, must be 0). In hybrid mode (PrimaryVisibility::raster) the primary
+/// hits come from a raster pass (raster_primary.h) where it settles them.
 
 #include "specula/gpu/gpu_scene.h"
 #include "specula/gpu/raster_primary.h"
@@ -40,6 +41,7 @@ enum class Execution : std::uint8_t;
 struct GpuTraceCounters;
 class DeviceCache;
 class DevicePath;
+struct StatePool;
 
 class DeviceRenderer {
 public:
@@ -99,10 +101,9 @@ private:
   void run_wavefront(const TraceSettings& settings, std::uint32_t pixels);
   void run_single(std::uint32_t pixels);
   void bind_cache(bool cache);
+  /// Every frame kernel's buffers, bindings 0 to kFramePoolBindings - 1 (frame_layout.h), with
+  /// `unused_` where the frame has no cubes or no visibility buffer.
   [[nodiscard]] std::vector<const Buffer*> bindings() const;
-  /// bindings() and the visibility buffer and slot → box table (frame_layout.h's
-  /// kFrameHybridBindings), `unused_` in their place when primary hits are traced.
-  [[nodiscard]] std::vector<const Buffer*> hybrid_bindings() const;
 
   Context& context_;
   const GpuScene& scene_;
@@ -119,6 +120,7 @@ private:
   Buffer params_, materials_, lights_, normals_, counters_buffer_, image_, primary_buffer_;
   Buffer nodes_, hits_, queues_, shadows_, shadow_queues_;
   Buffer unused_; ///< 16 bytes, bound where a frame has no cubes or no visibility buffer
+  std::unique_ptr<StatePool> pool_; ///< saved traversal states (trace_pool.glsl)
   std::uint64_t tables_sync_ = 0; ///< SceneLayer::syncs() of the tables uploaded (0: none)
   std::uint32_t node_capacity_ = 0, shadow_capacity_ = 0, chunk_pixels_ = 0;
   std::uint32_t light_count_ = 0;

@@ -57,6 +57,7 @@ struct GpuTraceCounters {
   std::uint64_t resumed = 0;    ///< rays that used up a dispatch's budget and were resumed
   std::uint64_t cut = 0;        ///< rays the driver cut off (status still pending): must be 0
   std::uint64_t retraced = 0;   ///< hybrid mode: primary rays traced after all (frame_visibility)
+  std::uint64_t restarted = 0;  ///< device frames: resumed rays that found the state pool full
   std::uint64_t dispatches = 0; ///< traversal dispatches
   double gpu_ms = 0.0;          ///< timestamp time of the dispatches
 };

@@ -17,5 +17,6 @@ layout(constant_id = 4) const uint kLightCount = 0u;
 // constant_id 5: kCache (frame_cache.glsl), the frame has ray-cache cubes.
 layout(constant_id = 6) const bool kRasterPrimary = false; // hybrid mode (single kernel)
 #include "include/frame_cache.glsl"
+#include "include/trace_pool.glsl"
 
 #endif

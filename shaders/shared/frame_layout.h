@@ -33,13 +33,18 @@ SPECULA_CONST uint kFrameShadowsBinding = 18u;
 SPECULA_CONST uint kFrameShadowQueuesBinding = 19u;
 SPECULA_CONST uint kFrameBindings = 20u;
 /// Bindings 20-22: the ray-cache cubes (cache_layout.h), bound in every frame (placeholders
-/// without cubes). From 23 on, one family of kernels or the other: path frames (path_layout.h),
-/// or hybrid mode's (frame_visibility.comp, frame_single.comp): the visibility buffer (per pixel
-/// the instance slot and triangle rasterised, kNoIndex: none) and, per instance slot, its
-/// top-level box (kNoIndex: static).
+/// without cubes). 23-27 belong to one family of kernels or the other: path frames
+/// (path_layout.h), or hybrid mode's (frame_visibility.comp, frame_single.comp) 23-24: the
+/// visibility buffer (per pixel the instance slot and triangle rasterised, kNoIndex: none) and,
+/// per instance slot, its top-level box (kNoIndex: static).
 SPECULA_CONST uint kFrameVisibilityBinding = 23u;
 SPECULA_CONST uint kFrameSlotBoxesBinding = 24u;
-SPECULA_CONST uint kFrameHybridBindings = 25u;
+/// Saved traversal states (trace_pool.glsl): GpuTraceState per slot and params.stack_stride stack
+/// entries per slot, after both families' bindings so that frame_shadow.comp serves both
+/// renderers; every frame and path pipeline has kFramePoolBindings.
+SPECULA_CONST uint kFramePoolStatesBinding = 28u;
+SPECULA_CONST uint kFramePoolStacksBinding = 29u;
+SPECULA_CONST uint kFramePoolBindings = 30u;
 
 /// Single kernel: stack frames per pixel. A pixel's Whitted tree is walked depth first, so it
 /// needs max_depth + 1 frames; children deeper than the stack are not traced and counted as
@@ -68,8 +73,8 @@ struct GpuFrameParams {
   uint first_pixel; ///< single kernel: the chunk's first pixel
   uint chunk_pixels;
   uint record_capacity; ///< ray-cache records (cache_layout.h) the frame may write
-  uint _pad0;
-  uint _pad1;
+  uint stack_stride;    ///< saved stack entries per pool slot (GpuScene::stack_depth)
+  uint pool_slots;      ///< slots per state pool (wavefront: two pools; single kernel: one)
   uint _pad2;
 };
 
@@ -97,7 +102,7 @@ struct GpuFrameNode {
   uint rays;   ///< rays traced for it and its subtree (folded)
   uint leaves; ///< the slot whose cube gets its record (kNoIndex: none)
   uint answer; ///< kAnswer* | kAnswerLookedUp (frame_cache.glsl)
-  uint _pad0;
+  uint resume; ///< while kRayBudget: the pool slot of its saved walk (kNoIndex: starts over)
   uint _pad1;
 };
 
@@ -108,7 +113,8 @@ struct GpuShadowRay {
   vec3 direction;
   uint status; ///< kRayPending / kRayDone / kRayBudget
   vec3 value;
-  uint visible; ///< 1: counts (not blocked, or not traced because shadows are off)
+  uint visible; ///< 1: counts (not blocked, or not traced because shadows are off); while
+                ///< kRayBudget: the pool slot of its saved walk (kNoIndex: starts over)
 };
 
 /// One level of a pixel's depth-first walk (single kernel): the ray, and once it is shaded what
@@ -143,7 +149,7 @@ struct GpuStackFrame {
   uint answer;
   uint reflect_leaves; ///< the children's `leaves`, found when this frame is shaded
   uint refract_leaves;
-  uint _pad0;
+  uint resume; ///< 1: the trace of its current state stopped on the budget and was saved
   uint _pad1;
 };
 
@@ -177,7 +183,10 @@ struct GpuFrameCounters {
   uint pending;   ///< single kernel: pixels not finished after a dispatch (resumed)
   uint records;   ///< ray-cache records written (past GpuFrameParams::record_capacity: lost)
   uint retraced;  ///< hybrid: primary rays traced after all (instance boundaries, raster misses)
-  uint _pad2;
+  uint state_count[2]; ///< wavefront: slots taken in each state pool (by wave parity)
+  uint restarted; ///< traces out of budget that found their pool full: they start over
+  uint _pad0;
+  uint _pad1;
 };
 
 #ifdef __cplusplus
@@ -186,7 +195,7 @@ static_assert(sizeof(GpuFrameParams) == 128 && offsetof(GpuFrameParams, backgrou
 static_assert(sizeof(GpuFrameNode) == 112 && offsetof(GpuFrameNode, kind) == 64);
 static_assert(sizeof(GpuShadowRay) == 48);
 static_assert(sizeof(GpuStackFrame) == 224 && offsetof(GpuStackFrame, refract_direction) == 192);
-static_assert(sizeof(GpuFrameCounters) == 96 && offsetof(GpuFrameCounters, queue_count) == 32 &&
+static_assert(sizeof(GpuFrameCounters) == 112 && offsetof(GpuFrameCounters, queue_count) == 32 &&
               offsetof(GpuFrameCounters, rays) == 48);
 } // namespace specula::gpu
 #endif

@@ -165,8 +165,9 @@ struct Param {
 class DeviceCacheFrames : public ::testing::TestWithParam<Param> {};
 
 /// Renders `frames` frames on the CPU (native-bvh) and on the device, each with its own store of
-/// the same settings, moving the mover before frame `move_at`; checks each frame.
-void compare_frames(const Param& p, int frames, int move_at) {
+/// the same settings, moving the mover before frame `move_at`; checks each frame. `budget`: the
+/// device's traversal budget (0: the default).
+void compare_frames(const Param& p, int frames, int move_at, std::uint32_t budget = 0) {
   CacheScene scene;
   test::TracedWorld world(scene.reg, "native-bvh");
   CacheSettings cs;
@@ -178,6 +179,7 @@ void compare_frames(const Param& p, int frames, int move_at) {
   gpu::GpuScene gpu_scene(*context, gpu::GpuStructure::bvh);
   gpu_scene.update(world.layer);
   gpu::DeviceRenderer renderer(*context, gpu_scene, p.execution);
+  if (budget > 0) renderer.set_budget(budget);
   TraceSettings s;
   s.mode = TraceMode::Whitted;
   s.max_depth = 4;
@@ -217,6 +219,10 @@ void compare_frames(const Param& p, int frames, int move_at) {
               << ", texels uploaded " << renderer.cache_texels_uploaded() << "\n";
     EXPECT_EQ(differ, 0u) << "frame " << f;
     EXPECT_EQ(counters.cut, 0u);
+    EXPECT_EQ(counters.restarted, 0u);
+    if (budget > 0) {
+      EXPECT_GT(counters.resumed, 0u) << "no trace stopped mid-walk: no test of resumption";
+    }
     EXPECT_EQ(renderer.cache_mismatches(), 0u) << "device lookups the store answers otherwise";
     EXPECT_GT(renderer.cache_records(), 0u);
     EXPECT_EQ(b.lookups, a.lookups) << "frame " << f;
@@ -244,6 +250,13 @@ TEST_P(DeviceCacheFrames, StaticFramesEqualTheCpuFrames) {
 TEST_P(DeviceCacheFrames, AfterAMoveAndInvalidationTheFrameEqualsTheCpuFrame) {
   SPECULA_NEED_DEVICE();
   compare_frames(GetParam(), 4, 2);
+}
+
+// Traces stopped by a budget of 16 steps go on from their saved walks (in Tau mode the confirming
+// occlusion rays are budgeted traces too): the frames still equal the CPU's.
+TEST_P(DeviceCacheFrames, SmallBudgetFramesEqualTheCpuFrames) {
+  SPECULA_NEED_DEVICE();
+  compare_frames(GetParam(), 2, -1, 16);
 }
 
 INSTANTIATE_TEST_SUITE_P(
