@@ -1,27 +1,34 @@
 // The Vulkan backends beside the CPU ones, in the same run (issue 10's benchmarks): primary rays
 // per second on the bunny and the Cornell box for each kernel style and structure — whole frames
 // on the device as a wavefront and as a single kernel, the CPU cast integrator over GPU
-// traversal, the uniform grid — against native-bvh and Embree, as ratios; then a sweep of the
-// grid's resolution (Purcell et al. chose theirs by the balance of traversal steps against
-// intersection tests).
+// traversal, the uniform grid — against native-bvh, native-grid and Embree, as ratios; then a
+// sweep of the grid's resolution on the device and on the CPU, with the mean traversal steps and
+// triangle tests per ray (Purcell et al. chose theirs by that balance).
 //
 // Every tracer comes from the factory (make_tracer), so this file names no backend type, and a
 // configuration the machine or build cannot run is reported in its row ("n/a: why") rather than
 // ending the run: the section runs unchanged on lavapipe, on a GPU machine, and without Vulkan.
 
 #include "bench_common.h"
+#include "specula/accel/grid/grid.h"
 #include "specula/core/error.h"
 #include "specula/image/framebuffer.h"
 #include "specula/render/scene_layer.h"
 #include "specula/render/tracer_factory.h"
 #include "specula/scene/scene.h"
+#include "specula/trace/camera_rays.h"
 #include "specula/trace/render_frame.h"
 #include "specula/trace/stats.h"
 
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
 #include <cstdio>
 #include <exception>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -44,6 +51,7 @@ std::vector<Config> configs() {
   over_gpu.device_frames = false;
   return {{"embree", "embree", {}},
           {"native-bvh", "native-bvh", {}},
+          {"native-grid", "native-grid", {}},
           {"vulkan, wavefront (device frames)", "vulkan", wavefront},
           {"vulkan, single kernel (device frames)", "vulkan", single},
           {"vulkan, CPU cast over GPU traversal", "vulkan", over_gpu},
@@ -128,31 +136,97 @@ void table(const Options& o, const char* title, Scene& scene) {
   std::fflush(stdout);
 }
 
-void grid_sweep(const Options& o, Scene& scene) {
+/// Mean work per ray of the native grid's walk (UniformGrid's own counters).
+struct GridWork {
+  double cells = 0.0, tests = 0.0;
+};
+
+GridWork native_grid_work(const TriangleMesh& mesh, float density, const std::vector<Ray>& rays) {
+  accel::UniformGrid grid;
+  grid.build({mesh.positions.data(), mesh.triangles.data(), std::uint32_t(mesh.triangles.size())},
+             {density});
+  GridWork w;
+  for (const Ray& ray : rays) {
+    accel::PreparedRay r = accel::PreparedRay::make(ray);
+    accel::TriangleHit hit;
+    accel::GridTraceInfo info;
+    (void)grid.intersect(r, hit, accel::TriangleTest::watertight, &info);
+    w.cells += info.cells_visited;
+    w.tests += info.triangles_tested;
+  }
+  w.cells /= double(rays.size());
+  w.tests /= double(rays.size());
+  return w;
+}
+
+/// Median ms of tracing `rays` in one intersect call (the device: one batch) or, for a CPU
+/// tracer, in blocks over `threads` threads.
+double time_batch(const Options& o, const Tracer& tracer, const std::vector<Ray>& rays,
+                  std::vector<Hit>& hits, bool on_device) {
+  const auto run = [&] {
+    if (on_device) {
+      tracer.intersect(rays, hits);
+      return;
+    }
+    constexpr std::size_t kBlock = 4096;
+    tbb::task_arena arena{static_cast<int>(o.threads)};
+    arena.execute([&] {
+      tbb::parallel_for(std::size_t(0), (rays.size() + kBlock - 1) / kBlock, [&](std::size_t b) {
+        const std::size_t first = b * kBlock, n = std::min(kBlock, rays.size() - first);
+        tracer.intersect(std::span(rays).subspan(first, n), std::span(hits).subspan(first, n));
+      });
+    });
+  };
+  run(); // warm-up: pipelines, uploads
+  std::vector<double> ms;
+  for (int r = 0; r < o.repetitions; ++r) ms.push_back(time_ms(run));
+  return median(ms);
+}
+
+void grid_sweep(const Options& o, const TriangleMesh& mesh, Scene& scene) {
   SceneLayer layer;
   layer.sync(scene.registry);
-  const Camera camera = *active_camera(scene.registry);
-  std::printf("\n### vulkan-grid resolution sweep: bunny, %ux%u, wavefront device frames\n\n"
-              "Traversal steps against intersection tests per ray need counters the traversal "
-              "kernels do not report yet (TODO: GpuTraceCounters); dispatches and resumed rays "
-              "show the per-dispatch budget at work.\n\n",
-              scene.settings.width, scene.settings.height);
-  std::printf("| cells per triangle | Mrays/s | GPU-time Mrays/s | dispatches | resumed | cut "
-              "|\n|---:|---:|---:|---:|---:|---:|\n");
-  for (const float density : {0.5f, 1.0f, 2.0f, 4.0f, 8.0f}) {
-    Config c{"vulkan-grid", "vulkan-grid", {}};
-    c.gpu.grid_density = density;
-    const Measured m = measure(o, c, layer, camera, scene.settings.width, scene.settings.height);
-    if (!m.failure.empty()) {
-      std::printf("| %g | n/a: %s | | | | |\n", double(density), m.failure.c_str());
-      continue;
+  const std::uint32_t width = scene.settings.width, height = scene.settings.height;
+  const CameraRays camera(*active_camera(scene.registry), width, height);
+  std::vector<Ray> rays;
+  for (std::uint32_t y = 0; y < height; ++y)
+    for (std::uint32_t x = 0; x < width; ++x) rays.push_back(camera.ray(x, y));
+  std::vector<Hit> hits(rays.size());
+  std::printf("\n### Grid resolution sweep: bunny, %ux%u primary rays in one batch, %u CPU "
+              "threads\n\nvulkan-grid traces them with trace_rays.comp (its steps: cells entered, "
+              "triangles tested, set-up); native-grid with the same grid on the CPU.\n\n",
+              width, height, o.threads);
+  std::printf("| cells per triangle | vulkan-grid Mrays/s | native-grid Mrays/s | × native-grid "
+              "| device steps/ray | device tests/ray | native cells/ray | native tests/ray | cut "
+              "|\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+  for (const float density : {0.25f, 0.5f, 1.0f, 2.0f, 4.0f, 8.0f, 16.0f}) {
+    const GridWork w = native_grid_work(mesh, density, rays);
+    TracerOptions options;
+    options.packet_width = 8;
+    options.gpu.grid_density = density;
+    options.gpu.count_tests = true;
+    const std::unique_ptr<Tracer> native = make_tracer("native-grid", options);
+    native->update(layer);
+    const double native_mrays = mrays(rays.size(), time_batch(o, *native, rays, hits, false));
+    std::string device = "n/a", ratio_text, steps, tests, cut;
+    try {
+      const std::unique_ptr<Tracer> gpu = make_tracer("vulkan-grid", options);
+      gpu->update(layer);
+      const double gpu_mrays = mrays(rays.size(), time_batch(o, *gpu, rays, hits, true));
+      const TracerDevice d = tracer_device(*gpu).value_or(TracerDevice{});
+      device = fixed(gpu_mrays);
+      ratio_text = ratio(gpu_mrays, native_mrays);
+      steps = fixed(double(d.steps) / double(rays.size()));
+      tests = fixed(double(d.tests) / double(rays.size()));
+      cut = std::to_string(d.cut);
+    } catch (const std::exception& e) {
+      device = "n/a: " + one_line(e.what(), 80);
     }
-    const TracerDevice d = m.device.value_or(TracerDevice{});
-    std::printf("| %g | %.2f | %.2f | %llu | %llu | %llu |\n", double(density), m.mrays,
-                m.gpu_mrays, static_cast<unsigned long long>(d.dispatches),
-                static_cast<unsigned long long>(d.resumed), static_cast<unsigned long long>(d.cut));
+    std::printf("| %g | %s | %.2f | %s | %s | %s | %.2f | %.2f | %s |\n", double(density),
+                device.c_str(), native_mrays, ratio_text.c_str(), steps.c_str(), tests.c_str(),
+                w.cells, w.tests, cut.c_str());
+    std::fflush(stdout);
   }
-  std::fflush(stdout);
 }
 
 } // namespace
@@ -163,12 +237,13 @@ void section_gpu(const Options& o) {
   for (const VulkanDeviceEntry& d : vulkan_devices(&why))
     std::printf("- %s (%s)%s\n", d.name.c_str(), d.type.c_str(), d.chosen ? " — used" : "");
   if (!why.empty()) std::printf("- none used: %s\n", one_line(why).c_str());
-  Scene bunny = mesh_scene(load_bunny(o), o.size);
+  const TriangleMesh bunny_mesh = load_bunny(o);
+  Scene bunny = mesh_scene(bunny_mesh, o.size);
   table(o, "bunny", bunny);
   Scene cornell = load_scene(o.source_dir + "/samples/scenes/cornell_box.json");
   cornell.settings.width = cornell.settings.height = o.size;
   table(o, "Cornell box", cornell);
-  grid_sweep(o, bunny);
+  grid_sweep(o, bunny_mesh, bunny);
 }
 
 } // namespace specula::bench

@@ -82,6 +82,7 @@ VulkanTracer::VulkanTracer(std::uint32_t packet_width, VulkanOptions options)
   desc.spirv = shader_spirv("trace_rays");
   desc.storage_buffers = kSceneBindings + 8;
   desc.push_constant_bytes = sizeof(TracePush);
+  desc.specialization = {options_.count_tests ? 1u : 0u};
   desc.debug_name = "trace_rays";
   kernels_->trace = context_->make_pipeline(desc);
   renderer_ = std::make_unique<DeviceRenderer>(*context_, *scene_, options_.execution);
@@ -131,6 +132,8 @@ void VulkanTracer::trace_locked(std::span<const Ray> rays, Hit* hits,
       std::memcpy(&c, k.counters.mapped(), sizeof c);
       total.resumed += c.budget;
       total.cut += c.cut;
+      total.steps += c.steps;
+      total.tests += c.tests;
       in = out;
       if (c.budget == 0) break;
     }

@@ -45,6 +45,9 @@ struct VulkanOptions {
   /// Render cast and Whitted frames with the streaming kernels; false: the CPU integrators over
   /// GPU traversal (every mode then).
   bool device_frames = true;
+  /// Count ray/triangle tests in trace_rays.comp (GpuTraceCounters::tests; costs an atomic per
+  /// ray). Traversal steps are always counted.
+  bool count_tests = false;
   Context::Options context;
 };
 
@@ -54,6 +57,8 @@ struct GpuTraceCounters {
   std::uint64_t resumed = 0;    ///< rays that used up a dispatch's budget and were resumed
   std::uint64_t cut = 0;        ///< rays the driver cut off (status still pending): must be 0
   std::uint64_t dispatches = 0; ///< traversal dispatches
+  std::uint64_t steps = 0;      ///< traversal steps of trace_rays.comp (nodes, cells, tests, pops)
+  std::uint64_t tests = 0;      ///< its ray/triangle tests (VulkanOptions::count_tests; else 0)
   double gpu_ms = 0.0;          ///< timestamp time of the dispatches
 };
 

@@ -88,6 +88,9 @@ bool intersect_box(PreparedRay r, vec3 lo, vec3 hi, out float t_enter) {
 vec3 traced_vertex(uint tri, uint k) { return scene_position(scene_traced[3u * tri + k]); }
 
 bool trace_triangle(PreparedRay r, uint tri, out float t, out float u, out float v) {
+#ifdef TRACE_ON_TRIANGLE
+  TRACE_ON_TRIANGLE(); // trace_rays.comp counts the tests
+#endif
   return intersect_watertight(r, traced_vertex(tri, 0u), traced_vertex(tri, 1u),
                               traced_vertex(tri, 2u), r.tfar, t, u, v);
 }
