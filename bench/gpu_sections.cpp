@@ -24,12 +24,14 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <bit>
 #include <cstdio>
 #include <exception>
 #include <memory>
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace specula::bench {
@@ -183,14 +185,70 @@ double time_batch(const Options& o, const Tracer& tracer, const std::vector<Ray>
   return median(ms);
 }
 
+/// The camera's primary rays, row by row.
+std::vector<Ray> camera_rays(Scene& scene) {
+  const std::uint32_t width = scene.settings.width, height = scene.settings.height;
+  const CameraRays camera(*active_camera(scene.registry), width, height);
+  std::vector<Ray> rays;
+  rays.reserve(std::size_t(width) * height);
+  for (std::uint32_t y = 0; y < height; ++y)
+    for (std::uint32_t x = 0; x < width; ++x) rays.push_back(camera.ray(x, y));
+  return rays;
+}
+
+bool same_hit(const Hit& a, const Hit& b) {
+  const auto bits = [](float f) { return std::bit_cast<std::uint32_t>(f); };
+  if (a.instance != b.instance) return false;
+  return !a.hit() || (a.primitive == b.primitive && bits(a.t) == bits(b.t) &&
+                      bits(a.uv.x) == bits(b.uv.x) && bits(a.uv.y) == bits(b.uv.y));
+}
+
+/// Traversal alone (the lavapipe target): the primary rays in one batch through
+/// trace_rays.comp against the native backend's scalar traversal of the same structure over the
+/// CPU threads, and whether every hit is the same to the bit.
+void traversal_table(const Options& o, Scene& scene) {
+  SceneLayer layer;
+  layer.sync(scene.registry);
+  const std::vector<Ray> rays = camera_rays(scene);
+  std::printf("\n### Traversal alone: bunny, %ux%u primary rays in one batch, %u CPU threads\n\n"
+              "| tracer | Mrays/s | × native-bvh | device-time Mrays/s | dispatches | hits bit-identical "
+              "to native |\n|---|---:|---:|---:|---:|---|\n",
+              scene.settings.width, scene.settings.height, o.threads);
+  std::vector<Hit> reference(rays.size()), hits(rays.size());
+  double native_bvh = 0.0;
+  for (const char* name : {"native-bvh", "vulkan", "native-grid", "vulkan-grid", "embree"}) {
+    const bool device = std::string_view(name).starts_with("vulkan");
+    try {
+      TracerOptions options;
+      options.packet_width = 8;
+      const std::unique_ptr<Tracer> tracer = make_tracer(name, options);
+      tracer->update(layer);
+      const double m = mrays(rays.size(), time_batch(o, *tracer, rays, hits, device));
+      std::string same;
+      if (std::string_view(name).starts_with("native")) {
+        reference = hits;
+      } else if (device) {
+        std::size_t differ = 0;
+        for (std::size_t i = 0; i < rays.size(); ++i) differ += same_hit(hits[i], reference[i]) ? 0 : 1;
+        same = differ == 0 ? "yes" : std::to_string(differ) + " differ";
+      }
+      if (std::string_view(name) == "native-bvh") native_bvh = m;
+      const std::optional<TracerDevice> d = tracer_device(*tracer);
+      std::printf("| %s | %.2f | %s | %s | %s | %s |\n", name, m, ratio(m, native_bvh).c_str(),
+                  d && d->gpu_ms > 0.0 ? fixed(mrays(rays.size(), d->gpu_ms)).c_str() : "",
+                  d ? std::to_string(d->dispatches).c_str() : "", same.c_str());
+    } catch (const std::exception& e) {
+      std::printf("| %s | n/a | | | | %s |\n", name, one_line(e.what(), 100).c_str());
+    }
+    std::fflush(stdout);
+  }
+}
+
 void grid_sweep(const Options& o, const TriangleMesh& mesh, Scene& scene) {
   SceneLayer layer;
   layer.sync(scene.registry);
   const std::uint32_t width = scene.settings.width, height = scene.settings.height;
-  const CameraRays camera(*active_camera(scene.registry), width, height);
-  std::vector<Ray> rays;
-  for (std::uint32_t y = 0; y < height; ++y)
-    for (std::uint32_t x = 0; x < width; ++x) rays.push_back(camera.ray(x, y));
+  const std::vector<Ray> rays = camera_rays(scene);
   std::vector<Hit> hits(rays.size());
   std::printf("\n### Grid resolution sweep: bunny, %ux%u primary rays in one batch, %u CPU "
               "threads\n\nvulkan-grid traces them with trace_rays.comp (its steps: cells entered, "
@@ -239,6 +297,7 @@ void section_gpu(const Options& o) {
   if (!why.empty()) std::printf("- none used: %s\n", one_line(why).c_str());
   const TriangleMesh bunny_mesh = load_bunny(o);
   Scene bunny = mesh_scene(bunny_mesh, o.size);
+  traversal_table(o, bunny);
   table(o, "bunny", bunny);
   Scene cornell = load_scene(o.source_dir + "/samples/scenes/cornell_box.json");
   cornell.settings.width = cornell.settings.height = o.size;

@@ -30,6 +30,15 @@ bool ray_valid(PreparedRay r) {
          trace_finite(r.tnear);
 }
 
+// Component a of v by selects, not v[a]: indexing a vector by a per-invocation value makes
+// llvmpipe spill it to memory and gather lane by lane.
+float trace_axis(vec3 v, int a) { return a == 0 ? v.x : (a == 1 ? v.y : v.z); }
+
+// (v[kx], v[ky], v[kz]) of the ray's shear frame.
+vec3 ray_frame(PreparedRay r, vec3 v) {
+  return vec3(trace_axis(v, r.kx), trace_axis(v, r.ky), trace_axis(v, r.kz));
+}
+
 PreparedRay prepare_ray(vec3 org, vec3 dir, float tnear, float tfar) {
   PreparedRay r;
   r.org = org;
@@ -43,14 +52,15 @@ PreparedRay prepare_ray(vec3 org, vec3 dir, float tnear, float tfar) {
   r.kz = ad.x > ad.y ? (ad.x > ad.z ? 0 : 2) : (ad.y > ad.z ? 1 : 2);
   r.kx = (r.kz + 1) % 3;
   r.ky = (r.kx + 1) % 3;
-  if (dir[r.kz] < 0.0) {
+  if (trace_axis(dir, r.kz) < 0.0) {
     int k = r.kx;
     r.kx = r.ky;
     r.ky = k;
   }
-  precise float sx = dir[r.kx] / dir[r.kz];
-  precise float sy = dir[r.ky] / dir[r.kz];
-  precise float sz = 1.0 / dir[r.kz];
+  vec3 d = ray_frame(r, dir);
+  precise float sx = d.x / d.z;
+  precise float sy = d.y / d.z;
+  precise float sz = 1.0 / d.z;
   r.sx = sx;
   r.sy = sy;
   r.sz = sz;
@@ -64,15 +74,18 @@ bool intersect_watertight(PreparedRay r, vec3 p0, vec3 p1, vec3 p2, float tmax, 
   t_out = 0.0;
   u_out = 0.0;
   v_out = 0.0;
-  precise vec3 a = p0 - r.org;
-  precise vec3 b = p1 - r.org;
-  precise vec3 c = p2 - r.org;
-  precise float ax = a[r.kx] - r.sx * a[r.kz];
-  precise float ay = a[r.ky] - r.sy * a[r.kz];
-  precise float bx = b[r.kx] - r.sx * b[r.kz];
-  precise float by = b[r.ky] - r.sy * b[r.kz];
-  precise float cx = c[r.kx] - r.sx * c[r.kz];
-  precise float cy = c[r.ky] - r.sy * c[r.kz];
+  precise vec3 a_world = p0 - r.org;
+  precise vec3 b_world = p1 - r.org;
+  precise vec3 c_world = p2 - r.org;
+  vec3 a = ray_frame(r, a_world);
+  vec3 b = ray_frame(r, b_world);
+  vec3 c = ray_frame(r, c_world);
+  precise float ax = a.x - r.sx * a.z;
+  precise float ay = a.y - r.sy * a.z;
+  precise float bx = b.x - r.sx * b.z;
+  precise float by = b.y - r.sy * b.z;
+  precise float cx = c.x - r.sx * c.z;
+  precise float cy = c.y - r.sy * c.z;
   precise float U = cx * by - cy * bx;
   precise float V = ax * cy - ay * cx;
   precise float W = bx * ay - by * ax;
@@ -88,9 +101,9 @@ bool intersect_watertight(PreparedRay r, vec3 p0, vec3 p1, vec3 p2, float tmax, 
   if ((U < 0.0 || V < 0.0 || W < 0.0) && (U > 0.0 || V > 0.0 || W > 0.0)) return false;
   precise float det = U + V + W;
   if (det == 0.0) return false;
-  precise float az = r.sz * a[r.kz];
-  precise float bz = r.sz * b[r.kz];
-  precise float cz = r.sz * c[r.kz];
+  precise float az = r.sz * a.z;
+  precise float bz = r.sz * b.z;
+  precise float cz = r.sz * c.z;
   precise float T = U * az + V * bz + W * cz;
   // t = T / det must lie in (tnear, tmax); compare without dividing, signs folded in.
   precise float abs_det = abs(det);
