@@ -14,6 +14,9 @@
 layout(constant_id = 0) const bool kCountTests = false;
 uint g_tests = 0u;
 #define TRACE_ON_TRIANGLE() if (kCountTests) ++g_tests
+// False for a BVH scene (VulkanTracer): the grid's walk compiled out.
+layout(constant_id = 1) const bool kGridCode = true;
+#define TRACE_GRID_CODE kGridCode
 
 #include "include/trace.glsl"
 

@@ -82,7 +82,8 @@ VulkanTracer::VulkanTracer(std::uint32_t packet_width, VulkanOptions options)
   desc.spirv = shader_spirv("trace_rays");
   desc.storage_buffers = kSceneBindings + 8;
   desc.push_constant_bytes = sizeof(TracePush);
-  desc.specialization = {options_.count_tests ? 1u : 0u};
+  desc.specialization = {options_.count_tests ? 1u : 0u,
+                         options_.structure == GpuStructure::grid ? 1u : 0u};
   desc.debug_name = "trace_rays";
   kernels_->trace = context_->make_pipeline(desc);
   renderer_ = std::make_unique<DeviceRenderer>(*context_, *scene_, options_.execution);

@@ -53,6 +53,13 @@ layout(std430, set = 0, binding = 7) readonly buffer SceneTraced { uint scene_tr
 
 vec3 scene_position(uint i) { return vec3(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]); }
 
+// False in a kernel that never sees a grid (trace_rays.comp over a BVH scene): llvmpipe runs both
+// sides of every branch under a mask, so code that cannot be taken still costs each step.
+#ifndef TRACE_GRID_CODE
+#define TRACE_GRID_CODE true
+#endif
+bool trace_static_grid() { return TRACE_GRID_CODE && scene_header.static_kind == kStaticGrid; }
+
 const float kTraceInf = 1.0 / 0.0;
 const uint kStaticHit = 0xFFFFFFFEu;
 const uint kPhaseStart = 0u;
@@ -225,7 +232,7 @@ void trace_start_static() {
       tr.node = scene_header.static_node_base;
       return;
     }
-  } else if (scene_header.static_kind == kStaticGrid) {
+  } else if (trace_static_grid()) {
     if (trace_grid_setup(true)) return;
   }
   trace_start_top();
@@ -401,7 +408,7 @@ uint trace_run(inout uint budget) {
     --budget;
     if (tr.phase == kPhaseStart)
       trace_start_static();
-    else if (tr.phase == kPhaseStatic && scene_header.static_kind == kStaticGrid)
+    else if (tr.phase == kPhaseStatic && trace_static_grid())
       trace_grid_step();
     else
       trace_bvh_step();
@@ -462,7 +469,7 @@ void trace_resume(vec3 org, vec3 dir, float tnear, bool any_hit) {
   tr_occluded = false;
   tr_world = prepare_ray(org, dir, tnear, tr.tfar);
   tr_local = tr_world;
-  if (tr.phase == kPhaseStatic && scene_header.static_kind == kStaticGrid) trace_grid_setup(false);
+  if (tr.phase == kPhaseStatic && trace_static_grid()) trace_grid_setup(false);
   if (tr.entry != kNoIndex) {
     GpuTopEntry e = scene_top[tr.entry];
     if (e.identity == 0u) tr_local = to_object(tr_world, e);
