@@ -17,6 +17,9 @@ uint g_tests = 0u;
 // False for a BVH scene (VulkanTracer): the grid's walk compiled out.
 layout(constant_id = 1) const bool kGridCode = true;
 #define TRACE_GRID_CODE kGridCode
+// False for a scene without a top level (VulkanTracer picks the pipeline per batch).
+layout(constant_id = 2) const bool kTopCode = true;
+#define TRACE_TOP_CODE kTopCode
 
 #include "include/trace.glsl"
 

@@ -60,6 +60,8 @@ public:
   [[nodiscard]] Context& context() const { return context_; }
   /// Stack entries a ray's walk may need (at most kTraceStackSize).
   [[nodiscard]] std::uint32_t stack_depth() const { return stack_depth_; }
+  /// Whether the uploaded scene has dynamic instances (a top level to walk).
+  [[nodiscard]] bool has_top_level() const { return header_.top_count != 0; }
   /// The CPU structures the device copies (tests compare against them).
   [[nodiscard]] const NativeTracer& native() const { return native_; }
 

@@ -53,10 +53,14 @@ layout(std430, set = 0, binding = 7) readonly buffer SceneTraced { uint scene_tr
 
 vec3 scene_position(uint i) { return vec3(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]); }
 
-// False in a kernel that never sees a grid (trace_rays.comp over a BVH scene): llvmpipe runs both
-// sides of every branch under a mask, so code that cannot be taken still costs each step.
+// False in a kernel that never sees a grid (trace_rays.comp over a BVH scene), or a top level
+// (a scene without dynamic instances): llvmpipe runs both sides of every branch under a mask, so
+// code that cannot be taken still costs each step.
 #ifndef TRACE_GRID_CODE
 #define TRACE_GRID_CODE true
+#endif
+#ifndef TRACE_TOP_CODE
+#define TRACE_TOP_CODE true
 #endif
 bool trace_static_grid() { return TRACE_GRID_CODE && scene_header.static_kind == kStaticGrid; }
 
@@ -208,7 +212,7 @@ bool trace_grid_setup(bool fresh) {
 
 void trace_start_top() {
   tr.phase = kPhaseDone;
-  if (scene_header.top_count == 0u) return;
+  if (!TRACE_TOP_CODE || scene_header.top_count == 0u) return;
   BvhNode root = scene_nodes[scene_header.top_node_base];
   float t_enter;
   if (!intersect_box(tr_world, root.bounds_min, root.bounds_max, t_enter)) return;
@@ -273,7 +277,7 @@ void trace_enter_instance(uint box) {
 
 // One step of a BVH walk (Bvh::traverse): a leaf entry, a node, or a pop.
 void trace_bvh_step() {
-  bool in_instance = tr.entry != kNoIndex;
+  bool in_instance = TRACE_TOP_CODE && tr.entry != kNoIndex;
   uint node_base, index_base;
   if (tr.phase == kPhaseStatic) {
     node_base = scene_header.static_node_base;
@@ -290,7 +294,7 @@ void trace_bvh_step() {
   if (tr.leaf_cursor < tr.leaf_end) {
     uint prim = scene_words[index_base + tr.leaf_cursor];
     ++tr.leaf_cursor;
-    if (tr.phase == kPhaseTop && !in_instance) {
+    if (TRACE_TOP_CODE && tr.phase == kPhaseTop && !in_instance) {
       trace_enter_instance(prim);
       return;
     }
@@ -470,7 +474,7 @@ void trace_resume(vec3 org, vec3 dir, float tnear, bool any_hit) {
   tr_world = prepare_ray(org, dir, tnear, tr.tfar);
   tr_local = tr_world;
   if (tr.phase == kPhaseStatic && trace_static_grid()) trace_grid_setup(false);
-  if (tr.entry != kNoIndex) {
+  if (TRACE_TOP_CODE && tr.entry != kNoIndex) {
     GpuTopEntry e = scene_top[tr.entry];
     if (e.identity == 0u) tr_local = to_object(tr_world, e);
   }
