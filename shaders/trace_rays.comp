@@ -8,6 +8,19 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 #include "include/common.glsl"
+
+// Counting each ray's triangle tests (the grid resolution sweep's intersection work) costs a
+// register and an atomic per ray, so only a pipeline specialised for it does.
+layout(constant_id = 0) const bool kCountTests = false;
+uint g_tests = 0u;
+#define TRACE_ON_TRIANGLE() if (kCountTests) ++g_tests
+// False for a BVH scene (VulkanTracer): the grid's walk compiled out.
+layout(constant_id = 1) const bool kGridCode = true;
+#define TRACE_GRID_CODE kGridCode
+// False for a scene without a top level (VulkanTracer picks the pipeline per batch).
+layout(constant_id = 2) const bool kTopCode = true;
+#define TRACE_TOP_CODE kTopCode
+
 #include "include/trace.glsl"
 
 layout(local_size_x = 64) in;
@@ -59,6 +72,7 @@ void main() {
   uint budget = pc.budget;
   uint status = trace_run(budget);
   atomicAdd(counters.steps, pc.budget - budget);
+  if (kCountTests) atomicAdd(counters.tests, g_tests);
 
   // ---- Exits -------------------------------------------------------------------------------------
   if (status == kRayPending) return; // cut off by the driver: left pending, counted by the host

@@ -63,6 +63,8 @@ public:
   /// The top level's boxes as uploaded (binding 4 after the header), in box order: each dynamic
   /// instance's slot and object_from_world (hybrid mode maps slots to boxes with them).
   [[nodiscard]] std::span<const GpuTopEntry> top_entries() const { return top_.entries; }
+  /// Whether the uploaded scene has dynamic instances (a top level to walk).
+  [[nodiscard]] bool has_top_level() const { return header_.top_count != 0; }
   /// The CPU structures the device copies (tests compare against them).
   [[nodiscard]] const NativeTracer& native() const { return native_; }
 

@@ -47,6 +47,7 @@ constexpr std::uint32_t kMaxDispatches = 1u << 20;
 struct VulkanTracer::Kernels {
   explicit Kernels(Context& context) : cmd(context) {}
   Pipeline trace;
+  Pipeline trace_static; ///< trace without the top level's code, for scenes without one
   Commands cmd; ///< recorded and submitted again for every dispatch (submit resets it)
   std::mutex mutex;
   std::size_t capacity = 0;      ///< rays the batch buffers hold
@@ -82,8 +83,12 @@ VulkanTracer::VulkanTracer(std::uint32_t packet_width, VulkanOptions options)
   desc.spirv = shader_spirv("trace_rays");
   desc.storage_buffers = kSceneBindings + 8;
   desc.push_constant_bytes = sizeof(TracePush);
+  desc.specialization = {options_.count_tests ? 1u : 0u,
+                         options_.structure == GpuStructure::grid ? 1u : 0u, 1u};
   desc.debug_name = "trace_rays";
   kernels_->trace = context_->make_pipeline(desc);
+  desc.specialization[2] = 0u;
+  kernels_->trace_static = context_->make_pipeline(desc);
   renderer_ = std::make_unique<DeviceRenderer>(*context_, *scene_, options_.execution,
                                                options_.primary);
 }
@@ -122,7 +127,8 @@ void VulkanTracer::trace_locked(std::span<const Ray> rays, Hit* hits,
                              &k.status[out], &k.states, &k.stacks,   &k.counters};
       std::copy(std::begin(own), std::end(own), buffers.begin() + kSceneBindings);
       const std::uint32_t t0 = cmd.timestamp();
-      cmd.dispatch(k.trace, std::span<const Buffer* const>(buffers), &push,
+      cmd.dispatch(scene_->has_top_level() ? k.trace : k.trace_static,
+                   std::span<const Buffer* const>(buffers), &push,
                    std::uint32_t((n + kTraceGroup - 1) / kTraceGroup));
       const std::uint32_t t1 = cmd.timestamp();
       cmd.submit();
@@ -132,6 +138,8 @@ void VulkanTracer::trace_locked(std::span<const Ray> rays, Hit* hits,
       std::memcpy(&c, k.counters.mapped(), sizeof c);
       total.resumed += c.budget;
       total.cut += c.cut;
+      total.steps += c.steps;
+      total.tests += c.tests;
       in = out;
       if (c.budget == 0) break;
     }

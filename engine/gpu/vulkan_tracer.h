@@ -48,6 +48,9 @@ struct VulkanOptions {
   /// Render cast and Whitted frames with the streaming kernels; false: the CPU integrators over
   /// GPU traversal (every mode then).
   bool device_frames = true;
+  /// Count ray/triangle tests in trace_rays.comp (GpuTraceCounters::tests; costs an atomic per
+  /// ray). Traversal steps are always counted.
+  bool count_tests = false;
   Context::Options context;
 };
 
@@ -59,6 +62,8 @@ struct GpuTraceCounters {
   std::uint64_t retraced = 0;   ///< hybrid mode: primary rays traced after all (frame_visibility)
   std::uint64_t restarted = 0;  ///< device frames: resumed rays that found the state pool full
   std::uint64_t dispatches = 0; ///< traversal dispatches
+  std::uint64_t steps = 0;      ///< traversal steps of trace_rays.comp (nodes, cells, tests, pops)
+  std::uint64_t tests = 0;      ///< its ray/triangle tests (VulkanOptions::count_tests; else 0)
   double gpu_ms = 0.0;          ///< timestamp time of the dispatches
 };
 

@@ -231,6 +231,7 @@ std::unique_ptr<Tracer> make_tracer(std::string_view name, const TracerOptions& 
                      : gpu::PrimaryVisibility::trace;
     vk.device_frames = options.gpu.device_frames;
     vk.grid_density = options.gpu.grid_density;
+    vk.count_tests = options.gpu.count_tests;
     auto tracer = std::make_unique<gpu::VulkanTracer>(packet_width, vk);
     // Test-only: lets the CLI's tests reach the device-loss path of a whole run (every submit
     // then fails as on a lost device); see tests/cli.
@@ -243,6 +244,7 @@ std::unique_ptr<Tracer> make_tracer(std::string_view name, const TracerOptions& 
   NativeOptions native;
   if (backend == "native-bvh") native.static_structure = StaticStructure::bvh;
   if (backend == "native-grid") native.static_structure = StaticStructure::grid;
+  native.grid_density = options.gpu.grid_density;
   if (backend == "native" || backend == "native-bvh" || backend == "native-grid")
     return std::make_unique<NativeTracer>(packet_width, native);
   throw UnavailableError("backend '" + backend + "' has no tracer in this build");
@@ -272,6 +274,8 @@ std::optional<TracerDevice> tracer_device(const Tracer& tracer) {
     d.cut = c.cut;
     d.retraced = c.retraced;
     d.dispatches = c.dispatches;
+    d.steps = c.steps;
+    d.tests = c.tests;
     d.gpu_ms = c.gpu_ms;
     return d;
   }

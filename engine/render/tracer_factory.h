@@ -71,8 +71,10 @@ struct GpuTracerOptions {
   Primary primary = Primary::trace;
   /// Whole cast and Whitted frames on the device; false: CPU integrators over GPU traversal.
   bool device_frames = true;
-  /// vulkan-grid's target cells per triangle of the static set.
+  /// vulkan-grid's and native-grid's target cells per triangle of the static set.
   float grid_density = 4.0f;
+  /// Count the Vulkan traversal's ray/triangle tests (TracerDevice::tests; slower).
+  bool count_tests = false;
 };
 
 struct TracerOptions {
@@ -105,6 +107,8 @@ struct TracerDevice {
   std::uint64_t cut = 0;
   std::uint64_t retraced = 0; ///< hybrid mode: primary rays traced after all
   std::uint64_t dispatches = 0;
+  std::uint64_t steps = 0; ///< traversal steps of the latest batch of rays (not of device frames)
+  std::uint64_t tests = 0; ///< its ray/triangle tests, with GpuTracerOptions::count_tests
   double gpu_ms = 0.0;
 };
 [[nodiscard]] std::optional<TracerDevice> tracer_device(const Tracer& tracer);

@@ -25,8 +25,8 @@
 // UniformGrid's 3D-DDA, NativeTracer's two levels), with `precise` wherever the C++ build rounds
 // each operation on its own, so hits are bit-identical to native-bvh / native-grid on the same
 // structures. Layout: shaders/shared/gpu_scene_layout.h. One flat loop, one iteration per step (a
-// node visited, a triangle tested, a grid cell entered, a stack entry popped): the budget counts
-// them all, and the state between two steps is all there is to save.
+// node visited, a stack entry popped with the node it leads to, a triangle tested, a grid cell
+// entered): the budget counts them all, and the state between two steps is all there is to save.
 #ifndef SPECULA_TRACE_GLSL
 #define SPECULA_TRACE_GLSL
 
@@ -34,6 +34,7 @@
 #include "shared/trace_layout.h"
 #include "shared/accel_layout.h"
 #include "shared/gpu_scene_layout.h"
+#include "include/ray_triangle.glsl"
 
 layout(std430, set = 0, binding = 0) readonly buffer ScenePositions { float positions[]; };
 layout(std430, set = 0, binding = 1) readonly buffer SceneTriangles { uint triangles[]; };
@@ -52,64 +53,23 @@ layout(std430, set = 0, binding = 7) readonly buffer SceneTraced { uint scene_tr
 
 vec3 scene_position(uint i) { return vec3(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]); }
 
+// False in a kernel that never sees a grid (trace_rays.comp over a BVH scene), or a top level
+// (a scene without dynamic instances): llvmpipe runs both sides of every branch under a mask, so
+// code that cannot be taken still costs each step.
+#ifndef TRACE_GRID_CODE
+#define TRACE_GRID_CODE true
+#endif
+#ifndef TRACE_TOP_CODE
+#define TRACE_TOP_CODE true
+#endif
+bool trace_static_grid() { return TRACE_GRID_CODE && scene_header.static_kind == kStaticGrid; }
+
 const float kTraceInf = 1.0 / 0.0;
 const uint kStaticHit = 0xFFFFFFFEu;
 const uint kPhaseStart = 0u;
 const uint kPhaseStatic = 1u;
 const uint kPhaseTop = 2u;
 const uint kPhaseDone = 3u;
-
-// ---- Rays (accel::PreparedRay) -------------------------------------------------------------------
-
-struct PreparedRay {
-  vec3 org;
-  vec3 dir;
-  vec3 inv_dir;
-  float tnear;
-  float tfar;
-  int kx, ky, kz;
-  float sx, sy, sz;
-  uvec3 neg;
-};
-
-// Bit tests: a compiler may assume no NaN/Inf in comparisons, never in integer ops.
-bool trace_finite(float x) { return (floatBitsToUint(x) & 0x7F800000u) != 0x7F800000u; }
-bool trace_nan(float x) { return (floatBitsToUint(x) & 0x7FFFFFFFu) > 0x7F800000u; }
-bool trace_finite3(vec3 v) { return trace_finite(v.x) && trace_finite(v.y) && trace_finite(v.z); }
-
-// geometry/ray.h's traceable().
-bool ray_valid(PreparedRay r) {
-  return trace_finite3(r.org) && trace_finite3(r.dir) && !(r.dir == vec3(0.0)) &&
-         !trace_nan(r.tfar) && !trace_nan(r.tnear) && r.tnear >= 0.0 && r.tnear <= r.tfar &&
-         trace_finite(r.tnear);
-}
-
-PreparedRay prepare_ray(vec3 org, vec3 dir, float tnear, float tfar) {
-  PreparedRay r;
-  r.org = org;
-  r.dir = dir;
-  r.tnear = tnear;
-  r.tfar = tfar;
-  precise vec3 inv = vec3(1.0) / dir;
-  r.inv_dir = inv;
-  r.neg = floatBitsToUint(dir) >> 31;
-  vec3 ad = abs(dir);
-  r.kz = ad.x > ad.y ? (ad.x > ad.z ? 0 : 2) : (ad.y > ad.z ? 1 : 2);
-  r.kx = (r.kz + 1) % 3;
-  r.ky = (r.kx + 1) % 3;
-  if (dir[r.kz] < 0.0) {
-    int k = r.kx;
-    r.kx = r.ky;
-    r.ky = k;
-  }
-  precise float sx = dir[r.kx] / dir[r.kz];
-  precise float sy = dir[r.ky] / dir[r.kz];
-  precise float sz = 1.0 / dir[r.kz];
-  r.sx = sx;
-  r.sy = sy;
-  r.sz = sz;
-  return r;
-}
 
 // ---- The conservative slab test (accel::intersect_box) -------------------------------------------
 
@@ -136,61 +96,12 @@ bool intersect_box(PreparedRay r, vec3 lo, vec3 hi, out float t_enter) {
   return t0 <= t1;
 }
 
-// ---- Woop, Benthin & Wald's watertight test (accel::intersect_watertight) ------------------------
-
-bool intersect_watertight(PreparedRay r, vec3 p0, vec3 p1, vec3 p2, float tmax, out float t_out,
-                          out float u_out, out float v_out) {
-  t_out = 0.0;
-  u_out = 0.0;
-  v_out = 0.0;
-  precise vec3 a = p0 - r.org;
-  precise vec3 b = p1 - r.org;
-  precise vec3 c = p2 - r.org;
-  precise float ax = a[r.kx] - r.sx * a[r.kz];
-  precise float ay = a[r.ky] - r.sy * a[r.kz];
-  precise float bx = b[r.kx] - r.sx * b[r.kz];
-  precise float by = b[r.ky] - r.sy * b[r.kz];
-  precise float cx = c[r.kx] - r.sx * c[r.kz];
-  precise float cy = c[r.ky] - r.sy * c[r.kz];
-  precise float U = cx * by - cy * bx;
-  precise float V = ax * cy - ay * cx;
-  precise float W = bx * ay - by * ax;
-  if (U == 0.0 || V == 0.0 || W == 0.0) {
-    // An edge function rounded to exactly 0: all three again in double (the paper's §3.2).
-    precise double Ud = double(cx) * double(by) - double(cy) * double(bx);
-    precise double Vd = double(ax) * double(cy) - double(ay) * double(cx);
-    precise double Wd = double(bx) * double(ay) - double(by) * double(ax);
-    U = float(Ud);
-    V = float(Vd);
-    W = float(Wd);
-  }
-  if ((U < 0.0 || V < 0.0 || W < 0.0) && (U > 0.0 || V > 0.0 || W > 0.0)) return false;
-  precise float det = U + V + W;
-  if (det == 0.0) return false;
-  precise float az = r.sz * a[r.kz];
-  precise float bz = r.sz * b[r.kz];
-  precise float cz = r.sz * c[r.kz];
-  precise float T = U * az + V * bz + W * cz;
-  // t = T / det must lie in (tnear, tmax); compare without dividing, signs folded in.
-  precise float abs_det = abs(det);
-  precise float signed_t = (floatBitsToUint(det) >> 31) != 0u ? -T : T;
-  precise float lo = r.tnear * abs_det;
-  precise float hi = tmax * abs_det;
-  if (!(signed_t > lo) || !(signed_t < hi)) return false;
-  precise float inv_det = 1.0 / det;
-  precise float t = T * inv_det;
-  if (!(t > r.tnear) || !(t < tmax)) return false; // rounding of the division at the interval ends
-  precise float u = V * inv_det;
-  precise float v = W * inv_det;
-  t_out = t;
-  u_out = u;
-  v_out = v;
-  return true;
-}
-
 vec3 traced_vertex(uint tri, uint k) { return scene_position(scene_traced[3u * tri + k]); }
 
 bool trace_triangle(PreparedRay r, uint tri, out float t, out float u, out float v) {
+#ifdef TRACE_ON_TRIANGLE
+  TRACE_ON_TRIANGLE(); // trace_rays.comp counts the tests
+#endif
   return intersect_watertight(r, traced_vertex(tri, 0u), traced_vertex(tri, 1u),
                               traced_vertex(tri, 2u), r.tfar, t, u, v);
 }
@@ -218,8 +129,6 @@ vec3 tr_q, tr_scale;
 ivec3 tr_dstep, tr_out;
 uint tr_max_cells;
 
-float trace_axis(vec3 v, int a) { return a == 0 ? v.x : (a == 1 ? v.y : v.z); }
-
 // The walk stands in `cell` (its triangles next), the next planes at distances s_next.
 void trace_enter_cell(ivec3 cell, vec3 s_next) {
   tr.cell_x = cell.x;
@@ -230,6 +139,9 @@ void trace_enter_cell(ivec3 cell, vec3 s_next) {
   tr.s_next_z = s_next.z;
   uvec3 res = scene_header.grid.resolution;
   uint c = uint(cell.x) + res.x * (uint(cell.y) + res.y * uint(cell.z));
+#ifdef TRACE_ON_CELL
+  TRACE_ON_CELL(c); // probe_grid_cells.comp records the walk
+#endif
   tr.leaf_cursor = scene_words[scene_header.cell_start_base + c];
   tr.leaf_end = scene_words[scene_header.cell_start_base + c + 1u];
 }
@@ -300,7 +212,7 @@ bool trace_grid_setup(bool fresh) {
 
 void trace_start_top() {
   tr.phase = kPhaseDone;
-  if (scene_header.top_count == 0u) return;
+  if (!TRACE_TOP_CODE || scene_header.top_count == 0u) return;
   BvhNode root = scene_nodes[scene_header.top_node_base];
   float t_enter;
   if (!intersect_box(tr_world, root.bounds_min, root.bounds_max, t_enter)) return;
@@ -324,7 +236,7 @@ void trace_start_static() {
       tr.node = scene_header.static_node_base;
       return;
     }
-  } else if (scene_header.static_kind == kStaticGrid) {
+  } else if (trace_static_grid()) {
     if (trace_grid_setup(true)) return;
   }
   trace_start_top();
@@ -365,7 +277,7 @@ void trace_enter_instance(uint box) {
 
 // One step of a BVH walk (Bvh::traverse): a leaf entry, a node, or a pop.
 void trace_bvh_step() {
-  bool in_instance = tr.entry != kNoIndex;
+  bool in_instance = TRACE_TOP_CODE && tr.entry != kNoIndex;
   uint node_base, index_base;
   if (tr.phase == kPhaseStatic) {
     node_base = scene_header.static_node_base;
@@ -382,7 +294,7 @@ void trace_bvh_step() {
   if (tr.leaf_cursor < tr.leaf_end) {
     uint prim = scene_words[index_base + tr.leaf_cursor];
     ++tr.leaf_cursor;
-    if (tr.phase == kPhaseTop && !in_instance) {
+    if (TRACE_TOP_CODE && tr.phase == kPhaseTop && !in_instance) {
       trace_enter_instance(prim);
       return;
     }
@@ -397,48 +309,50 @@ void trace_bvh_step() {
     return;
   }
 
-  if (tr.node != kNoIndex) {
-    BvhNode n = scene_nodes[tr.node];
-    tr.node = kNoIndex;
-    if (n.count == 0u) {
-      uint i0 = node_base + n.index;
-      BvhNode c0 = scene_nodes[i0];
-      BvhNode c1 = scene_nodes[i0 + 1u];
-      float e0, e1;
-      bool hit0 = intersect_box(r, c0.bounds_min, c0.bounds_max, e0);
-      bool hit1 = intersect_box(r, c1.bounds_min, c1.bounds_max, e1);
-      if (hit0 && hit1) {
-        if (e1 < e0) {
-          tr_stack[tr.sp++] = uvec2(i0, floatBitsToUint(e0));
-          tr.node = i0 + 1u;
-        } else {
-          tr_stack[tr.sp++] = uvec2(i0 + 1u, floatBitsToUint(e1));
-          tr.node = i0;
-        }
-      } else if (hit0 || hit1) {
-        tr.node = hit0 ? i0 : i0 + 1u;
-      }
-    } else {
-      tr.leaf_cursor = n.index;
-      tr.leaf_end = n.index + n.count;
+  // Pop the nearest pending subtree the ray can still reach (its tfar may have shrunk), and
+  // visit it in the same step: fewer loop iterations, each running every branch a SIMD vector's
+  // rays need anyway.
+  if (tr.node == kNoIndex) {
+    if (in_instance && tr.sp == tr.floor) {
+      trace_leave_instance();
+      return;
     }
-    return;
+    if (tr.sp == 0u) {
+      if (tr.phase == kPhaseStatic)
+        trace_start_top();
+      else
+        tr.phase = kPhaseDone;
+      return;
+    }
+    uvec2 e = tr_stack[--tr.sp];
+    if (!(uintBitsToFloat(e.y) <= r.tfar)) return;
+    tr.node = e.x;
   }
 
-  // Pop the nearest pending subtree the ray can still reach (its tfar may have shrunk).
-  if (in_instance && tr.sp == tr.floor) {
-    trace_leave_instance();
-    return;
+  BvhNode n = scene_nodes[tr.node];
+  tr.node = kNoIndex;
+  if (n.count == 0u) {
+    uint i0 = node_base + n.index;
+    BvhNode c0 = scene_nodes[i0];
+    BvhNode c1 = scene_nodes[i0 + 1u];
+    float e0, e1;
+    bool hit0 = intersect_box(r, c0.bounds_min, c0.bounds_max, e0);
+    bool hit1 = intersect_box(r, c1.bounds_min, c1.bounds_max, e1);
+    if (hit0 && hit1) {
+      if (e1 < e0) {
+        tr_stack[tr.sp++] = uvec2(i0, floatBitsToUint(e0));
+        tr.node = i0 + 1u;
+      } else {
+        tr_stack[tr.sp++] = uvec2(i0 + 1u, floatBitsToUint(e1));
+        tr.node = i0;
+      }
+    } else if (hit0 || hit1) {
+      tr.node = hit0 ? i0 : i0 + 1u;
+    }
+  } else {
+    tr.leaf_cursor = n.index;
+    tr.leaf_end = n.index + n.count;
   }
-  if (tr.sp == 0u) {
-    if (tr.phase == kPhaseStatic)
-      trace_start_top();
-    else
-      tr.phase = kPhaseDone;
-    return;
-  }
-  uvec2 e = tr_stack[--tr.sp];
-  if (uintBitsToFloat(e.y) <= r.tfar) tr.node = e.x;
 }
 
 // One step of the grid's walk: a triangle of the current cell, or the move to the next cell.
@@ -498,7 +412,7 @@ uint trace_run(inout uint budget) {
     --budget;
     if (tr.phase == kPhaseStart)
       trace_start_static();
-    else if (tr.phase == kPhaseStatic && scene_header.static_kind == kStaticGrid)
+    else if (tr.phase == kPhaseStatic && trace_static_grid())
       trace_grid_step();
     else
       trace_bvh_step();
@@ -564,8 +478,8 @@ void trace_resume(vec3 org, vec3 dir, float tnear, bool any_hit) {
   tr_occluded = false;
   tr_world = prepare_ray(org, dir, tnear, tr.tfar);
   tr_local = tr_world;
-  if (tr.phase == kPhaseStatic && scene_header.static_kind == kStaticGrid) trace_grid_setup(false);
-  if (tr.entry != kNoIndex) {
+  if (tr.phase == kPhaseStatic && trace_static_grid()) trace_grid_setup(false);
+  if (TRACE_TOP_CODE && tr.entry != kNoIndex) {
     GpuTopEntry e = scene_top[tr.entry];
     if (e.identity == 0u) tr_local = to_object(tr_world, e);
   }

@@ -58,6 +58,7 @@ struct TraceCounters {
   uint budget;    ///< rays that used up their budget (resumed)
   uint cut;       ///< rays found still pending after a dispatch: the driver cut a loop (must be 0)
   uint steps;     ///< traversal steps (node or cell visits), summed
+  uint tests;     ///< ray/triangle tests, summed (trace_rays.comp's kCountTests; 0 without it)
 };
 
 #ifdef __cplusplus
@@ -65,7 +66,7 @@ static_assert(sizeof(GpuRay) == 32 && offsetof(GpuRay, direction) == 16 &&
               offsetof(GpuRay, tfar) == 28);
 static_assert(sizeof(GpuHit) == 32 && offsetof(GpuHit, instance) == 12 &&
               offsetof(GpuHit, ng_x) == 20);
-static_assert(sizeof(TraceCounters) == 16);
+static_assert(sizeof(TraceCounters) == 20);
 } // namespace specula::gpu
 #endif
 

@@ -182,6 +182,28 @@ TEST_P(VulkanTrace, RandomRaysOnTheBunnyHitBitIdenticallyToTheNativeBackend) {
   EXPECT_EQ(gpu->counters().rays, a.rays);
 }
 
+TEST_P(VulkanTrace, AStaticOnlySceneTracedWithoutTheTopLevelsCodeHitsBitIdentically) {
+  // No dynamic instance: the tracer dispatches its pipeline with the top level compiled out.
+  SPECULA_NEED_VULKAN(gpu, options());
+  ecs::Registry reg;
+  add(reg, bunny(), test::at(vec3(0.0f)), Kinematics::Type::Static);
+  update_world_transforms(reg, 1);
+  SceneLayer layer;
+  layer.sync(reg);
+  NativeTracer native(8, native_like(options()));
+  gpu->update(layer);
+  native.update(layer);
+  EXPECT_FALSE(gpu->scene().has_top_level());
+  Aabb b;
+  for (const vec3& p : bunny()->positions) b.grow(p);
+  const Agreement a = compare(*gpu, native,
+                              random_rays(20000, b.center(), 0.5f * b.extent(),
+                                          2.0f * glm::length(b.extent()), 13));
+  EXPECT_GT(a.hits, a.rays / 5);
+  EXPECT_EQ(a.identical, a.rays) << a.first_difference;
+  EXPECT_EQ(gpu->counters().cut, 0u);
+}
+
 TEST_P(VulkanTrace, ATinyBudgetResumesEveryRayAndChangesNoHit) {
   VulkanOptions o = options();
   o.traversal_budget = 3;

@@ -325,11 +325,16 @@ bool UniformGrid::traverse(PreparedRay& r, TriangleHit* hit, GridTraceInfo* info
     const std::uint32_t begin = cell_start_[c], end = cell_start_[c + 1];
     ++visited;
     tested += end - begin;
+    if (info != nullptr && info->cells != nullptr) info->cells->push_back(c);
     bool closer = false;
     for (std::uint32_t i = begin; i < end; ++i) {
       if constexpr (Any) {
         if (intersect_any<Test>(r, tris_, indices_[i])) {
-          if (info) *info = GridTraceInfo{visited, tested - (end - i - 1), false};
+          if (info) {
+            info->cells_visited = visited;
+            info->triangles_tested = tested - (end - i - 1);
+            info->step_bound_hit = false;
+          }
           return true;
         }
       } else {
@@ -353,7 +358,11 @@ bool UniformGrid::traverse(PreparedRay& r, TriangleHit* hit, GridTraceInfo* info
     }
     s_next[axis] = (float(cell[axis] + (step[axis] > 0 ? 1 : 0)) - q[axis]) * scale[axis];
   }
-  if (info) *info = GridTraceInfo{visited, tested, bounded};
+  if (info) {
+    info->cells_visited = visited;
+    info->triangles_tested = tested;
+    info->step_bound_hit = bounded;
+  }
   return found;
 }
 

@@ -58,6 +58,8 @@ struct GridTraceInfo {
   std::uint32_t cells_visited = 0;
   std::uint32_t triangles_tested = 0;
   bool step_bound_hit = false; ///< the loop ran into its res.x + res.y + res.z + 3 bound
+  /// When set, receives the index of every cell visited, in order (the GPU DDA's kernel test).
+  std::vector<std::uint32_t>* cells = nullptr;
 };
 
 class UniformGrid {
