@@ -198,6 +198,11 @@ TEST(DeviceFramesScene, FactoryBackendRendersOnTheDevice) {
   EXPECT_EQ(stats.rays[RayKind::Primary], std::uint64_t(kWidth) * kHeight);
   EXPECT_GT(vk.counters().dispatches, 0u);
   EXPECT_EQ(vk.counters().cut, 0u);
+  // The frame's stats carry the device's counters (the stats file's frames[].gpu).
+  EXPECT_TRUE(stats.gpu.present);
+  EXPECT_EQ(stats.gpu.rays, stats.rays.total());
+  EXPECT_EQ(stats.gpu.dispatches, vk.counters().dispatches);
+  EXPECT_EQ(stats.gpu.cut, 0u);
 }
 
 TEST(DeviceFramesScene, DeviceLossIsAClearError) {
