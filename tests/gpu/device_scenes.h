@@ -1,8 +1,26 @@
 #pragma once
-// The GPU tests' scene: a small Cornell box (test_device_frames, test_device_path, test_hybrid).
+// What the device-frame tests share (test_device_frames, test_device_path, test_device_cache,
+// test_hybrid): whether a Vulkan device is there, and a small Cornell box.
 #include "../trace/scene_builder.h"
+#include "specula/core/error.h"
+#include "specula/gpu/vk_context.h"
+
+#include <gtest/gtest.h>
 
 namespace specula::test {
+
+/// Whether Context::create finds a device (lavapipe counts); `drawing`: one whose queue also draws.
+inline bool have_device(bool drawing = false) {
+  try {
+    const auto context = gpu::Context::create();
+    return !drawing || context->info().graphics;
+  } catch (const UnavailableError&) {
+    return false;
+  }
+}
+
+#define SPECULA_NEED_DEVICE()                                                                      \
+  if (!::specula::test::have_device()) GTEST_SKIP() << "no Vulkan device on this machine"
 
 /// A small Cornell box: coloured walls, a block, a mirror sphere and a glass sphere (smooth
 /// normals), a point light and an emitting panel (an area light); coarse spheres keep it fast on lavapipe.

@@ -3,7 +3,7 @@
 // kernel) equal the CPU integrator's over native-bvh — image and the store's counters — frame
 // after frame while the cubes fill, and again after an object moves and the store invalidates;
 // no ray is cut by the driver and every device lookup agrees with the store's own.
-#include "../trace/scene_builder.h"
+#include "device_scenes.h"
 #include "specula/cache/cube_map.h"
 #include "specula/cache/ray_cache.h"
 #include "specula/core/error.h"
@@ -30,18 +30,6 @@ using cache::CachePolicy;
 using cache::CacheSettings;
 using cache::LookupMode;
 using cache::RayCacheStore;
-
-bool have_device() {
-  try {
-    (void)gpu::Context::create();
-    return true;
-  } catch (const UnavailableError&) {
-    return false;
-  }
-}
-
-#define SPECULA_NEED_DEVICE()                                                                      \
-  if (!have_device()) GTEST_SKIP() << "no Vulkan device on this machine"
 
 /// Directions that probe cube_coord's branches: the axes, face edges and corners (ties between
 /// axes), signed zeros, texel boundaries on every face (u·res exactly an integer), and seeded

@@ -51,18 +51,6 @@ struct Device {
   }
 };
 
-bool have_device() {
-  try {
-    (void)gpu::Context::create();
-    return true;
-  } catch (const UnavailableError&) {
-    return false;
-  }
-}
-
-#define SPECULA_NEED_DEVICE()                                                                      \
-  if (!have_device()) GTEST_SKIP() << "no Vulkan device on this machine"
-
 TraceSettings settings_for(TraceMode mode) {
   TraceSettings s;
   s.mode = mode;

@@ -26,18 +26,6 @@ namespace {
 
 constexpr std::uint32_t kWidth = 64, kHeight = 48;
 
-bool have_device() {
-  try {
-    (void)gpu::Context::create();
-    return true;
-  } catch (const UnavailableError&) {
-    return false;
-  }
-}
-
-#define SPECULA_NEED_DEVICE()                                                                      \
-  if (!have_device()) GTEST_SKIP() << "no Vulkan device on this machine"
-
 struct Device {
   std::unique_ptr<gpu::Context> context;
   std::unique_ptr<gpu::GpuScene> scene;

@@ -25,16 +25,8 @@ namespace {
 
 constexpr std::uint32_t kWidth = 96, kHeight = 72;
 
-bool have_device() {
-  try {
-    return gpu::Context::create()->info().graphics;
-  } catch (const UnavailableError&) {
-    return false;
-  }
-}
-
-#define SPECULA_NEED_DEVICE()                                                                      \
-  if (!have_device()) GTEST_SKIP() << "no Vulkan device that draws on this machine"
+#define SPECULA_NEED_DRAWING_DEVICE()                                                              \
+  if (!test::have_device(true)) GTEST_SKIP() << "no Vulkan device that draws on this machine"
 
 /// A finely tessellated static sphere on a floor, a mirror, and a dynamic sphere rotated and
 /// scaled unevenly (its hits are found in object space), under one point light.
@@ -143,7 +135,7 @@ void expect_hybrid_matches(const SceneLayer& layer, const Camera& camera, TraceM
 class Hybrid : public ::testing::TestWithParam<TraceMode> {};
 
 TEST_P(Hybrid, CornellBoxMatchesTheTracedFrame) {
-  SPECULA_NEED_DEVICE();
+  SPECULA_NEED_DRAWING_DEVICE();
   ecs::Registry reg;
   test::cornell(reg);
   test::TracedWorld world(reg, "native-bvh");
@@ -151,7 +143,7 @@ TEST_P(Hybrid, CornellBoxMatchesTheTracedFrame) {
 }
 
 TEST_P(Hybrid, MeshSceneWithADynamicInstanceMatchesTheTracedFrame) {
-  SPECULA_NEED_DEVICE();
+  SPECULA_NEED_DRAWING_DEVICE();
   ecs::Registry reg;
   mesh_scene(reg);
   test::TracedWorld world(reg, "native-bvh");
@@ -160,7 +152,7 @@ TEST_P(Hybrid, MeshSceneWithADynamicInstanceMatchesTheTracedFrame) {
 }
 
 TEST_P(Hybrid, FarFromTheWorldOriginMatchesTheTracedFrame) {
-  SPECULA_NEED_DEVICE();
+  SPECULA_NEED_DRAWING_DEVICE();
   ecs::Registry reg;
   mesh_scene(reg);
   // Everything, the camera included, a long way from the world origin: the layer's render
