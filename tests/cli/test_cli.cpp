@@ -359,8 +359,13 @@ TEST(Cli, GpuOptionsRejectBadValuesNamingTheOption) {
 }
 
 /// Renders a tiny cast frame on a Vulkan backend; skips while the traversal kernels are the
-/// groundwork's stub (which says "not implemented yet").
-Result render_on_vulkan(const std::vector<std::string>& extra, const std::string& prefix = "") {
+/// groundwork's stub (which says "not implemented yet"). Sanitized builds preload lavapipe so that
+/// LeakSanitizer does not take its globals for leaks once the loader unloads it (tests/CMakeLists.txt).
+Result render_on_vulkan(const std::vector<std::string>& extra, std::string prefix = "") {
+#ifdef SPECULA_KEEP_VULKAN_DRIVER
+  const std::string keep = "export LD_PRELOAD=" + quote(SPECULA_KEEP_VULKAN_DRIVER);
+  prefix = prefix.empty() ? keep : keep + "; " + prefix;
+#endif
   std::vector<std::string> args = {
       "render",   (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string(),
       "--width",  "8",

@@ -7,10 +7,24 @@
 
 #include <gtest/gtest.h>
 
+#ifdef SPECULA_KEEP_VULKAN_DRIVER
+#include <dlfcn.h>
+#endif
+
 namespace specula::test {
+
+/// Sanitized builds only (tests/CMakeLists.txt): loads lavapipe once more and never unloads it,
+/// so the blocks it keeps in its globals stay reachable when the Vulkan loader lets it go.
+inline void keep_vulkan_driver_loaded() {
+#ifdef SPECULA_KEEP_VULKAN_DRIVER
+  static const void* const handle = ::dlopen(SPECULA_KEEP_VULKAN_DRIVER, RTLD_LAZY | RTLD_NODELETE);
+  (void)handle;
+#endif
+}
 
 /// Whether Context::create finds a device (lavapipe counts); `drawing`: one whose queue also draws.
 inline bool have_device(bool drawing = false) {
+  keep_vulkan_driver_loaded();
   try {
     const auto context = gpu::Context::create();
     return !drawing || context->info().graphics;
