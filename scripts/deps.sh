@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs every Debian 12 package Specula builds, tests and runs with (clang-15 and
-# libfuzzer-15-dev: the asan preset, which also builds the fuzzers).
+# libfuzzer-15-dev: the asan preset, which also builds the fuzzers; lld: the CI presets link with it).
 # Idempotent: a fast no-op when everything is present.
 set -euo pipefail
 
@@ -14,6 +14,7 @@ packages=(
   libvulkan-dev mesa-vulkan-drivers glslang-tools
   libgtest-dev
   clang-15 libfuzzer-15-dev
+  lld
   assimp-testmodels
 )
 

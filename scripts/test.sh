@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Installs what is missing, builds Specula three times and runs every test through ctest on each:
 #   1. the `ci` preset: optimised, warnings as errors, benchmarks built and smoke-run;
-#   2. the `ci-native` preset: the same without Embree (SPECULA_WITH_EMBREE=OFF), so the engine
-#      builds, renders and passes its tests on the native backend alone;
+#   2. the `ci-native` preset: the same without the optional backends (SPECULA_WITH_EMBREE=OFF,
+#      SPECULA_WITH_VULKAN=OFF), so the engine builds, renders and passes its tests on the native
+#      CPU backend alone (the Vulkan tests, which run on Specula's own structures whatever the CPU
+#      backends, run in the other two presets);
 #   3. the `asan` preset: Clang 15, AddressSanitizer and UBSan, assertions on, so the death tests
 #      compiled out of optimised builds run, and memory errors and leaks fail the run; then each
 #      libFuzzer harness of tests/fuzz/ (built in the same preset) fuzzes for
@@ -10,6 +12,9 @@
 #      fails the run (scripts/fuzz.sh, docs/fuzzing.md; SPECULA_FUZZ_SECONDS=0 skips it).
 # Every preset's ctest also replays the fuzzers' corpora and regression inputs (label "fuzz").
 # SPECULA_TEST_PRESETS="ci" (or any list of them) runs those only.
+# CI's time (keep it under 45 min on 2 cores): the ci presets compile with -g1 (line tables and
+# function names, enough for backtraces; full -g made the test files ~70% slower to compile) and all
+# three link with lld; the asan preset's brute-force tests trace a quarter of the rays.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/deps.sh

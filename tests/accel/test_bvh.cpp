@@ -25,6 +25,7 @@ namespace {
 constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
+using test::kBruteForceDivisor;
 using test::Mesh;
 using test::random_soup;
 
@@ -246,18 +247,19 @@ TEST(Bvh, ClosestAndAnyHitEqualBruteForce) {
     check_structure(bvh, view.count, 4, &view);
     const Aabb box = mesh_bounds(mesh);
     for (bool coherent : {true, false}) {
-      const auto rays = make_rays(box, 13000, 100 + (coherent ? 1u : 0u), coherent);
+      const auto rays =
+          make_rays(box, 13000 / kBruteForceDivisor, 100 + (coherent ? 1u : 0u), coherent);
       EXPECT_EQ(mismatches(bvh, view, rays), 0) << (coherent ? "coherent" : "incoherent");
       total_rays += int(rays.size());
     }
   }
-  EXPECT_GE(total_rays, 100000);
+  EXPECT_GE(total_rays, 100000 / kBruteForceDivisor);
 }
 
 TEST(Bvh, OptionsAreHonoured) {
   const Mesh m = random_soup(2000, 3, 2.0f, 0.2f);
   const TriangleView view = m.view();
-  const auto rays = make_rays(mesh_bounds(m), 3000, 5, false);
+  const auto rays = make_rays(mesh_bounds(m), 3000 / kBruteForceDivisor, 5, false);
   for (std::uint32_t max_leaf : {1u, 2u, 8u})
     for (std::uint32_t bins : {2u, 8u, 32u, 1000u}) {
       SCOPED_TRACE(testing::Message() << "max_leaf " << max_leaf << " bins " << bins);
@@ -391,8 +393,8 @@ TEST(Bvh, RefitAfterDeformationStaysExact) {
   {
     const TriangleView view = m.view();
     check_structure(bvh, view.count, 4, &view);
-    EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 6000, 51, false)), 0);
-    EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 6000, 52, true)), 0);
+    EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 6000 / kBruteForceDivisor, 51, false)), 0);
+    EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 6000 / kBruteForceDivisor, 52, true)), 0);
   }
   // A large random displacement, into a new vertex array.
   std::mt19937 rng(53);
@@ -402,7 +404,7 @@ TEST(Bvh, RefitAfterDeformationStaysExact) {
   bvh.refit(moved.view());
   const TriangleView view = moved.view();
   check_structure(bvh, view.count, 4, &view);
-  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(moved), 6000, 54, false)), 0);
+  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(moved), 6000 / kBruteForceDivisor, 54, false)), 0);
   EXPECT_GT(bvh.sah_cost(), bvh.stats().sah_cost); // it degraded
 }
 
