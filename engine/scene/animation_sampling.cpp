@@ -17,8 +17,89 @@ std::pair<std::size_t, float> locate(const std::vector<float>& times, float t) {
   return {i, span > 0.0f ? (t - times[i]) / span : 0.0f};
 }
 
-template <typename V, typename Mix>
-V sample_track(const Keyframes<V>& track, float t, Mix mix) {
+/// The tangent weights of Kochanek–Bartels at the two ends of segment [i, i+1] (keys i-1 .. i+2
+/// exist), time-adjusted as BART's kbsplpos/kbsplrot do (Eberly's formulation): the outgoing
+/// tangent at key i is out_next·(P[i+1]-P[i]) + out_prev·(P[i]-P[i-1]) and the incoming one at
+/// key i+1 is in_next·(P[i+2]-P[i+1]) + in_prev·(P[i+1]-P[i]).
+struct KbWeights {
+  double out_prev, out_next, in_prev, in_next;
+};
+
+template <typename V>
+KbWeights kb_weights(const Keyframes<V>& track, std::size_t i) {
+  const auto& k = track.times;
+  const vec3 a = track.tcb[i];     // tension, continuity, bias at key i
+  const vec3 b = track.tcb[i + 1]; // ... at key i+1
+  // Non-uniform key spacing: scale each tangent to the segment's length in time.
+  const double adj0 = 2.0 * (double(k[i + 1]) - k[i]) / (double(k[i + 1]) - k[i - 1]);
+  const double adj1 = 2.0 * (double(k[i + 1]) - k[i]) / (double(k[i + 2]) - k[i]);
+  return KbWeights{0.5 * adj0 * (1.0 - a.x) * (1.0 + a.y) * (1.0 + a.z),
+                   0.5 * adj0 * (1.0 - a.x) * (1.0 - a.y) * (1.0 - a.z),
+                   0.5 * adj1 * (1.0 - b.x) * (1.0 - b.y) * (1.0 + b.z),
+                   0.5 * adj1 * (1.0 - b.x) * (1.0 + b.y) * (1.0 - b.z)};
+}
+
+/// Kochanek–Bartels on vectors: the cubic Hermite segment between keys i and i+1 at blend u.
+template <typename V>
+V kb_vector(const Keyframes<V>& track, std::size_t i, double u) {
+  using D = glm::dvec3;
+  const D p0(track.values[i - 1]), p1(track.values[i]), p2(track.values[i + 1]),
+      p3(track.values[i + 2]);
+  const KbWeights w = kb_weights(track, i);
+  const D dp = p2 - p1;
+  const D t_out = w.out_next * dp + w.out_prev * (p1 - p0);
+  const D t_in = w.in_next * (p3 - p2) + w.in_prev * dp;
+  const D c2 = 3.0 * dp - 2.0 * t_out - t_in;
+  const D c3 = -2.0 * dp + t_out + t_in;
+  return V(p1 + u * (t_out + u * (c2 + u * c3)));
+}
+
+/// log of a unit quaternion as a pure vector (angle/2 times the axis).
+dvec3 quat_log(const glm::dquat& q) {
+  const dvec3 v(q.x, q.y, q.z);
+  const double s = glm::length(v);
+  if (s < 1e-12) return v;
+  return v * (std::atan2(s, q.w) / s);
+}
+
+glm::dquat quat_exp(const dvec3& v) {
+  const double a = glm::length(v);
+  const double f = a < 1e-12 ? 1.0 : std::sin(a) / a;
+  return glm::dquat(std::cos(a), v.x * f, v.y * f, v.z * f);
+}
+
+/// Kochanek–Bartels on rotations as BART's kbsplrot: the tangents above taken on
+/// log(q[j]^-1 q[j+1]), turned into the inner control points a, b of squad (Shoemake), and
+/// squad(u) = slerp(slerp(q1, q2, u), slerp(a, b, u), 2u(1-u)). Consecutive keys are first put
+/// on the same hemisphere, so every segment takes the shorter arc.
+quat kb_rotation(const Keyframes<quat>& track, std::size_t i, double u) {
+  glm::dquat q[4];
+  for (int j = 0; j < 4; ++j) q[j] = glm::normalize(glm::dquat(track.values[i - 1 + j]));
+  for (int j = 1; j < 4; ++j)
+    if (glm::dot(q[j - 1], q[j]) < 0.0) q[j] = -q[j];
+  const KbWeights w = kb_weights(track, i);
+  const dvec3 log_prev = quat_log(glm::inverse(q[0]) * q[1]);
+  const dvec3 log_dq = quat_log(glm::inverse(q[1]) * q[2]);
+  const dvec3 log_next = quat_log(glm::inverse(q[2]) * q[3]);
+  const dvec3 t_out = w.out_next * log_dq + w.out_prev * log_prev;
+  const dvec3 t_in = w.in_next * log_next + w.in_prev * log_dq;
+  const glm::dquat a = q[1] * quat_exp(0.5 * (t_out - log_dq));
+  const glm::dquat b = q[2] * quat_exp(0.5 * (log_dq - t_in));
+  const glm::dquat outer = glm::slerp(q[1], q[2], u);
+  const glm::dquat inner = glm::slerp(a, b, u);
+  return quat(glm::normalize(glm::slerp(outer, inner, 2.0 * u * (1.0 - u))));
+}
+
+template <typename V, typename Mix, typename Kb>
+V sample_track(const Keyframes<V>& track, float t, Mix mix, Kb kb) {
+  if (track.interpolation == Interpolation::KochanekBartels) {
+    // As BART: the first and last keys only shape the end tangents; clamp to the inner keys.
+    const std::size_t n = track.times.size();
+    if (t <= track.times[1]) return track.values[1];
+    if (t >= track.times[n - 2]) return track.values[n - 2];
+    const auto [i, f] = locate(track.times, t);
+    return kb(track, i, double(f));
+  }
   if (t <= track.times.front()) return track.values.front();
   if (t >= track.times.back()) return track.values.back();
   const auto [i, f] = locate(track.times, t);
@@ -31,6 +112,23 @@ void check_times(const Keyframes<V>& track, const std::string& context, const st
   if (track.times.size() != track.values.size())
     throw Error(context, field, std::to_string(track.times.size()) + " key times but " +
                                     std::to_string(track.values.size()) + " values");
+  if (track.interpolation == Interpolation::KochanekBartels) {
+    if (track.times.size() < 4)
+      throw Error(context, field,
+                  "Kochanek-Bartels interpolation needs at least 4 keys (the first and last only "
+                  "shape the end tangents), got " + std::to_string(track.times.size()));
+    if (track.tcb.size() != track.times.size())
+      throw Error(context, field + ".tcb",
+                  std::to_string(track.times.size()) + " key times but " +
+                      std::to_string(track.tcb.size()) + " tension/continuity/bias triples");
+    for (std::size_t i = 0; i < track.tcb.size(); ++i)
+      if (!is_finite(track.tcb[i]))
+        throw Error(context, field + ".tcb[" + std::to_string(i) + "]",
+                    "tension, continuity and bias must be finite");
+  } else if (!track.tcb.empty()) {
+    throw Error(context, field + ".tcb",
+                "tension/continuity/bias only apply to Kochanek-Bartels interpolation");
+  }
   for (std::size_t i = 0; i < track.times.size(); ++i) {
     if (!std::isfinite(track.times[i]))
       throw Error(context, field + ".times[" + std::to_string(i) + "]", "time is not finite");
@@ -43,19 +141,22 @@ void check_times(const Keyframes<V>& track, const std::string& context, const st
 } // namespace
 
 vec3 sample(const Keyframes<vec3>& track, float t) {
-  return sample_track(track, t, [](const vec3& a, const vec3& b, float f) { return glm::mix(a, b, f); });
+  return sample_track(
+      track, t, [](const vec3& a, const vec3& b, float f) { return glm::mix(a, b, f); },
+      kb_vector<vec3>);
 }
 
 dvec3 sample(const Keyframes<dvec3>& track, float t) {
-  return sample_track(track, t, [](const dvec3& a, const dvec3& b, float f) {
-    return glm::mix(a, b, double(f));
-  });
+  return sample_track(
+      track, t, [](const dvec3& a, const dvec3& b, float f) { return glm::mix(a, b, double(f)); },
+      kb_vector<dvec3>);
 }
 
 quat sample(const Keyframes<quat>& track, float t) {
-  return sample_track(track, t, [](const quat& a, const quat& b, float f) {
-    return glm::normalize(glm::slerp(a, b, f));
-  });
+  return sample_track(
+      track, t,
+      [](const quat& a, const quat& b, float f) { return glm::normalize(glm::slerp(a, b, f)); },
+      kb_rotation);
 }
 
 void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3>& out) {
@@ -100,6 +201,9 @@ void validate_animation(const Animation& a, std::size_t vertex_count, const std:
   check_times(a.rotation, context, field + ".rotation");
   check_times(a.scale, context, field + ".scale");
   check_times(a.vertices, context, field + ".vertices");
+  if (a.vertices.interpolation == Interpolation::KochanekBartels)
+    throw Error(context, field + ".vertices",
+                "vertex tracks interpolate linearly or by step, not Kochanek-Bartels");
   for (std::size_t i = 0; i < a.translation.values.size(); ++i)
     if (!is_finite(a.translation.values[i]) || !in_range(a.translation.values[i]))
       throw Error(context, field + ".translation.values[" + std::to_string(i) + "]",

@@ -12,8 +12,10 @@
 namespace specula {
 
 /// Track value at time t: clamped to the first/last key outside the keys' range; Step holds the
-/// previous key; Linear lerps vectors and slerps rotations (shortest arc). Tracks must be
-/// non-empty and valid (validate_animation).
+/// previous key; Linear lerps vectors and slerps rotations (shortest arc); KochanekBartels
+/// (BART's kbsplpos/kbsplrot, see Interpolation) is clamped to keys 1 and size-2, passes through
+/// every key in between, and keeps rotations unit length. Tracks must be non-empty and valid
+/// (validate_animation).
 [[nodiscard]] vec3 sample(const Keyframes<vec3>& track, float t);
 [[nodiscard]] dvec3 sample(const Keyframes<dvec3>& track, float t);
 [[nodiscard]] quat sample(const Keyframes<quat>& track, float t);
@@ -28,6 +30,8 @@ void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3
 [[nodiscard]] CameraPath::Key sample(const CameraPath& path, float t);
 
 /// Throws specula::Error(context, field, ...) for: times not finite or not strictly increasing,
+/// a Kochanek-Bartels track with fewer than 4 keys or without one finite tcb triple per key, tcb
+/// on another interpolation, a Kochanek-Bartels vertex track,
 /// a values count different from the times count, non-finite values, translations or camera
 /// positions outside ±kMaxCoordinate (core/math.h), zero-length rotations,
 /// vertex keys whose size differs from `vertex_count` (pass 0 when there is no mesh: any vertex

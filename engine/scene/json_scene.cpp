@@ -467,17 +467,24 @@ template <typename V, typename ReadValue>
 Keyframes<V> read_track(const Reader& r, const json& j, const std::string& path,
                         ReadValue read_value) {
   Keyframes<V> track;
-  const Object o(r, j, path, {"interpolation", "times", "values"}, "keyframe track");
+  const Object o(r, j, path, {"interpolation", "times", "values", "tcb"}, "keyframe track");
   if (const json* v = o.find("interpolation")) {
     const std::string mode = read_string(r, *v, o.path("interpolation"));
     if (mode == "linear") {
       track.interpolation = Interpolation::Linear;
     } else if (mode == "step") {
       track.interpolation = Interpolation::Step;
+    } else if (mode == "kochanek-bartels") {
+      track.interpolation = Interpolation::KochanekBartels;
     } else {
       r.fail(o.path("interpolation"),
-             "unknown interpolation \"" + mode + "\" (expected linear or step)");
+             "unknown interpolation \"" + mode + "\" (expected linear, step or kochanek-bartels)");
     }
+  }
+  if (const json* v = o.find("tcb")) {
+    const json& tcb = read_array(r, *v, o.path("tcb"), "one [tension, continuity, bias] per key");
+    for (std::size_t i = 0; i < tcb.size(); ++i)
+      track.tcb.push_back(read_vec<3>(r, tcb[i], element_path(o.path("tcb"), i)));
   }
   const json& times = read_array(r, o.require("times"), o.path("times"), "key times in seconds");
   const json& values =
@@ -951,12 +958,18 @@ Out write_camera_path(const Writer& w, const CameraPath& p) {
 template <typename V, typename WriteValue>
 Out write_track(const Writer& w, const Keyframes<V>& track, WriteValue write_value) {
   Out o = Out::object();
-  o.add("interpolation",
-        Writer::string(track.interpolation == Interpolation::Step ? "step" : "linear"));
+  const char* mode = track.interpolation == Interpolation::Step     ? "step"
+                     : track.interpolation == Interpolation::Linear ? "linear"
+                                                                    : "kochanek-bartels";
+  o.add("interpolation", Writer::string(mode));
   Out& times = o.add("times", Out::array());
   for (const float t : track.times) times.push(w.number(t));
   Out& values = o.add("values", Out::array());
   for (const V& v : track.values) values.push(write_value(v));
+  if (!track.tcb.empty()) {
+    Out& tcb = o.add("tcb", Out::array());
+    for (const vec3& k : track.tcb) tcb.push(w.vec<3>(k));
+  }
   return o;
 }
 

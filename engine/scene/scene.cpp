@@ -1,6 +1,7 @@
 #include "specula/scene/scene.h"
 
 #include "specula/core/error.h"
+#include "specula/scene/aff_loader.h"
 #include "specula/scene/components.h"
 #include "specula/scene/gltf_loader.h"
 #include "specula/scene/hierarchy.h"
@@ -71,11 +72,13 @@ Scene load_scene(const std::filesystem::path& path) {
     scene = load_json_scene(path);
   } else if (ext == ".gltf" || ext == ".glb") {
     scene = load_gltf_scene(path);
+  } else if (ext == ".aff" || ext == ".nff") {
+    scene = load_aff_scene(path);
   } else if (is_mesh_file_extension(ext)) {
     scene = scene_from_mesh_file(path);
   } else {
     throw Error(path.string(), "unknown file extension '" + ext +
-                                   "' (expected .json, .gltf, .glb, .obj, .ply, .off or .stl)");
+                                   "' (expected .json, .gltf, .glb, .aff, .nff, .obj, .ply, .off or .stl)");
   }
   scene.source = path;
   if (scene.registry.alive() > kMaxEntities)

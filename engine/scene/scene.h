@@ -20,6 +20,12 @@ struct RenderSettings {
   std::uint32_t height = 1024;
   std::uint32_t max_depth = 5;
   vec3 background{0.0f};
+  /// The animation a scene file asks to render (AFF `a START END FRAMES`): frame i of
+  /// anim_frames is at time anim_start + i·(anim_end − anim_start)/(anim_frames − 1) (a single
+  /// frame at anim_start). anim_frames = 0: the file gives none.
+  double anim_start = 0.0;
+  double anim_end = 0.0;
+  std::uint32_t anim_frames = 0;
   friend bool operator==(const RenderSettings&, const RenderSettings&) = default;
 };
 
@@ -43,8 +49,8 @@ inline constexpr std::uint64_t kMaxEntities = 10'000'000;
 /// deep chains cost, so 64 is honoured as it is.
 inline constexpr std::uint32_t kMaxTraceDepth = 64;
 
-/// Reads a scene by extension: .json (Specula), .gltf/.glb (glTF 2.0), .obj/.ply/.off/.stl (one
-/// mesh). Then, whatever the format: computes world transforms, which checks the hierarchy
+/// Reads a scene by extension: .json (Specula), .gltf/.glb (glTF 2.0), .aff/.nff (BART's
+/// animated NFF, aff_loader.h), .obj/.ply/.off/.stl (one mesh). Then, whatever the format: computes world transforms, which checks the hierarchy
 /// (update_world_transforms), settles Kinematics (settle_kinematics: stated ones checked, the
 /// others inferred), and adds the default camera and light when the file has none
 /// (add_defaults). Throws specula::Error naming the file and the problem, including an entity

@@ -5,13 +5,20 @@
 
 namespace specula {
 
-enum class Interpolation { Step, Linear }; ///< Linear = lerp for vectors, slerp for rotations
+/// Linear = lerp for vectors, slerp for rotations. KochanekBartels = the TCB spline of Kochanek
+/// and Bartels (SIGGRAPH 1984) as BART uses it (animation_sampling.h): Hermite segments with
+/// per-key tension/continuity/bias tangents for vectors, squad with the same tangents taken in
+/// the quaternion logarithm for rotations. It needs at least four keys: the first and the last
+/// only shape the end tangents, so the track runs from times[1] to times[size - 2].
+enum class Interpolation { Step, Linear, KochanekBartels };
 
 template <typename V>
 struct Keyframes {
   std::vector<float> times; ///< seconds, strictly increasing
   std::vector<V> values;    ///< one per time
   Interpolation interpolation = Interpolation::Linear;
+  /// KochanekBartels only: tension, continuity, bias per key (one per time); empty otherwise.
+  std::vector<vec3> tcb;
   [[nodiscard]] bool empty() const { return times.empty(); }
   friend bool operator==(const Keyframes&, const Keyframes&) = default;
 };
