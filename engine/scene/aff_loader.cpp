@@ -59,8 +59,10 @@ public:
 
   Token next(std::string_view what) {
     const std::optional<Token> t = peek();
-    if (!t) fail(line_, "unexpected end of file, expected " + std::string(what));
+    // At the end, the line of the last token: the one whose command is incomplete.
+    if (!t) fail(last_line_, "unexpected end of file, expected " + std::string(what));
     pos_ += t->text.size();
+    last_line_ = t->line;
     return *t;
   }
 
@@ -146,6 +148,7 @@ private:
   std::string file_;
   std::size_t pos_ = 0;
   int line_ = 1;
+  int last_line_ = 1;
 };
 
 /// Bytes one number takes at least (a digit and a separator): bounds counts against the file.

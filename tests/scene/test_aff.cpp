@@ -292,7 +292,9 @@ INSTANTIATE_TEST_SUITE_P(
         BadAff{"key_order", "x n {\n}\nk n {\ntransl 4\n0 0 0 0 0 0 0\n1 0 0 0 0 0 0\n"
                             "1 0 0 0 0 0 0\n2 0 0 0 0 0 0\n}\n",
                7, "strictly increasing"},
-        BadAff{"few_keys", "x n {\n}\nk n {\ntransl 3\n", 4, "at least 4"},
+        BadAff{"few_keys",
+               "x n {\n}\nk n {\ntransl 3\n0 0 0 0 0 0 0\n1 0 0 0 0 0 0\n2 0 0 0 0 0 0\n}\n",
+               4, "at least 4"},
         BadAff{"unknown_name", "k ghost {\n}\n", 1, "ghost"},
         BadAff{"unbalanced", "x n {\n}\n}\n", 3, "without an open transform"},
         BadAff{"unclosed", "\nxs 1 1 1 0 1 0 0 0 0 0 {\n", 2, "never closed"},
@@ -301,7 +303,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadAff{"bad_view", "v\nfrom 0 0 0\nat 0 0 1\nup 0 1 0\nangle 200\nhither 1\n"
                            "resolution 4 4\n",
                1, "angle"}),
-    [](const auto& info) { return std::string(info.param.name); });
+    [](const ::testing::TestParamInfo<BadAff>& p) { return std::string(p.param.name); });
 
 TEST(Aff, IncludeCycleIsAnError) {
   try {
