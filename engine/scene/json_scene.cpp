@@ -465,9 +465,12 @@ CameraPath read_camera_path(const Reader& r, const json& j, const std::string& p
 
 template <typename V, typename ReadValue>
 Keyframes<V> read_track(const Reader& r, const json& j, const std::string& path,
-                        ReadValue read_value) {
+                        ReadValue read_value, bool splines = true) {
   Keyframes<V> track;
-  const Object o(r, j, path, {"interpolation", "times", "values", "tcb"}, "keyframe track");
+  // Vertex tracks take no spline (validate_animation), so no "tcb" either.
+  const Object o =
+      splines ? Object(r, j, path, {"interpolation", "times", "values", "tcb"}, "keyframe track")
+              : Object(r, j, path, {"interpolation", "times", "values"}, "keyframe track");
   if (const json* v = o.find("interpolation")) {
     const std::string mode = read_string(r, *v, o.path("interpolation"));
     if (mode == "linear") {
@@ -532,7 +535,8 @@ Animation read_animation(const Reader& r, const json& j, const std::string& path
           for (std::size_t i = 0; i < x.size(); ++i)
             key.push_back(read_vec<3>(r, x[i], element_path(at, i)));
           return key;
-        });
+        },
+        false);
   }
   validate_animation(a, mesh && mesh->geometry ? mesh->geometry->vertex_count() : 0, r.file(),
                      path);
