@@ -20,8 +20,8 @@
 namespace specula {
 namespace {
 
-/// Most animation frames `a` may ask for, and most keys one track or `tpa` may have.
-constexpr std::uint64_t kMaxFrames = 10'000'000;
+/// Most keys one track or `tpa` may have.
+constexpr std::uint64_t kMaxFrames = kMaxAnimationFrames;
 /// Camera path keys sampled per time unit when the file gives no frames (`a`).
 constexpr double kCameraSamplesPerSecond = 60.0;
 
@@ -224,6 +224,9 @@ private:
   void mesh(Lexer& lex);
   void animated_triangle(Lexer& lex);
   void sphere(Lexer& lex);
+  void cone(Lexer& lex);
+  void place_primitive(const MeshSource& source, std::shared_ptr<const TriangleMesh> geometry,
+                       const Transform& tr, const std::string& what);
   void include(Lexer& lex, const std::filesystem::path& path, int depth, int line);
   void keyframes(Lexer& lex, int line);
   void transform(Lexer& lex, bool is_static, int line);
@@ -295,7 +298,7 @@ void AffReader::command(Lexer& lex, const std::filesystem::path& path, int depth
   } else if (c == "s") {
     sphere(lex);
   } else if (c == "c") {
-    lex.fail(t.line, "cones and cylinders ('c') are not supported by Specula's AFF reader");
+    cone(lex);
   } else if (c == "d") {
     detail_level_ = int(lex.count("detail level", 1'000'000, 0));
   } else if (c == "i") {
@@ -303,8 +306,9 @@ void AffReader::command(Lexer& lex, const std::filesystem::path& path, int depth
   } else if (c == "a") {
     const float start = lex.number("animation start time");
     const float end = lex.number("animation end time");
-    const std::uint64_t frames = lex.count("number of frames", kMaxFrames, 0);
+    const std::uint64_t frames = lex.count("number of frames", kMaxAnimationFrames, 0);
     if (!(end >= start)) lex.fail(t.line, "animation end time is before its start time");
+    if (frames == 0) lex.fail(t.line, "the number of frames must be at least 1");
     scene_.settings.anim_start = start;
     scene_.settings.anim_end = end;
     scene_.settings.anim_frames = std::uint32_t(frames);
@@ -532,21 +536,71 @@ void AffReader::sphere(Lexer& lex) {
   const vec3 center = lex.vector("sphere centre");
   const float radius = lex.number("sphere radius");
   if (!(radius > 0.0f)) lex.fail(line, "sphere radius must be positive");
-  add_triangles(lex, line, 2 * 32 * 16);
   MeshSource source;
   source.kind = MeshSource::Kind::Primitive;
   source.primitive = "sphere";
   source.radius = 1.0f;
-  const ecs::Entity e = reg_.create();
-  reg_.emplace<Name>(e, "sphere@" + lex.file() + ":" + std::to_string(line));
+  if (!unit_sphere_)
+    unit_sphere_ = std::make_shared<const TriangleMesh>(make_primitive(source, lex.file()));
+  add_triangles(lex, line, unit_sphere_->triangle_count());
   Transform tr;
   tr.translation = dvec3(center);
   tr.scale = vec3(radius);
+  place_primitive(source, unit_sphere_, tr, "sphere@" + lex.file() + ":" + std::to_string(line));
+}
+
+void AffReader::cone(Lexer& lex) {
+  const int line = command_line_;
+  vec3 base = lex.vector("cone base");
+  float r0 = lex.number("cone base radius");
+  vec3 apex = lex.vector("cone apex");
+  float r1 = lex.number("cone apex radius");
+  // Negative radii mean "seen from inside" in NFF; the tracers see both sides anyway.
+  r0 = std::abs(r0);
+  r1 = std::abs(r1);
+  if (r0 < r1) {
+    std::swap(base, apex);
+    std::swap(r0, r1);
+  }
+  const vec3 axis = apex - base;
+  const float height = glm::length(axis);
+  if (!(height > 0.0f)) lex.fail(line, "cone base and apex coincide");
+  if (!(r0 > 0.0f)) lex.fail(line, "cone radii are zero");
+  MeshSource source;
+  source.kind = MeshSource::Kind::Primitive;
+  source.radius = r0;
+  source.height = height;
+  if (r1 == r0) {
+    source.primitive = "cylinder";
+  } else if (r1 == 0.0f) {
+    source.primitive = "cone";
+  } else {
+    lex.fail(line, "truncated cones (two different non-zero radii) are not supported");
+  }
+  auto geometry = std::make_shared<const TriangleMesh>(make_primitive(source, lex.file()));
+  add_triangles(lex, line, geometry->triangle_count());
+  // The primitives stand on +Y about the origin: turn +Y onto the axis, centre on its middle.
+  const vec3 dir = axis / height;
+  Transform tr;
+  tr.translation = dvec3(0.5f * (base + apex));
+  const vec3 turn = glm::cross(vec3(0, 1, 0), dir);
+  const float angle = std::atan2(glm::length(turn), dir.y);
+  if (glm::length(turn) > 1e-7f)
+    tr.rotation = glm::angleAxis(angle, glm::normalize(turn));
+  else if (dir.y < 0.0f)
+    tr.rotation = glm::angleAxis(glm::pi<float>(), vec3(1, 0, 0));
+  place_primitive(source, std::move(geometry), tr,
+                  source.primitive + "@" + lex.file() + ":" + std::to_string(line));
+}
+
+void AffReader::place_primitive(const MeshSource& source,
+                                std::shared_ptr<const TriangleMesh> geometry, const Transform& tr,
+                                const std::string& what) {
+  const ecs::Entity e = reg_.create();
+  reg_.emplace<Name>(e, what);
   reg_.emplace<Transform>(e, tr);
   if (current_parent() != ecs::null_entity) reg_.emplace<Parent>(e, Parent{current_parent()});
-  if (!unit_sphere_)
-    unit_sphere_ = std::make_shared<const TriangleMesh>(make_primitive(source, lex.file()));
-  reg_.emplace<Mesh>(e, Mesh{unit_sphere_, source, {}, 0});
+  reg_.emplace<Mesh>(e, Mesh{std::move(geometry), source, {}, 0});
   reg_.emplace<Material>(e, materials_[material_]);
 }
 

@@ -155,7 +155,8 @@ vec3 read_plane_size(const Reader& r, const json& j, const std::string& path) {
 
 RenderSettings read_settings(const Reader& r, const json& j, const std::string& path) {
   RenderSettings s;
-  const Object o(r, j, path, {"width", "height", "max_depth", "background"}, "render settings");
+  const Object o(r, j, path, {"width", "height", "max_depth", "background", "animation"},
+                 "render settings");
   if (const json* v = o.find("width")) s.width = read_u32(r, *v, o.path("width"), 1, kMaxImageSide);
   if (const json* v = o.find("height"))
     s.height = read_u32(r, *v, o.path("height"), 1, kMaxImageSide);
@@ -163,6 +164,14 @@ RenderSettings read_settings(const Reader& r, const json& j, const std::string& 
     s.max_depth = read_u32(r, *v, o.path("max_depth"), 0, kMaxTraceDepth);
   if (const json* v = o.find("background"))
     s.background = read_radiance(r, *v, o.path("background"));
+  if (const json* v = o.find("animation")) {
+    const std::string at = o.path("animation");
+    const Object a(r, *v, at, {"start", "end", "frames"}, "animation frames");
+    s.anim_start = read_number(r, a.require("start"), a.path("start"));
+    s.anim_end = read_number(r, a.require("end"), a.path("end"));
+    s.anim_frames = read_u32(r, a.require("frames"), a.path("frames"), 1, kMaxAnimationFrames);
+    r.check(s.anim_end >= s.anim_start, a.path("end"), "the end is before the start");
+  }
   return s;
 }
 
@@ -845,6 +854,12 @@ Out write_settings(const Writer& w, const RenderSettings& s) {
   o.add("height", Writer::integer(s.height));
   o.add("max_depth", Writer::integer(s.max_depth));
   o.add("background", w.vec<3>(s.background));
+  if (s.anim_frames > 0) {
+    Out& a = o.add("animation", Out::object());
+    a.add("start", w.number(s.anim_start));
+    a.add("end", w.number(s.anim_end));
+    a.add("frames", Writer::integer(s.anim_frames));
+  }
   return o;
 }
 

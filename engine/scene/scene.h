@@ -20,9 +20,10 @@ struct RenderSettings {
   std::uint32_t height = 1024;
   std::uint32_t max_depth = 5;
   vec3 background{0.0f};
-  /// The animation a scene file asks to render (AFF `a START END FRAMES`): frame i of
-  /// anim_frames is at time anim_start + i·(anim_end − anim_start)/(anim_frames − 1) (a single
-  /// frame at anim_start). anim_frames = 0: the file gives none.
+  /// The animation a scene file asks to render (AFF `a START END FRAMES`, JSON
+  /// settings.animation): frame i of anim_frames is at time
+  /// anim_start + i·(anim_end − anim_start)/(anim_frames − 1) (a single frame at anim_start).
+  /// anim_frames = 0: the file gives none; at most kMaxAnimationFrames.
   double anim_start = 0.0;
   double anim_end = 0.0;
   std::uint32_t anim_frames = 0;
@@ -43,6 +44,8 @@ inline constexpr std::uint64_t kMaxTriangles = 100'000'000;
 /// Largest vertex count of one mesh: three distinct vertices per triangle.
 inline constexpr std::uint64_t kMaxVertices = 3 * kMaxTriangles;
 inline constexpr std::uint64_t kMaxEntities = 10'000'000;
+/// Most frames RenderSettings::anim_frames may ask for.
+inline constexpr std::uint32_t kMaxAnimationFrames = 10'000'000;
 /// Longest chain of secondary rays (RenderSettings::max_depth) a scene may ask for, and the
 /// most the render job accepts (render/render_job.h), so `info` and `render` agree on every file.
 /// The Whitted integrator traces in waves, not by recursion, and kMaxRaysPerPixel bounds what

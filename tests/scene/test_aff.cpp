@@ -109,6 +109,31 @@ TEST(Aff, ParsesEveryStaticCommandIntoComponents) {
   EXPECT_EQ(reg.get<Kinematics>(meshes_under(reg, xs)[0]).type, Kinematics::Type::Static);
 }
 
+TEST(Aff, CylindersAndConesBecomePrimitivesAlongTheirAxis) {
+  const fs::path path = fs::temp_directory_path() / "specula_aff_cones.aff";
+  std::ofstream(path) << "c 1 2 3 0.5 1 2 7 0.5\n"   // cylinder along +Z, length 4
+                         "c 0 0 0 2 0 -3 0 0\n";     // cone pointing down -Y
+  Scene scene = load_scene(path);
+  ecs::Registry& reg = scene.registry;
+  int found = 0;
+  reg.view<Mesh, Transform>().each([&](const Mesh& m, const Transform& t) {
+    const vec3 axis = t.rotation * vec3(0, 1, 0); // the primitive's +Y in the scene
+    if (m.source.primitive == "cylinder") {
+      ++found;
+      EXPECT_FLOAT_EQ(m.source.radius, 0.5f);
+      EXPECT_FLOAT_EQ(m.source.height, 4.0f);
+      EXPECT_EQ(t.translation, dvec3(1, 2, 5));
+      EXPECT_NEAR(axis.z, 1.0f, 1e-6f);
+    } else if (m.source.primitive == "cone") {
+      ++found;
+      EXPECT_FLOAT_EQ(m.source.radius, 2.0f);
+      EXPECT_FLOAT_EQ(m.source.height, 3.0f);
+      EXPECT_NEAR(axis.y, -1.0f, 1e-6f); // apex (primitive +Y) towards the file's apex
+    }
+  });
+  EXPECT_EQ(found, 2);
+}
+
 TEST(Aff, KeyframedTransformIsHierarchicalWithKochanekBartelsTracks) {
   Scene scene = load_scene(kData / "basic.aff");
   ecs::Registry& reg = scene.registry;
@@ -160,6 +185,8 @@ TEST(Aff, SavesToJsonAndLoadsBackEqual) {
   ASSERT_NE(b, ecs::null_entity);
   EXPECT_EQ(scene.registry.get<Animation>(a), back.registry.get<Animation>(b));
   EXPECT_EQ(back.registry.get<Animation>(b).rotation.tcb.size(), 4u);
+  EXPECT_EQ(back.settings, scene.settings); // `a` included
+  EXPECT_EQ(back.settings.anim_frames, 5u);
 }
 
 TEST(KochanekBartels, PassesThroughEveryInnerKeyAndClampsToThem) {
@@ -298,7 +325,8 @@ INSTANTIATE_TEST_SUITE_P(
         BadAff{"unknown_name", "k ghost {\n}\n", 1, "ghost"},
         BadAff{"unbalanced", "x n {\n}\n}\n", 3, "without an open transform"},
         BadAff{"unclosed", "\nxs 1 1 1 0 1 0 0 0 0 0 {\n", 2, "never closed"},
-        BadAff{"cone", "c 0 0 0 1 0 1 0 1\n", 1, "not supported"},
+        BadAff{"truncated_cone", "c 0 0 0 1 0 1 0 0.5\n", 1, "not supported"},
+        BadAff{"flat_cone", "\nc 0 0 0 1 0 0 0 1\n", 2, "coincide"},
         BadAff{"missing_include", "\ni 0 nowhere.aff\n", 2, "not found"},
         BadAff{"bad_view", "v\nfrom 0 0 0\nat 0 0 1\nup 0 1 0\nangle 200\nhither 1\n"
                            "resolution 4 4\n",
