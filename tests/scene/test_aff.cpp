@@ -86,14 +86,24 @@ TEST(Aff, ParsesEveryStaticCommandIntoComponents) {
       ++green;
       EXPECT_FLOAT_EQ(m.reflectivity, 0.4f); // largest specular component of `fm`
       const auto& geometry = *reg.get<Mesh>(e).geometry;
-      if (geometry.triangle_count() == 1) {
+      if (geometry.triangle_count() == 1 && geometry.uvs.empty()) {
         ASSERT_EQ(geometry.normals.size(), 3u); // `pp` keeps its normals
       }
     }
     EXPECT_EQ(reg.get<Kinematics>(e).type, Kinematics::Type::Static);
   }
   EXPECT_EQ(red, 1u);
-  EXPECT_GE(green, 2u); // pp, sphere
+  EXPECT_EQ(green, 4u); // pp, sphere, tt, ttp: each its own vertex layout
+  std::size_t textured = 0;
+  for (const ecs::Entity e : root) {
+    const Mesh& mesh = reg.get<Mesh>(e);
+    const TriangleMesh& g = *mesh.geometry;
+    if (g.uvs.empty() || mesh.source.kind == MeshSource::Kind::Primitive) continue;
+    ++textured; // `tt` / `ttp`: texture coordinates kept (the texture is not)
+    EXPECT_EQ(g.uvs[1], vec2(1, 0));
+    EXPECT_EQ(g.normals.size(), g.positions[0].z == -2.0f ? 3u : 0u);
+  }
+  EXPECT_EQ(textured, 2u);
 
   // `xs`: a static node with its TRS, its `m` mesh beneath it.
   ecs::Entity xs = ecs::null_entity;
