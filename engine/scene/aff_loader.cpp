@@ -260,7 +260,9 @@ private:
   std::map<std::tuple<std::uint32_t, std::uint32_t, std::vector<float>>, std::size_t>
       morph_index_;
   std::vector<PendingKeys> keys_;
-  std::unordered_map<std::string, ecs::Entity> named_;
+  /// Transforms and animated lights by name. BART looks animations up by name, so every node
+  /// of a name (an included part used twice) follows the same keyframes.
+  std::unordered_map<std::string, std::vector<ecs::Entity>> named_;
   std::optional<ecs::Entity> camera_;
   std::vector<ecs::Entity> lights_;
   std::shared_ptr<const TriangleMesh> unit_sphere_;
@@ -374,8 +376,7 @@ void AffReader::light(Lexer& lex, bool animated) {
   l.color = color;
   reg_.emplace<Light>(e, l);
   lights_.push_back(e);
-  if (animated && !named_.try_emplace(name, e).second)
-    lex.fail(line, "the name '" + name + "' is given twice");
+  if (animated) named_[name].push_back(e);
 }
 
 void AffReader::fill(Lexer& lex, bool extended) {
@@ -712,8 +713,7 @@ void AffReader::transform(Lexer& lex, bool is_static, int line) {
     name = "xs@" + lex.file() + ":" + std::to_string(line);
   } else {
     name = std::string(lex.next("transform name").text);
-    if (!named_.try_emplace(name, e).second)
-      lex.fail(line, "the name '" + name + "' is given twice");
+    named_[name].push_back(e);
   }
   lex.expect("{", is_static ? "static transform 'xs'" : "transform 'x'");
   reg_.emplace<Name>(e, name);
@@ -777,16 +777,18 @@ void AffReader::finish() {
     if (it == named_.end())
       throw Error(pk.file, pk.line,
                   "keyframes for '" + pk.name + "', which no 'x' transform or 'la' light names");
-    if (reg_.try_get<Animation>(it->second))
-      throw Error(pk.file, pk.line, "keyframes for '" + pk.name + "' given twice");
-    Animation a = pk.animation;
-    a.time = t0;
-    // Start where the animation starts, so the first frame needs no update.
-    Transform& tr = reg_.get<Transform>(it->second);
-    if (!a.translation.empty()) tr.translation = sample(a.translation, t0);
-    if (!a.rotation.empty()) tr.rotation = sample(a.rotation, t0);
-    if (!a.scale.empty()) tr.scale = sample(a.scale, t0);
-    reg_.emplace<Animation>(it->second, std::move(a));
+    for (const ecs::Entity e : it->second) {
+      if (reg_.try_get<Animation>(e))
+        throw Error(pk.file, pk.line, "keyframes for '" + pk.name + "' given twice");
+      Animation a = pk.animation;
+      a.time = t0;
+      // Start where the animation starts, so the first frame needs no update.
+      Transform& tr = reg_.get<Transform>(e);
+      if (!a.translation.empty()) tr.translation = sample(a.translation, t0);
+      if (!a.rotation.empty()) tr.rotation = sample(a.rotation, t0);
+      if (!a.scale.empty()) tr.scale = sample(a.scale, t0);
+      reg_.emplace<Animation>(e, std::move(a));
+    }
   }
 
   const auto add_mesh = [&](ecs::Entity parent, std::uint32_t material, std::string name,

@@ -343,6 +343,26 @@ INSTANTIATE_TEST_SUITE_P(
                1, "angle"}),
     [](const ::testing::TestParamInfo<BadAff>& p) { return std::string(p.param.name); });
 
+TEST(Aff, KeyframesAnimateEveryTransformOfTheirName) {
+  // BART finds animations by name: a part included twice moves twice.
+  const fs::path path = fs::temp_directory_path() / "specula_aff_twice.aff";
+  std::ofstream(path) << "x wheel {\np 3 0 0 0 1 0 0 0 1 0\n}\n"
+                         "xs 1 1 1 0 1 0 0 5 0 0 {\nx wheel {\np 3 0 0 0 1 0 0 0 1 0\n}\n}\n"
+                         "k wheel {\nscale 4\n0 1 1 1 0 0 0\n1 1 1 1 0 0 0\n2 2 2 2 0 0 0\n"
+                         "3 2 2 2 0 0 0\n}\n";
+  Scene scene = load_scene(path);
+  std::size_t animated = 0;
+  scene.registry.view<Name, Animation>().each([&](const Name& n, const Animation& a) {
+    EXPECT_EQ(n.value, "wheel");
+    EXPECT_EQ(a.scale.interpolation, Interpolation::KochanekBartels);
+    ++animated;
+  });
+  EXPECT_EQ(animated, 2u);
+  scene.registry.view<Mesh, Kinematics>().each([](const Mesh&, const Kinematics& k) {
+    EXPECT_EQ(k.type, Kinematics::Type::Hierarchical);
+  });
+}
+
 TEST(Aff, IncludeCycleIsAnError) {
   try {
     (void)load_scene(kData / "cycle_a.aff");
