@@ -84,8 +84,8 @@ public:
     if (ec == std::errc::result_out_of_range)
       fail(t.line, std::string(what) + " '" + std::string(t.text) + "' is out of range");
     if (ec != std::errc() || ptr != last)
-      fail(t.line, "expected a number for " + std::string(what) + ", got '" +
-                       std::string(t.text) + "'");
+      fail(t.line,
+           "expected a number for " + std::string(what) + ", got '" + std::string(t.text) + "'");
     if (!std::isfinite(v)) fail(t.line, std::string(what) + " is not finite");
     return v;
   }
@@ -257,8 +257,7 @@ private:
   std::vector<Group> groups_;
   std::map<std::tuple<std::uint32_t, std::uint32_t, int>, std::size_t> group_index_;
   std::vector<Morph> morphs_;
-  std::map<std::tuple<std::uint32_t, std::uint32_t, std::vector<float>>, std::size_t>
-      morph_index_;
+  std::map<std::tuple<std::uint32_t, std::uint32_t, std::vector<float>>, std::size_t> morph_index_;
   std::vector<PendingKeys> keys_;
   /// Transforms and animated lights by name. BART looks animations up by name, so every node
   /// of a name (an included part used twice) follows the same keyframes.
@@ -279,7 +278,8 @@ void AffReader::command(Lexer& lex, const std::filesystem::path& path, int depth
     viewpoint(lex);
   } else if (c == "b") {
     const vec3 bg = lex.vector("background colour");
-    if (glm::any(glm::lessThan(bg, vec3(0.0f))) || glm::any(glm::greaterThan(bg, vec3(kMaxEmission))))
+    if (glm::any(glm::lessThan(bg, vec3(0.0f))) ||
+        glm::any(glm::greaterThan(bg, vec3(kMaxEmission))))
       lex.fail(t.line, "background colour components must be in [0, 1e20]");
     scene_.settings.background = bg;
   } else if (c == "am") {
@@ -415,8 +415,7 @@ void AffReader::fill(Lexer& lex, bool extended) {
 
 void AffReader::polygon(Lexer& lex, bool normals) {
   const int line = command_line_;
-  const std::uint64_t n =
-      lex.count("vertex count", kMaxVertices, (normals ? 6 : 3) * kNumberBytes);
+  const std::uint64_t n = lex.count("vertex count", kMaxVertices, (normals ? 6 : 3) * kNumberBytes);
   if (n < 3) lex.fail(line, "a polygon needs at least 3 vertices");
   add_triangles(lex, line, n - 2);
   Group& g = group(normals, false);
@@ -484,7 +483,8 @@ void AffReader::mesh(Lexer& lex) {
                        std::to_string(size) + " given)");
     return std::uint32_t(i);
   };
-  if (mesh.positions.size() + 3 * nt > kMaxVertices) lex.fail(line, "too many vertices in one mesh");
+  if (mesh.positions.size() + 3 * nt > kMaxVertices)
+    lex.fail(line, "too many vertices in one mesh");
   for (std::uint64_t k = 0; k < nt; ++k) {
     // Each corner gets its own vertex: positions, normals and coordinates are indexed apart.
     uvec3 v, n, c;
@@ -513,8 +513,7 @@ void AffReader::animated_triangle(Lexer& lex) {
   for (std::uint64_t k = 0; k < n; ++k) {
     const int at = lex.line();
     times[k] = lex.number("key time");
-    if (k > 0 && !(times[k] > times[k - 1]))
-      lex.fail(at, "key times must be strictly increasing");
+    if (k > 0 && !(times[k] > times[k - 1])) lex.fail(at, "key times must be strictly increasing");
     for (int j = 0; j < 3; ++j) {
       pos[3 * k + j] = lex.vector("vertex");
       nrm[3 * k + j] = lex.vector("normal");
@@ -660,7 +659,8 @@ void AffReader::keyframes(Lexer& lex, int line) {
     if (kind != 3 && n < 4)
       lex.fail(motion.line, "'" + std::string(motion.text) +
                                 "' needs at least 4 keys (the first and last only shape the "
-                                "spline's ends), got " + std::to_string(n));
+                                "spline's ends), got " +
+                                std::to_string(n));
     std::vector<float> times;
     for (std::uint64_t i = 0; i < n; ++i) {
       const int at = lex.line();
@@ -815,10 +815,9 @@ void AffReader::finish() {
     mesh.normals = std::move(m.normals);
     for (std::uint32_t i = 0; i < mesh.positions.size(); i += 3)
       mesh.triangles.push_back(uvec3(i, i + 1, i + 2));
-    const ecs::Entity e = add_mesh(m.parent, m.material,
-                                   node_name(m.parent) + "/morph " +
-                                       std::to_string(&m - morphs_.data()),
-                                   std::move(mesh));
+    const ecs::Entity e = add_mesh(
+        m.parent, m.material, node_name(m.parent) + "/morph " + std::to_string(&m - morphs_.data()),
+        std::move(mesh));
     if (m.times.size() > 1) {
       // BART's tpa interpolates linearly between its keys.
       Animation a;
@@ -835,8 +834,7 @@ void AffReader::finish() {
   const dvec3 target = camera_ ? reg_.get<Camera>(*camera_).look_at : dvec3(0.0);
   for (const ecs::Entity e : lights_) {
     const double d = glm::length(reg_.get<Transform>(e).translation - target);
-    reg_.get<Light>(e).intensity =
-        float(std::clamp(d * d, 1e-12, double(kMaxLightIntensity)));
+    reg_.get<Light>(e).intensity = float(std::clamp(d * d, 1e-12, double(kMaxLightIntensity)));
   }
 }
 

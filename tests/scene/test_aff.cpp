@@ -121,8 +121,8 @@ TEST(Aff, ParsesEveryStaticCommandIntoComponents) {
 
 TEST(Aff, CylindersAndConesBecomePrimitivesAlongTheirAxis) {
   const fs::path path = fs::temp_directory_path() / "specula_aff_cones.aff";
-  std::ofstream(path) << "c 1 2 3 0.5 1 2 7 0.5\n"   // cylinder along +Z, length 4
-                         "c 0 0 0 2 0 -3 0 0\n";     // cone pointing down -Y
+  std::ofstream(path) << "c 1 2 3 0.5 1 2 7 0.5\n" // cylinder along +Z, length 4
+                         "c 0 0 0 2 0 -3 0 0\n";   // cone pointing down -Y
   Scene scene = load_scene(path);
   ecs::Registry& reg = scene.registry;
   int found = 0;
@@ -200,11 +200,11 @@ TEST(Aff, SavesToJsonAndLoadsBackEqual) {
 }
 
 TEST(KochanekBartels, PassesThroughEveryInnerKeyAndClampsToThem) {
-  const auto k = kb_track({0, 1, 2.5f, 3, 5}, {vec3(0), vec3(1, 2, 3), vec3(-4, 0, 1),
-                                               vec3(2, 2, 2), vec3(9)},
-                          {vec3(0), vec3(0.3f, -0.2f, 0.5f), vec3(-0.5f, 0.4f, 0.1f), vec3(0.2f),
-                           vec3(0)});
-  for (std::size_t i = 1; i + 1 < k.times.size(); ++i) EXPECT_EQ(sample(k, k.times[i]), k.values[i]);
+  const auto k =
+      kb_track({0, 1, 2.5f, 3, 5}, {vec3(0), vec3(1, 2, 3), vec3(-4, 0, 1), vec3(2, 2, 2), vec3(9)},
+               {vec3(0), vec3(0.3f, -0.2f, 0.5f), vec3(-0.5f, 0.4f, 0.1f), vec3(0.2f), vec3(0)});
+  for (std::size_t i = 1; i + 1 < k.times.size(); ++i)
+    EXPECT_EQ(sample(k, k.times[i]), k.values[i]);
   EXPECT_EQ(sample(k, -10.0f), k.values[1]); // first and last keys only shape the ends
   EXPECT_EQ(sample(k, 10.0f), k.values[3]);
 }
@@ -326,20 +326,22 @@ INSTANTIATE_TEST_SUITE_P(
         BadAff{"two_vertices", "p 2\n0 0 0\n1 0 0\n", 1, "at least 3"},
         BadAff{"mesh_index", "m vertices 3 0 0 0 1 0 0 0 1 0\ntriangles 1\n0 1 3\n", 3,
                "out of range"},
-        BadAff{"key_order", "x n {\n}\nk n {\ntransl 4\n0 0 0 0 0 0 0\n1 0 0 0 0 0 0\n"
-                            "1 0 0 0 0 0 0\n2 0 0 0 0 0 0\n}\n",
+        BadAff{"key_order",
+               "x n {\n}\nk n {\ntransl 4\n0 0 0 0 0 0 0\n1 0 0 0 0 0 0\n"
+               "1 0 0 0 0 0 0\n2 0 0 0 0 0 0\n}\n",
                7, "strictly increasing"},
         BadAff{"few_keys",
-               "x n {\n}\nk n {\ntransl 3\n0 0 0 0 0 0 0\n1 0 0 0 0 0 0\n2 0 0 0 0 0 0\n}\n",
-               4, "at least 4"},
+               "x n {\n}\nk n {\ntransl 3\n0 0 0 0 0 0 0\n1 0 0 0 0 0 0\n2 0 0 0 0 0 0\n}\n", 4,
+               "at least 4"},
         BadAff{"unknown_name", "k ghost {\n}\n", 1, "ghost"},
         BadAff{"unbalanced", "x n {\n}\n}\n", 3, "without an open transform"},
         BadAff{"unclosed", "\nxs 1 1 1 0 1 0 0 0 0 0 {\n", 2, "never closed"},
         BadAff{"truncated_cone", "c 0 0 0 1 0 1 0 0.5\n", 1, "not supported"},
         BadAff{"flat_cone", "\nc 0 0 0 1 0 0 0 1\n", 2, "coincide"},
         BadAff{"missing_include", "\ni 0 nowhere.aff\n", 2, "not found"},
-        BadAff{"bad_view", "v\nfrom 0 0 0\nat 0 0 1\nup 0 1 0\nangle 200\nhither 1\n"
-                           "resolution 4 4\n",
+        BadAff{"bad_view",
+               "v\nfrom 0 0 0\nat 0 0 1\nup 0 1 0\nangle 200\nhither 1\n"
+               "resolution 4 4\n",
                1, "angle"}),
     [](const ::testing::TestParamInfo<BadAff>& p) { return std::string(p.param.name); });
 
@@ -358,9 +360,8 @@ TEST(Aff, KeyframesAnimateEveryTransformOfTheirName) {
     ++animated;
   });
   EXPECT_EQ(animated, 2u);
-  scene.registry.view<Mesh, Kinematics>().each([](const Mesh&, const Kinematics& k) {
-    EXPECT_EQ(k.type, Kinematics::Type::Hierarchical);
-  });
+  scene.registry.view<Mesh, Kinematics>().each(
+      [](const Mesh&, const Kinematics& k) { EXPECT_EQ(k.type, Kinematics::Type::Hierarchical); });
 }
 
 TEST(Aff, IncludeCycleIsAnError) {
