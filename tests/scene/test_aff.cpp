@@ -197,6 +197,12 @@ TEST(Aff, SavesToJsonAndLoadsBackEqual) {
   EXPECT_EQ(back.registry.get<Animation>(b).rotation.tcb.size(), 4u);
   EXPECT_EQ(back.settings, scene.settings); // `a` included
   EXPECT_EQ(back.settings.anim_frames, 5u);
+  const SceneSummary sa = summarize(scene), sb = summarize(back);
+  EXPECT_EQ(sb.mesh_entities, sa.mesh_entities);
+  EXPECT_EQ(sb.triangles, sa.triangles);
+  EXPECT_EQ(sb.materials, sa.materials);
+  EXPECT_EQ(sb.lights, sa.lights);
+  EXPECT_EQ(sb.animated, sa.animated);
 }
 
 TEST(KochanekBartels, PassesThroughEveryInnerKeyAndClampsToThem) {
@@ -362,6 +368,16 @@ TEST(Aff, KeyframesAnimateEveryTransformOfTheirName) {
   EXPECT_EQ(animated, 2u);
   scene.registry.view<Mesh, Kinematics>().each(
       [](const Mesh&, const Kinematics& k) { EXPECT_EQ(k.type, Kinematics::Type::Hierarchical); });
+}
+
+TEST(Aff, IncludesAboveTheDetailLevelAreSkipped) {
+  const fs::path dir = fs::temp_directory_path() / "specula_aff_detail";
+  fs::create_directories(dir / "sub");
+  std::ofstream(dir / "sub" / "coarse.aff") << "p 3 0 0 0 1 0 0 0 1 0\n";
+  std::ofstream(dir / "sub" / "fine.aff") << "p 3 0 0 0 1 0 0 0 1 0\np 3 0 0 0 1 0 0 0 1 0\n";
+  std::ofstream(dir / "scene.aff") << "d 1\ni 1 sub/coarse.aff\ni 2 sub/fine.aff\n";
+  Scene scene = load_scene(dir / "scene.aff");
+  EXPECT_EQ(summarize(scene).triangles, 1u); // detail 2 > level 1: fine.aff left out
 }
 
 TEST(Aff, IncludeCycleIsAnError) {
