@@ -345,6 +345,8 @@ void AffReader::viewpoint(Lexer& lex) {
   if (w == 0 || h == 0) lex.fail(line, "resolution must be at least 1 x 1");
   if (!(angle > 0.0f && angle < 180.0f)) lex.fail(line, "angle must be in (0, 180) degrees");
   if (cam.position == cam.look_at) lex.fail(line, "'from' and 'at' must differ");
+  if (!in_range(cam.position) || !in_range(cam.look_at))
+    lex.fail(line, std::string("'from' or 'at' is outside ") + kCoordinateRangeText);
   if (!(glm::length(cam.up) > 0.0f)) lex.fail(line, "'up' must not be zero");
   // AFF: the angle is the vertical field of view, the aspect width / height.
   cam.vertical_fov = glm::radians(angle);

@@ -121,10 +121,11 @@ void check_times(const Keyframes<V>& track, const std::string& context, const st
       throw Error(context, field + ".tcb",
                   std::to_string(track.times.size()) + " key times but " +
                       std::to_string(track.tcb.size()) + " tension/continuity/bias triples");
+    // Kochanek and Bartels define the three on [-1, 1]; beyond it tangents can overflow.
     for (std::size_t i = 0; i < track.tcb.size(); ++i)
-      if (!is_finite(track.tcb[i]))
+      if (!is_finite(track.tcb[i]) || glm::any(glm::greaterThan(glm::abs(track.tcb[i]), vec3(1.0f))))
         throw Error(context, field + ".tcb[" + std::to_string(i) + "]",
-                    "tension, continuity and bias must be finite");
+                    "tension, continuity and bias must be in [-1, 1]");
   } else if (!track.tcb.empty()) {
     throw Error(context, field + ".tcb",
                 "tension/continuity/bias only apply to Kochanek-Bartels interpolation");

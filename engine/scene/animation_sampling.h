@@ -30,7 +30,7 @@ void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3
 [[nodiscard]] CameraPath::Key sample(const CameraPath& path, float t);
 
 /// Throws specula::Error(context, field, ...) for: times not finite or not strictly increasing,
-/// a Kochanek-Bartels track with fewer than 4 keys or without one finite tcb triple per key, tcb
+/// a Kochanek-Bartels track with fewer than 4 keys or without one tcb triple in [-1, 1] per key, tcb
 /// on another interpolation, a Kochanek-Bartels vertex track,
 /// a values count different from the times count, non-finite values, translations or camera
 /// positions outside ±kMaxCoordinate (core/math.h), zero-length rotations,

@@ -287,6 +287,8 @@ TEST(KochanekBartels, ValidationRejectsShortTracksAndBadTcb) {
   EXPECT_THROW(validate_animation(a, 0, "t", "a"), Error); // 3 tcb for 4 keys
   a.translation.tcb.push_back(vec3(std::nanf("")));
   EXPECT_THROW(validate_animation(a, 0, "t", "a"), Error);
+  a.translation.tcb.back() = vec3(0, 1.5f, 0); // outside Kochanek–Bartels' [-1, 1]
+  EXPECT_THROW(validate_animation(a, 0, "t", "a"), Error);
   a.translation.tcb.back() = vec3(0);
   EXPECT_NO_THROW(validate_animation(a, 0, "t", "a"));
 }
@@ -345,6 +347,13 @@ INSTANTIATE_TEST_SUITE_P(
         BadAff{"truncated_cone", "c 0 0 0 1 0 1 0 0.5\n", 1, "not supported"},
         BadAff{"flat_cone", "\nc 0 0 0 1 0 0 0 1\n", 2, "coincide"},
         BadAff{"missing_include", "\ni 0 nowhere.aff\n", 2, "not found"},
+        BadAff{"far_view",
+               "v\nfrom 0 0 1e30\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 4 4\n", 1,
+               "outside"},
+        BadAff{"wild_tension",
+               "x n {\n}\nk n {\nscale 4\n0 1 1 1 0 0 0\n1 1 1 1 0 0 0\n2 1 1 1 9 0 0\n"
+               "3 1 1 1 0 0 0\n}\n",
+               3, "[-1, 1]"},
         BadAff{"bad_view",
                "v\nfrom 0 0 0\nat 0 0 1\nup 0 1 0\nangle 200\nhither 1\n"
                "resolution 4 4\n",
