@@ -228,6 +228,30 @@ TEST(KochanekBartels, ZeroTcbOnUniformKeysIsCatmullRom) {
   }
 }
 
+TEST(KochanekBartels, UnevenKeysKeepVelocityContinuousAtTheSecantSlope) {
+  // The time adjustment (BART's adj0/adj1) makes the velocity at a key, from either side,
+  // (P[i+1] - P[i-1]) / (t[i+1] - t[i-1]) when t = c = b = 0, however unevenly keys are spaced.
+  const std::vector<float> t = {0, 1, 3, 3.5f, 6, 7};
+  const std::vector<vec3> p = {vec3(0),       vec3(1, 2, 0),  vec3(3, 1, -1),
+                               vec3(4, 5, 2), vec3(-2, 0, 1), vec3(0, 1, 0)};
+  const auto f = kb_track(t, p);
+  Keyframes<dvec3> k; // double values: finite differences need the precision
+  k.interpolation = f.interpolation;
+  k.times = f.times;
+  k.tcb = f.tcb;
+  for (const vec3& v : p) k.values.push_back(dvec3(v));
+  for (std::size_t i = 2; i <= 3; ++i) {
+    const float ahead = t[i] + 1e-4f, behind = t[i] - 1e-4f; // steps as float times hold them
+    const dvec3 secant = dvec3(p[i + 1] - p[i - 1]) / double(t[i + 1] - t[i - 1]);
+    const dvec3 right = (sample(k, ahead) - sample(k, t[i])) / (double(ahead) - t[i]);
+    const dvec3 left = (sample(k, t[i]) - sample(k, behind)) / (double(t[i]) - behind);
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(right[c], secant[c], 0.01) << "key " << i;
+      EXPECT_NEAR(left[c], secant[c], 0.01) << "key " << i;
+    }
+  }
+}
+
 TEST(KochanekBartels, TensionOneGivesZeroTangents) {
   const std::vector<vec3> p = {vec3(5, -3, 0), vec3(1, 2, 0), vec3(3, 1, -1), vec3(-4, 5, 2)};
   const auto k = kb_track({0, 1, 2, 3}, p, std::vector<vec3>(4, vec3(1, 0, 0)));
