@@ -80,9 +80,17 @@ public:
     const char* first = t.text.data();
     const char* last = first + t.text.size();
     if (*first == '+') ++first; // from_chars takes no leading '+', which C's scanf allows
-    const auto [ptr, ec] = std::from_chars(first, last, v);
-    if (ec == std::errc::result_out_of_range)
-      fail(t.line, std::string(what) + " '" + std::string(t.text) + "' is out of range");
+    auto [ptr, ec] = std::from_chars(first, last, v);
+    if (ec == std::errc::result_out_of_range) {
+      // Underflow (1e-45) is a value near zero, written by exporters: keep it. Overflow is not.
+      double d = 0.0;
+      const auto [dptr, dec] = std::from_chars(first, last, d);
+      if (dec != std::errc() || dptr != last || !(std::abs(d) < 1.0))
+        fail(t.line, std::string(what) + " '" + std::string(t.text) + "' is out of range");
+      v = float(d);
+      ptr = dptr;
+      ec = std::errc();
+    }
     if (ec != std::errc() || ptr != last)
       fail(t.line,
            "expected a number for " + std::string(what) + ", got '" + std::string(t.text) + "'");
