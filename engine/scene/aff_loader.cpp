@@ -162,6 +162,11 @@ private:
 /// Bytes one number takes at least (a digit and a separator): bounds counts against the file.
 constexpr std::uint64_t kNumberBytes = 2;
 
+/// "FILE:LINE" with the file's name only: names entities that the file leaves unnamed.
+std::string place(const Lexer& lex, int line) {
+  return std::filesystem::path(lex.file()).filename().string() + ":" + std::to_string(line);
+}
+
 quat axis_angle(Lexer& lex, const vec3& axis, float degrees, int line) {
   if (degrees == 0.0f) return quat(1.0f, 0.0f, 0.0f, 0.0f);
   if (!(glm::length(axis) > 0.0f)) lex.fail(line, "rotation axis is zero");
@@ -182,7 +187,7 @@ struct Morph {
   std::uint32_t material = 0;
   std::vector<float> times;
   std::vector<std::vector<vec3>> keys; ///< positions per key time
-  std::vector<vec3> normals;           ///< at the first key
+  std::vector<vec3> normals;           ///< at the first key (used when there is only one)
 };
 
 struct PendingKeys {
@@ -556,7 +561,7 @@ void AffReader::sphere(Lexer& lex) {
   Transform tr;
   tr.translation = dvec3(center);
   tr.scale = vec3(radius);
-  place_primitive(source, unit_sphere_, tr, "sphere@" + lex.file() + ":" + std::to_string(line));
+  place_primitive(source, unit_sphere_, tr, "sphere@" + place(lex, line));
 }
 
 void AffReader::cone(Lexer& lex) {
@@ -599,8 +604,7 @@ void AffReader::cone(Lexer& lex) {
     tr.rotation = glm::angleAxis(angle, glm::normalize(turn));
   else if (dir.y < 0.0f)
     tr.rotation = glm::angleAxis(glm::pi<float>(), vec3(1, 0, 0));
-  place_primitive(source, std::move(geometry), tr,
-                  source.primitive + "@" + lex.file() + ":" + std::to_string(line));
+  place_primitive(source, std::move(geometry), tr, source.primitive + "@" + place(lex, line));
 }
 
 void AffReader::place_primitive(const MeshSource& source,
@@ -720,7 +724,7 @@ void AffReader::transform(Lexer& lex, bool is_static, int line) {
     const vec3 axis = lex.vector("rotation axis");
     tr.rotation = axis_angle(lex, axis, lex.number("rotation angle"), line);
     tr.translation = dvec3(lex.vector("translation"));
-    name = "xs@" + lex.file() + ":" + std::to_string(line);
+    name = "xs@" + place(lex, line);
   } else {
     name = std::string(lex.next("transform name").text);
     named_[name].push_back(e);
@@ -822,7 +826,9 @@ void AffReader::finish() {
   for (Morph& m : morphs_) {
     TriangleMesh mesh;
     mesh.positions = m.keys.front();
-    mesh.normals = std::move(m.normals);
+    // The tracers take vertex normals as given, so normals of the first key would go stale as
+    // the triangles morph: animated ones are shaded with face normals instead (docs).
+    if (m.times.size() == 1) mesh.normals = std::move(m.normals);
     for (std::uint32_t i = 0; i < mesh.positions.size(); i += 3)
       mesh.triangles.push_back(uvec3(i, i + 1, i + 2));
     const ecs::Entity e = add_mesh(

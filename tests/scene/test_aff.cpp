@@ -173,6 +173,7 @@ TEST(Aff, MorphingTrianglesAreFreeAndTheCameraMoves) {
     EXPECT_EQ(a.vertices.times, (std::vector<float>{0.0f, 1.0f}));
     EXPECT_EQ(a.vertices.values[1][0], vec3(0, 0, 1));
     EXPECT_EQ(reg.get<Kinematics>(e).type, Kinematics::Type::Free);
+    EXPECT_TRUE(m.geometry->normals.empty()); // face normals follow the morph
   });
   EXPECT_EQ(morphs, 1u);
   const ecs::Entity cam = find_named(reg, "camera");
