@@ -138,8 +138,8 @@ void section_dynamic(const Options& o) {
   const Rgb colours[] = {{31, 119, 180}, {214, 39, 40}, {44, 160, 44}};
   const Marker markers[] = {Marker::Circle, Marker::Square, Marker::TriangleUp};
   for (const bool big : {false, true}) {
-    const char* name = big ? "dynamic_three_classes + statue + wobbling sphere"
-                           : "dynamic_three_classes";
+    const char* name =
+        big ? "dynamic_three_classes + statue + wobbling sphere" : "dynamic_three_classes";
     std::uint64_t triangles = 0;
     {
       Scene probe = big ? large(o) : sample(o);
@@ -153,8 +153,8 @@ void section_dynamic(const Options& o) {
     int k = 0;
     for (const char* backend : {"native", "native-bvh", "embree"}) {
       if (!backend_info(backend).available) continue;
-      const Run run = animate(big ? large(o) : sample(o), backend, width, height, frames,
-                              o.threads);
+      const Run run =
+          animate(big ? large(o) : sample(o), backend, width, height, frames, o.threads);
       const double frame = median(run.frame_ms), update = median(run.accel_ms);
       report("| %s | %llu | %s | %.1f | %.2f | %.1f%% | %.1f | %u | %llu / %llu / %llu |\n", name,
              static_cast<unsigned long long>(triangles), backend, frame, update,
@@ -203,8 +203,8 @@ void section_dynamic(const Options& o) {
                              .frame_ms);
         ++k;
       }
-      report("| %s | %s | %.1f | %.1f | %.1f | %.2f |\n", big ? "large variant" : "sample",
-             c.name, ms[0], ms[1], ms[2], ms[1] > 0.0 ? ms[0] / ms[1] : 0.0);
+      report("| %s | %s | %.1f | %.1f | %.1f | %.2f |\n", big ? "large variant" : "sample", c.name,
+             ms[0], ms[1], ms[2], ms[1] > 0.0 ? ms[0] / ms[1] : 0.0);
     }
   }
   report.save(dir / "README.md");

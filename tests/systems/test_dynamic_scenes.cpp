@@ -68,8 +68,9 @@ TEST_P(DynamicScenes, StaticPartsAreBuiltOnceHierarchicalOnlyTopLevelFreeRefitte
   if (!available(backend)) GTEST_SKIP() << backend << " is not in this build";
   Scene scene = sample_scene();
   const std::uint64_t free_triangles = triangles_of(scene.registry, Kinematics::Type::Free);
-  const std::uint64_t fixed_triangles = triangles_of(scene.registry, Kinematics::Type::Static) +
-                                        triangles_of(scene.registry, Kinematics::Type::Hierarchical);
+  const std::uint64_t fixed_triangles =
+      triangles_of(scene.registry, Kinematics::Type::Static) +
+      triangles_of(scene.registry, Kinematics::Type::Hierarchical);
   ASSERT_GT(free_triangles, 0u);
   ASSERT_GT(fixed_triangles, 0u);
   prepare(scene.registry, backend);
@@ -130,9 +131,9 @@ Scene free_mesh_scene(const std::function<vec3(const vec3&, std::size_t)>& moved
   Scene scene;
   ecs::Registry& reg = scene.registry;
   test::add_mesh(reg, test::primitive("plane", 1, vec3(20, 1, 20)), test::at(vec3(0)));
-  const ecs::Entity blob = test::add_mesh(reg, test::primitive("sphere", 1.0f, vec3(1), 32, 16),
-                                          test::at(vec3(0, 1, 0)), Material{},
-                                          Kinematics::Type::Free);
+  const ecs::Entity blob =
+      test::add_mesh(reg, test::primitive("sphere", 1.0f, vec3(1), 32, 16), test::at(vec3(0, 1, 0)),
+                     Material{}, Kinematics::Type::Free);
   const std::vector<vec3>& rest = reg.get<Mesh>(blob).geometry->positions;
   std::vector<vec3> target(rest.size());
   for (std::size_t i = 0; i < rest.size(); ++i) target[i] = moved(rest[i], i);
@@ -161,9 +162,8 @@ std::uint32_t native_restructures(Scene scene) {
 
 TEST(Restructuring, HappensWhenDeformationDegradesTheTreeNotWhenItMovesRigidly) {
   // Rigid: every vertex shifted alike; the refitted tree is the built one, translated.
-  EXPECT_EQ(native_restructures(free_mesh_scene([](const vec3& p, std::size_t) {
-              return p + vec3(2.5f, 0.5f, -1.0f);
-            })),
+  EXPECT_EQ(native_restructures(free_mesh_scene(
+                [](const vec3& p, std::size_t) { return p + vec3(2.5f, 0.5f, -1.0f); })),
             0u);
   // Degrading: the vertices of neighbouring triangles fly apart (a seeded-free scatter: each
   // vertex leaves along a direction given by its index), so the refitted boxes swell and overlap.
