@@ -91,6 +91,11 @@ void section_gpu(const Options& o);
 // mirror-spheres scene's frames/s cached against uncached, with the cached frames' PSNR.
 void section_gpu_cache(const Options& o);
 
+// Animated scenes (dynamic_sections.cpp): acceleration update against frame time per backend,
+// per-frame plots, and the paper's Table 1 grid (Markdown and PNGs under --out-dir, default
+// docs/dynamic-report).
+void section_dynamic(const Options& o);
+
 /// A report section's Markdown: printed to stdout as it is written and kept to be saved.
 class Report {
 public:

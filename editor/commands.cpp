@@ -34,6 +34,37 @@ std::string shown_number(double value) {
   return text;
 }
 
+/// The scene-time range of an animated render (`--time T0:T1`).
+struct TimeRange {
+  double t0 = 0.0;
+  double t1 = 0.0;
+};
+
+/// Later AFF scenes carry an animation range (`a START END FRAMES`): once Scene::settings holds
+/// it, this hook returns it and `--time` left out renders that range. JSON scenes have none.
+std::optional<TimeRange> scene_time_range(const Scene& /*scene*/) { return std::nullopt; }
+
+/// "T0:T1" → the range; a clear error naming --time for anything else.
+TimeRange parse_time_range(const std::string& text) {
+  const auto bad = [&] {
+    return Error("--time", "expected T0:T1 in seconds with 0 <= T0 <= T1 <= 1e9, got '" +
+                               printable(text) + "'");
+  };
+  const std::size_t colon = text.find(':');
+  if (colon == std::string::npos) throw bad();
+  double v[2] = {};
+  const std::string parts[2] = {text.substr(0, colon), text.substr(colon + 1)};
+  for (int i = 0; i < 2; ++i) {
+    const char* first = parts[i].data();
+    const char* last = first + parts[i].size();
+    const auto [end, ec] = std::from_chars(first, last, v[i]);
+    if (parts[i].empty() || ec != std::errc() || end != last) throw bad();
+  }
+  // Animation clocks are floats: beyond 1e9 s a frame step of 1/60 s would be lost.
+  if (!(v[0] >= 0.0 && v[0] <= v[1] && v[1] <= 1e9)) throw bad();
+  return {v[0], v[1]};
+}
+
 bool power_of_two(std::uint32_t v) { return v >= 1 && v <= 4096 && (v & (v - 1)) == 0; }
 
 /// --cache and its companions → the job's cache settings.
@@ -213,6 +244,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   if (options.frames < 1 || options.frames > kMaxFrames)
     throw Error("--frames", "expected a whole number in [1 - " + std::to_string(kMaxFrames) +
                                 "], got " + std::to_string(options.frames));
+  std::optional<TimeRange> time_range;
+  if (!options.time.empty()) time_range = parse_time_range(options.time);
   const std::optional<TraceMode> mode = parse_trace_mode(options.mode);
   if (!mode) throw Error("--mode", "unknown mode '" + printable(options.mode) + "'");
   if (options.spp < 1 || options.spp > kMaxSpp)
@@ -262,6 +295,7 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   if (!is_backend_name(options.backend))
     (void)resolve_backend(options.backend); // throws the "unknown backend" error (exit 1)
   Scene scene = load_scene(options.scene);
+  if (!time_range) time_range = scene_time_range(scene);
 
   RenderJob job;
   job.backend = options.backend;
@@ -344,7 +378,15 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   const Clock::time_point start = Clock::now();
   bool progress_shown = false;
   for (std::uint32_t f = 0; f < options.frames; ++f) {
-    naming_device_failures([&] { schedule.tick(scene.registry, 1.0 / 60.0); });
+    // With a range, each tick advances to frame f's time (the first from 0 to T0).
+    double dt = 1.0 / 60.0;
+    if (time_range) {
+      const double step = options.frames > 1 ? (time_range->t1 - time_range->t0) /
+                                                   double(options.frames - 1)
+                                             : 0.0;
+      dt = time_range->t0 + double(f) * step - schedule.last().time;
+    }
+    naming_device_failures([&] { schedule.tick(scene.registry, dt); });
     stats.frames.push_back(scene.registry.resource<RenderJob>().last);
     stats.frames.back().gpu = gpu_frame_stats(tracer);
     const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
@@ -359,6 +401,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
     }
   }
   if (progress_shown) *progress << "\r" << std::string(60, ' ') << "\r" << std::flush;
+  stats.settings.time0 = stats.frames.front().time;
+  stats.settings.time1 = stats.frames.back().time;
   const RenderJob& done = scene.registry.resource<RenderJob>();
   if (!options.out.empty()) write_image(done.image, options.out);
   if (!options.stats.empty()) write_stats_file(stats, options.stats);
@@ -385,6 +429,33 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   }
   out << "), " << (trace > 0.0 ? double(last.rays.total()) / (trace * 1e3) : 0.0)
       << " Mrays/s of tracing time\n";
+  {
+    // Medians per system over the run: where a frame's time goes, the acceleration update split
+    // by step, and what the last update did to the triangles (frame-to-frame coherence).
+    const auto med = [&](double SystemTimes::*field) {
+      std::vector<double> v;
+      for (const FrameStats& f : stats.frames) v.push_back(f.systems.*field);
+      return median(v);
+    };
+    const auto med_accel = [&](double AccelStats::*field) {
+      std::vector<double> v;
+      for (const FrameStats& f : stats.frames) v.push_back(f.accel.*field);
+      return median(v);
+    };
+    const double accel_ms = med(&SystemTimes::acceleration_ms);
+    out << "  systems ms (median): animation " << med(&SystemTimes::animation_ms)
+        << ", transform " << med(&SystemTimes::transform_ms) << ", scene layer "
+        << med(&SystemTimes::scene_layer_ms) << ", acceleration " << accel_ms << " (build "
+        << med_accel(&AccelStats::static_build_ms) + med_accel(&AccelStats::blas_build_ms)
+        << ", refit " << med_accel(&AccelStats::refit_ms) << ", restructure "
+        << med_accel(&AccelStats::restructure_ms) << ", top level "
+        << med_accel(&AccelStats::top_build_ms) << "; " << 100.0 * accel_ms / frame_ms
+        << "% of the frame), cache invalidation " << med(&SystemTimes::cache_invalidation_ms)
+        << ", render " << med(&SystemTimes::render_ms) << "\n"
+        << "  last frame's triangles: " << last.accel.triangles_rebuilt << " rebuilt, "
+        << last.accel.triangles_refit << " refit, " << last.accel.triangles_untouched
+        << " untouched\n";
+  }
   if (tracer_dev) {
     const GpuFrameStats& g = last.gpu;
     out << "  device: " << device << ", " << tracer_dev->execution << ", device frames "

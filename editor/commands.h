@@ -40,6 +40,9 @@ struct RenderOptions {
   std::uint32_t width = 0;      ///< 0: the scene's settings
   std::uint32_t height = 0;     ///< 0: the scene's settings
   std::uint32_t frames = 1;
+  /// "T0:T1": frame i shows scene time T0 + i·(T1−T0)/(frames−1) (T0 for one frame); empty: the
+  /// scene file's range where it has one, else steps of 1/60 s from 1/60.
+  std::string time;
   std::uint32_t threads = 0; ///< 0: every hardware thread
   std::string cache = "off"; ///< off | on | auto | a face resolution (auto at that resolution)
   std::string cache_lookup = "direction"; ///< direction | tau | march

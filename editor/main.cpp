@@ -199,6 +199,9 @@ int main(int argc, char** argv) {
   render_cmd->add_option("--frames", render.frames, "Frames to trace")
       ->transform(whole_number(1, cli::kMaxFrames))
       ->capture_default_str();
+  render_cmd->add_option("--time", render.time,
+                         "Scene-time range T0:T1 in seconds: frame i shows T0 + i*(T1-T0)/(N-1) "
+                         "(default: steps of 1/60 s)");
   render_cmd->add_option("--threads", render.threads, "Worker threads (0: all)")
       ->transform(whole_number(0, 1024))
       ->capture_default_str();

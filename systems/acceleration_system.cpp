@@ -28,6 +28,11 @@ void acceleration_system(ecs::Registry& registry, const FrameContext& /*ctx*/) {
     a.refits = u.blas_refits;
     a.restructures = u.blas_restructures;
     a.hidden_instances = u.hidden_instances;
+    a.triangles_rebuilt = u.triangles_rebuilt;
+    a.triangles_refit = u.triangles_refit;
+    // A shared mesh built once for several instances counts once but is held per instance.
+    const std::uint64_t touched = u.triangles_rebuilt + u.triangles_refit;
+    a.triangles_untouched = u.triangles > touched ? u.triangles - touched : 0;
   }
 }
 

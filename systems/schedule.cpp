@@ -9,6 +9,7 @@
 #include "specula/systems/transform_system.h"
 
 #include <chrono>
+#include <iterator>
 
 namespace specula {
 namespace {
@@ -23,6 +24,8 @@ constexpr Stage kStages[] = {
     {"scene_layer", &scene_layer_system}, {"acceleration", &acceleration_system},
     {"cache_invalidation", &cache_invalidation_system}, {"render", &render_system},
 };
+
+static_assert(std::size(kStages) == 6, "SystemTimes names one field per stage");
 
 } // namespace
 
@@ -42,7 +45,18 @@ FrameContext Schedule::tick(ecs::Registry& registry, double dt) {
     stage_start = now;
   }
   timings.ms = std::chrono::duration<double, std::milli>(stage_start - start).count();
-  if (RenderJob* job = registry.try_resource<RenderJob>()) job->last.ms = timings.ms;
+  if (RenderJob* job = registry.try_resource<RenderJob>()) {
+    job->last.ms = timings.ms;
+    job->last.time = ctx_.time;
+    // kStages' order (static_assert below keeps the two in step).
+    SystemTimes& t = job->last.systems;
+    t.animation_ms = timings.system_ms[0];
+    t.transform_ms = timings.system_ms[1];
+    t.scene_layer_ms = timings.system_ms[2];
+    t.acceleration_ms = timings.system_ms[3];
+    t.cache_invalidation_ms = timings.system_ms[4];
+    t.render_ms = timings.system_ms[5];
+  }
   registry.resource_or_default<FrameTimings>() = std::move(timings); // no new resource per tick
   return ctx_;
 }

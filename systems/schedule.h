@@ -25,7 +25,8 @@ struct FrameTimings {
 ///   5. cache_invalidation_system (what moved → outdated ray-cache texels; prefill)
 ///   6. render_system       (the frame, on the tracer chosen by prepare_rendering)
 /// Stages 3–6 do nothing until rendering is prepared (5 also needs caching on).
-/// After the systems it records FrameTimings, and the whole tick's time in RenderJob::last.ms.
+/// After the systems it records FrameTimings, and in RenderJob::last the whole tick's time (ms),
+/// each system's (systems) and the scene time the frame shows (time).
 class Schedule {
 public:
   /// Advances time by dt seconds and runs every system once. Returns the context it ran with.

@@ -95,6 +95,8 @@ std::string stats_to_json(const RunStats& stats) {
                    {"width", s.width},
                    {"height", s.height},
                    {"frames", s.frames},
+                   {"time0", s.time0},
+                   {"time1", s.time1},
                    {"threads", s.threads},
                    {"max_depth", s.max_depth},
                    {"cache", s.cache_policy == "off"
@@ -136,7 +138,8 @@ std::string stats_to_json(const RunStats& stats) {
       rates[ray_kind_name(k)] = f.trace_ms > 0.0 ? double(f.rays[k]) / (f.trace_ms * 1e3) : 0.0;
     }
     rates["total"] = f.trace_ms > 0.0 ? double(f.rays.total()) / (f.trace_ms * 1e3) : 0.0;
-    frames.push_back({{"ms", f.ms},
+    frames.push_back({{"time", f.time},
+                      {"ms", f.ms},
                       {"trace_ms", f.trace_ms},
                       {"rays", rays},
                       {"dropped_rays", f.rays.dropped},
@@ -154,7 +157,17 @@ std::string stats_to_json(const RunStats& stats) {
                         {"blas_builds", f.accel.blas_builds},
                         {"refits", f.accel.refits},
                         {"restructures", f.accel.restructures},
-                        {"hidden_instances", f.accel.hidden_instances}}},
+                        {"hidden_instances", f.accel.hidden_instances},
+                        {"triangles_rebuilt", f.accel.triangles_rebuilt},
+                        {"triangles_refit", f.accel.triangles_refit},
+                        {"triangles_untouched", f.accel.triangles_untouched}}},
+                      {"systems_ms",
+                       {{"animation", f.systems.animation_ms},
+                        {"transform", f.systems.transform_ms},
+                        {"scene_layer", f.systems.scene_layer_ms},
+                        {"acceleration", f.systems.acceleration_ms},
+                        {"cache_invalidation", f.systems.cache_invalidation_ms},
+                        {"render", f.systems.render_ms}}},
                       {"accumulated_samples", f.accumulated_samples},
                       {"accumulation_restarted", f.accumulation_restarted},
                       {"denoise_ms", f.denoise_ms}});
@@ -202,6 +215,9 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
   s.width = read<std::uint32_t>(settings, "width", name, "settings");
   s.height = read<std::uint32_t>(settings, "height", name, "settings");
   s.frames = read<std::uint32_t>(settings, "frames", name, "settings");
+  // Arrived with animated rendering (issue 11): older files have none.
+  read_optional(settings, "time0", s.time0, name, "settings");
+  read_optional(settings, "time1", s.time1, name, "settings");
   s.threads = read<std::uint32_t>(settings, "threads", name, "settings");
   s.max_depth = read<std::uint32_t>(settings, "max_depth", name, "settings");
   const json cache = read<json>(settings, "cache", name, "settings");
@@ -311,6 +327,23 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
       f.accel.restructures = read<std::uint32_t>(a, "restructures", name, where);
       // Arrived with issue 13's degenerate-instance handling: older files have none.
       read_optional(a, "hidden_instances", f.accel.hidden_instances, name, where);
+      // Arrived with issue 11's coherence counts: older files have none.
+      read_optional(a, "triangles_rebuilt", f.accel.triangles_rebuilt, name, where);
+      read_optional(a, "triangles_refit", f.accel.triangles_refit, name, where);
+      read_optional(a, "triangles_untouched", f.accel.triangles_untouched, name, where);
+    }
+    // Per frame scene time and per-system times arrived with issue 11: older files have none.
+    read_optional(frames[i], "time", f.time, name, at);
+    if (frames[i].contains("systems_ms")) {
+      const json y = read<json>(frames[i], "systems_ms", name, at);
+      const std::string where = at + ".systems_ms";
+      SystemTimes& t = f.systems;
+      t.animation_ms = read<double>(y, "animation", name, where);
+      t.transform_ms = read<double>(y, "transform", name, where);
+      t.scene_layer_ms = read<double>(y, "scene_layer", name, where);
+      t.acceleration_ms = read<double>(y, "acceleration", name, where);
+      t.cache_invalidation_ms = read<double>(y, "cache_invalidation", name, where);
+      t.render_ms = read<double>(y, "render", name, where);
     }
     // Arrived with issue 9's accumulation: older files have none.
     read_optional(frames[i], "accumulated_samples", f.accumulated_samples, name, at);

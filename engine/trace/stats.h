@@ -77,6 +77,11 @@ struct AccelStats {
   std::uint32_t restructures = 0;
   /// Instances left out of the top level: singular transform or collapsed bounds (a scale of 0).
   std::uint32_t hidden_instances = 0;
+  /// Triangles whose structure was built from scratch this frame (static structure, per-mesh
+  /// structures, restructured subtrees), refitted, or left untouched (the rest the tracer holds).
+  std::uint64_t triangles_rebuilt = 0;
+  std::uint64_t triangles_refit = 0;
+  std::uint64_t triangles_untouched = 0;
   friend bool operator==(const AccelStats&, const AccelStats&) = default;
 };
 
@@ -92,12 +97,25 @@ struct GpuFrameStats {
   friend bool operator==(const GpuFrameStats&, const GpuFrameStats&) = default;
 };
 
+/// Wall-clock milliseconds of each system of the tick (the schedule's FrameTimings, by name).
+struct SystemTimes {
+  double animation_ms = 0.0;
+  double transform_ms = 0.0;
+  double scene_layer_ms = 0.0;
+  double acceleration_ms = 0.0;
+  double cache_invalidation_ms = 0.0;
+  double render_ms = 0.0;
+  friend bool operator==(const SystemTimes&, const SystemTimes&) = default;
+};
+
 struct FrameStats {
+  double time = 0.0;     ///< scene time the frame shows (seconds since the schedule started)
   double ms = 0.0;       ///< wall-clock time of the whole frame: every system of the tick
   double trace_ms = 0.0; ///< of which tracing the image (render_system)
   RayCounts rays;
   CacheCounts cache;
   AccelStats accel;
+  SystemTimes systems;
   /// Path and shadow modes: samples per pixel in the image shown (this frame's included); 0 in
   /// the deterministic modes, which accumulate nothing.
   std::uint64_t accumulated_samples = 0;
@@ -145,6 +163,10 @@ struct RunSettings {
   std::string gpu_primary = "trace";       ///< trace | raster (hybrid mode)
   bool gpu_device_frames = true;
   float grid_density = 4.0f; ///< vulkan-grid's cells per triangle
+  // Animated rendering (issue 11; older files have none): the scene times of the first and the
+  // last frame (`--time T0:T1`, or the fixed 1/60 s steps without it).
+  double time0 = 0.0;
+  double time1 = 0.0;
   friend bool operator==(const RunSettings&, const RunSettings&) = default;
 };
 

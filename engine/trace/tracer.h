@@ -79,6 +79,13 @@ struct TracerUpdateStats {
   /// Dynamic instances left out of the top level because their transform is singular or their
   /// world bounds degenerate (accel::traceable_instance): a scale of 0 makes an object vanish.
   std::uint32_t hidden_instances = 0;
+  /// Triangles this update touched, counted per structure: built from scratch (the static
+  /// structure, per-mesh structures, and the subtrees selective restructuring rebuilt) or refitted
+  /// (a deforming mesh's, less its restructured part); `triangles` is every triangle the tracer
+  /// holds (static and per instance), so untouched = triangles − rebuilt − refit.
+  std::uint64_t triangles = 0;
+  std::uint64_t triangles_rebuilt = 0;
+  std::uint64_t triangles_refit = 0;
   /// Milliseconds of each step of this update (the stats file's "accel" object).
   double static_build_ms = 0.0; ///< building the static structure
   double blas_build_ms = 0.0;   ///< building per-mesh structures

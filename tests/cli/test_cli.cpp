@@ -139,6 +139,7 @@ TEST(Cli, BadOptionsExitOne) {
                                              {"render", scene, "--width", "0"},
                                              {"render", scene, "--height", "100000"},
                                              {"render", scene, "--frames", "0"},
+                                             {"render", scene, "--time", "2:1"},
                                              {"render", scene, "--cache", "100"},
                                              {"render", scene, "--cache", "-4"},
                                              {"render", scene, "--cache", "sometimes"},
@@ -325,6 +326,47 @@ TEST(Cli, AutoWithoutARealGpuSaysInOneLineWhyTheCpuBackendWasChosen) {
       run({"render", scene, "--width", "16", "--height", "16", "--backend", "native"});
   ASSERT_EQ(named.code, 0) << named.err;
   EXPECT_TRUE(named.err.empty()) << named.err;
+}
+
+TEST(Cli, TimeRangeRejectsBadValuesNamingTheOption) {
+  for (const std::string value :
+       {"2:1", "1", ":", "a:1", "0:1:2", "nan:1", "0:inf", "-1:2", "0:1e10", "0x1:2"}) {
+    const Result r = run({"render",
+                          (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string(),
+                          "--width", "8", "--height", "8", "--backend",
+                          "native", "--time", value});
+    ASSERT_TRUE(r.exited);
+    EXPECT_EQ(r.code, 1) << value << "\n" << r.err;
+    EXPECT_NE(r.err.find("--time: expected T0:T1"), std::string::npos) << r.err;
+    EXPECT_TRUE(one_line_message(r.err)) << r.err;
+    EXPECT_TRUE(r.out.empty()) << r.out;
+  }
+}
+
+TEST(Cli, TimeRangeSpacesTheFramesEvenlyAndRecordsTheTimes) {
+  const fs::path stats =
+      fs::temp_directory_path() / ("specula_cli_time_" + std::to_string(::getpid()) + ".json");
+  const std::string scene =
+      (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/dynamic_three_classes.json").string();
+  const Result r = run({"render", scene, "--width", "16", "--height", "16", "--backend",
+                        "native", "--frames", "5", "--time", "0.5:2.5", "--stats",
+                        stats.string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(slurp(stats));
+  fs::remove(stats);
+  EXPECT_DOUBLE_EQ(j.at("settings").at("time0").get<double>(), 0.5);
+  EXPECT_DOUBLE_EQ(j.at("settings").at("time1").get<double>(), 2.5);
+  for (int i = 0; i < 5; ++i)
+    EXPECT_NEAR(j.at("frames").at(i).at("time").get<double>(), 0.5 + 0.5 * i, 1e-12) << i;
+  EXPECT_NE(r.out.find("systems ms (median): animation "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" refit, "), std::string::npos) << r.out;
+  // Without --time the frames step 1/60 s from 1/60, as before.
+  const Result plain = run({"render", scene, "--width", "8", "--height", "8", "--backend",
+                            "native", "--frames", "2", "--stats", stats.string()});
+  ASSERT_EQ(plain.code, 0) << plain.err;
+  const auto p = nlohmann::json::parse(slurp(stats));
+  fs::remove(stats);
+  EXPECT_NEAR(p.at("frames").at(1).at("time").get<double>(), 2.0 / 60.0, 1e-12);
 }
 
 TEST(Cli, GpuOptionsRejectBadValuesNamingTheOption) {

@@ -23,6 +23,8 @@ RunStats sample_stats() {
   s.settings.denoise = true;
   s.settings.denoise_iterations = 3;
   s.settings.denoise_sigma_color = 0.25f;
+  s.settings.time0 = 0.5;
+  s.settings.time1 = 2.25;
   for (int i = 0; i < 3; ++i) {
     FrameStats f;
     f.ms = 10.0 + i;
@@ -52,6 +54,11 @@ RunStats sample_stats() {
     f.accumulated_samples = 4u * unsigned(i + 1);
     f.accumulation_restarted = i == 0;
     f.denoise_ms = 0.5 + i;
+    f.time = 0.5 + 0.875 * i;
+    f.accel.triangles_rebuilt = i == 0 ? 5000u : 0u;
+    f.accel.triangles_refit = 320u + unsigned(i);
+    f.accel.triangles_untouched = 4680u - unsigned(i);
+    f.systems = {0.01 + i, 0.02, 0.5, 1.25 + i, 0.125, 8.0 + i};
     s.frames.push_back(f);
   }
   return s;
@@ -74,6 +81,13 @@ TEST(Stats, UsesThePublishedFieldNames) {
   EXPECT_EQ(j.at("settings").at("cache").at("resolution"), 64);
   EXPECT_EQ(j.at("settings").at("cache").at("policy"), "auto");
   EXPECT_EQ(f.at("cache").at("cubes").at(0).at("mode"), "tau");
+  EXPECT_EQ(j.at("settings").at("time0"), 0.5);
+  EXPECT_EQ(f.at("time"), 0.5);
+  for (const char* k : {"triangles_rebuilt", "triangles_refit", "triangles_untouched"})
+    EXPECT_TRUE(f.at("accel").contains(k)) << k;
+  for (const char* k :
+       {"animation", "transform", "scene_layer", "acceleration", "cache_invalidation", "render"})
+    EXPECT_TRUE(f.at("systems_ms").contains(k)) << k;
 }
 
 TEST(Stats, ReadsFilesFromBeforeTheCacheFields) {
@@ -128,6 +142,24 @@ TEST(Stats, ReadsFilesFromBeforeTheStochasticModes) {
   EXPECT_EQ(s.frames[0].denoise_ms, 0.0);
   j["settings"]["denoise"] = "yes";
   EXPECT_THROW((void)stats_from_json(j.dump(), "bad.json"), Error);
+}
+
+TEST(Stats, ReadsFilesFromBeforeTheAnimationFields) {
+  auto j = nlohmann::json::parse(stats_to_json(sample_stats()));
+  for (const char* k : {"time0", "time1"}) j["settings"].erase(k);
+  for (auto& f : j["frames"]) {
+    f.erase("time");
+    f.erase("systems_ms");
+    for (const char* k : {"triangles_rebuilt", "triangles_refit", "triangles_untouched"})
+      f["accel"].erase(k);
+  }
+  const RunStats s = stats_from_json(j.dump(), "old.json");
+  EXPECT_EQ(s.settings.time1, 0.0);
+  EXPECT_EQ(s.frames[1].time, 0.0);
+  EXPECT_EQ(s.frames[1].systems, SystemTimes{});
+  EXPECT_EQ(s.frames[0].accel.triangles_rebuilt, 0u);
+  j["frames"][0]["systems_ms"] = {{"animation", 1.0}};
+  EXPECT_THROW((void)stats_from_json(j.dump(), "bad.json"), Error) << "a partial systems_ms";
 }
 
 TEST(Stats, WritesTheDeviceAndGpuCountersOnlyForDeviceRuns) {

@@ -671,7 +671,8 @@ RestructureStats Bvh::restructure_common(const TriangleView* tris, std::span<con
     }
   }
   const std::size_t used_before = used_;
-  for (const auto& [node, depth] : selected) rebuild_subtree(node, depth, tris, boxes);
+  for (const auto& [node, depth] : selected)
+    out.primitives_rebuilt += rebuild_subtree(node, depth, tris, boxes);
   out.subtrees_rebuilt = std::uint32_t(selected.size());
   // A lazy tree must keep room for every future expansion; elsewhere holes are tolerated until
   // they are a quarter of the array.
@@ -683,8 +684,8 @@ RestructureStats Bvh::restructure_common(const TriangleView* tris, std::span<con
   return out;
 }
 
-void Bvh::rebuild_subtree(std::uint32_t root, std::uint32_t depth, const TriangleView* tris,
-                          std::span<const Aabb> boxes) {
+std::uint32_t Bvh::rebuild_subtree(std::uint32_t root, std::uint32_t depth,
+                                   const TriangleView* tris, std::span<const Aabb> boxes) {
   // The old subtree: its sibling pairs (slots to reuse) and its entry range (contiguous).
   std::vector<std::uint32_t> pairs;
   std::uint32_t first = std::numeric_limits<std::uint32_t>::max(), total = 0;
@@ -756,6 +757,7 @@ void Bvh::rebuild_subtree(std::uint32_t root, std::uint32_t depth, const Triangl
     }
     holes_ += 2;
   }
+  return total;
 }
 
 void Bvh::compact() {

@@ -58,6 +58,7 @@ struct BvhStats {
 
 struct RestructureStats {
   std::uint32_t subtrees_rebuilt = 0;
+  std::uint32_t primitives_rebuilt = 0; ///< under the rebuilt subtrees
   std::uint32_t nodes_visited = 0;
   float sah_before = 0.0f, sah_after = 0.0f;
   double ms = 0.0;
@@ -143,8 +144,9 @@ private:
   void refit_nodes(const TriangleView* tris, std::span<const Aabb> boxes);
   RestructureStats restructure_common(const TriangleView* tris, std::span<const Aabb> boxes,
                                       float threshold);
-  void rebuild_subtree(std::uint32_t root, std::uint32_t depth, const TriangleView* tris,
-                       std::span<const Aabb> boxes);
+  /// Returns the number of primitives under `root`.
+  std::uint32_t rebuild_subtree(std::uint32_t root, std::uint32_t depth, const TriangleView* tris,
+                                std::span<const Aabb> boxes);
   void compact();
   void update_stats();
   void subtree_costs(std::vector<float>& s) const;

@@ -140,6 +140,7 @@ void EmbreeTracer::rebuild_static(const SceneTables& tables) {
   rtcCommitGeometry(static_instance_);
   rtcAttachGeometryByID(top_, static_instance_, 0);
   ++last_.static_builds;
+  last_.triangles_rebuilt += static_triangles_;
 }
 
 RTCScene EmbreeTracer::shared_blas(const SceneTables& tables, std::uint32_t mesh) {
@@ -155,6 +156,7 @@ RTCScene EmbreeTracer::shared_blas(const SceneTables& tables, std::uint32_t mesh
     rtcCommitScene(blas);
     check("building a mesh's structure");
     ++last_.blas_builds;
+    last_.triangles_rebuilt += tables.meshes[mesh].triangle_count;
   }
   return blas;
 }
@@ -214,11 +216,13 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
       rtcCommitScene(d.own_blas);
       check("building a deforming mesh's structure");
       ++last_.blas_builds;
+      last_.triangles_rebuilt += tables.meshes[inst.mesh].triangle_count;
       blas = d.own_blas;
     } else {
       blas = shared_blas(tables, inst.mesh);
     }
     d.blas = blas;
+    d.triangles = tables.meshes[inst.mesh].triangle_count;
     d.instance = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_INSTANCE);
     rtcSetGeometryInstancedScene(d.instance, blas);
     place(slot, d, inst.world_from_object);
@@ -249,6 +253,7 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     place(slot, d, tables.instances[slot].world_from_object); // the mesh may have collapsed
     check("refitting a deforming mesh");
     ++last_.blas_refits;
+    last_.triangles_refit += m.triangle_count; // Embree refits whole (RTC_BUILD_QUALITY_REFIT)
     last_.refit_ms += ms_since(start);
     top_dirty = true; // the instance's bounds changed
   }
@@ -266,7 +271,9 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     last_.top_build_ms += ms_since(start);
   }
   last_.static_triangles = static_triangles_;
+  last_.triangles = static_triangles_;
   for (const auto& [slot, d] : dynamic_) {
+    last_.triangles += d.triangles;
     if (d.attached)
       ++last_.dynamic_instances;
     else

@@ -55,6 +55,7 @@ private:
     bool attached = false;       ///< in the top level (false: degenerate, hidden)
     RTCScene own_blas = nullptr; ///< deforming instances only
     RTCGeometry own_mesh = nullptr;
+    std::uint32_t triangles = 0; ///< in its mesh (the update stats' triangle counts)
   };
 
   /// The instance slot of an Embree hit (instance id 0: the static scene, by geometry id).

@@ -97,6 +97,7 @@ void NativeTracer::rebuild_static(const SceneTables& tables) {
     }
   }
   ++last_.static_builds;
+  last_.triangles_rebuilt += static_triangles_.size();
   last_.static_build_ms += ms_since(start);
 }
 
@@ -118,6 +119,7 @@ const NativeTracer::Blas* NativeTracer::shared_blas(const SceneTables& tables, s
     options.lazy = options_.lazy_blas;
     blas->bvh.build(blas->view(), options);
     ++last_.blas_builds;
+    last_.triangles_rebuilt += blas->triangles.size();
     last_.blas_build_ms += ms_since(start);
   }
   return blas.get();
@@ -177,6 +179,7 @@ const TracerUpdateStats& NativeTracer::update(const SceneLayer& layer) {
       d.own->bvh.build(d.own->view());
       d.blas = d.own.get();
       ++last_.blas_builds;
+      last_.triangles_rebuilt += d.own->triangles.size();
       last_.blas_build_ms += ms_since(start);
     } else {
       d.blas = shared_blas(tables, inst.mesh);
@@ -205,6 +208,8 @@ const TracerUpdateStats& NativeTracer::update(const SceneLayer& layer) {
     const accel::RestructureStats rs =
         d.own->bvh.restructure(d.own->view(), options_.restructure_threshold);
     last_.blas_restructures += rs.subtrees_rebuilt;
+    last_.triangles_rebuilt += rs.primitives_rebuilt;
+    last_.triangles_refit += d.own->triangles.size() - rs.primitives_rebuilt;
     last_.restructure_ms += ms_since(start);
     set_transform(d, d.world_from_object); // the mesh may have collapsed (or come back)
     top_dirty = true; // the instance's bounds changed
@@ -213,8 +218,11 @@ const TracerUpdateStats& NativeTracer::update(const SceneLayer& layer) {
   if (top_dirty) rebuild_top();
   last_.static_triangles = std::uint32_t(static_triangles_.size());
   last_.dynamic_instances = std::uint32_t(dynamic_.size());
-  for (const auto& [slot, d] : dynamic_)
+  last_.triangles = static_triangles_.size();
+  for (const auto& [slot, d] : dynamic_) {
+    last_.triangles += d.blas->triangles.size();
     if (!d.traceable) ++last_.hidden_instances;
+  }
   last_.dynamic_instances -= last_.hidden_instances;
   return last_;
 }
