@@ -180,15 +180,16 @@ TEST(DeviceFramesScene, AMovedObjectRendersAtItsNewPosition) {
 // and once it is gone the frame must be the first one again, in both execution styles.
 TEST(DeviceFramesScene, ATopLevelThatComesAndGoesRendersEveryFrameRight) {
   SPECULA_NEED_DEVICE();
-  ecs::Registry reg;
-  test::cornell(reg);
-  test::TracedWorld world(reg, reference_backend());
   const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(TraceMode::Whitted);
-  for (const gpu::Execution e : {gpu::Execution::wavefront, gpu::Execution::single_kernel}) {
+  for (const gpu::Execution e : {gpu::Execution::single_kernel, gpu::Execution::wavefront}) {
     SCOPED_TRACE(e == gpu::Execution::wavefront ? "wavefront" : "single kernel");
+    ecs::Registry reg;
+    test::cornell(reg);
+    test::TracedWorld world(reg, reference_backend());
     Device device(world.layer, e);
-    const auto matches_cpu = [&](const Framebuffer& image) {
+    const auto matches_cpu = [&](const char* frame, const Framebuffer& image) {
+      SCOPED_TRACE(frame);
       Framebuffer cpu(kWidth, kHeight);
       (void)render_frame(*world.tracer, world.layer, camera, s, cpu);
       EXPECT_GE(psnr(cpu, image), 45.0);
@@ -197,7 +198,7 @@ TEST(DeviceFramesScene, ATopLevelThatComesAndGoesRendersEveryFrameRight) {
     };
     ASSERT_FALSE(device.scene->has_top_level());
     const Framebuffer before = device.render(world.layer, camera, s);
-    matches_cpu(before);
+    matches_cpu("before the ball", before);
     const std::vector<std::uint32_t> primary_before(device.renderer->primary_instances().begin(),
                                                     device.renderer->primary_instances().end());
 
@@ -209,7 +210,7 @@ TEST(DeviceFramesScene, ATopLevelThatComesAndGoesRendersEveryFrameRight) {
     world.update(reg);
     device.scene->update(world.layer);
     ASSERT_TRUE(device.scene->has_top_level());
-    matches_cpu(device.render(world.layer, camera, s));
+    matches_cpu("with the ball", device.render(world.layer, camera, s));
     std::uint32_t changed = 0;
     for (std::size_t i = 0; i < primary_before.size(); ++i)
       changed += device.renderer->primary_instances()[i] != primary_before[i] ? 1u : 0u;
@@ -220,7 +221,7 @@ TEST(DeviceFramesScene, ATopLevelThatComesAndGoesRendersEveryFrameRight) {
     device.scene->update(world.layer);
     ASSERT_FALSE(device.scene->has_top_level());
     const Framebuffer after = device.render(world.layer, camera, s);
-    matches_cpu(after);
+    matches_cpu("after the ball", after);
     std::uint32_t differ = 0;
     for (std::size_t i = 0; i < after.pixels().size(); ++i)
       differ += after.pixels()[i] != before.pixels()[i] ? 1u : 0u;
