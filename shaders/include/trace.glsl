@@ -409,18 +409,13 @@ void trace_begin(vec3 org, vec3 dir, float tnear, float tfar, bool any_hit) {
 // of the loop any other way means the driver cut it off (lavapipe's silent iteration cap):
 // kRayPending then, and the caller must leave the ray's status unset.
 uint trace_run(inout uint budget) {
-  // The start (root box, grid set-up) is the walk's first step but runs before the loop, so that
-  // its code is not in the loop body that llvmpipe runs, masked, for every step.
-  if (tr.phase == kPhaseStart) {
-    if (budget == 0u) return kRayBudget;
-    --budget;
-    trace_start_static();
-  }
   for (;;) {
     if (tr.phase == kPhaseDone) return kRayDone;
     if (budget == 0u) return kRayBudget;
     --budget;
-    if (tr.phase == kPhaseStatic && trace_static_grid())
+    if (tr.phase == kPhaseStart)
+      trace_start_static();
+    else if (tr.phase == kPhaseStatic && trace_static_grid())
       trace_grid_step();
     else
       trace_bvh_step();
