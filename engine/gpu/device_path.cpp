@@ -97,13 +97,18 @@ void DevicePath::upload_emitters(const SceneLayer& layer) {
 
 void DevicePath::ensure_pipelines(const Features& f) {
   if (pipelines_ && pipelines_->features == f) return;
+  if (previous_ && previous_->features == f) {
+    std::swap(pipelines_, previous_);
+    return;
+  }
   auto p = std::make_unique<Pipelines>();
   p->features = f;
   // frame_common.glsl's ids 0-6 (0, 3, 5 the cache and 6 hybrid mode unused here), path.glsl's
-  // 7-10.
+  // 7-10, frame_common.glsl's 11-12.
   const std::vector<std::uint32_t> spec = {
       0u, f.shadows ? 1u : 0u, f.dielectrics ? 1u : 0u, 0u, f.lights, 0u, 0u, f.area ? 1u : 0u,
-      f.mirrors ? 1u : 0u, f.shadow_mode ? 1u : 0u, f.sampling};
+      f.mirrors ? 1u : 0u, f.shadow_mode ? 1u : 0u, f.sampling, f.grid ? 1u : 0u,
+      f.top ? 1u : 0u};
   const auto make = [&](const char* name) {
     return context_.make_pipeline({shader_spirv(name), kFramePoolBindings, sizeof(PathPush), spec, name});
   };
@@ -114,6 +119,7 @@ void DevicePath::ensure_pipelines(const Features& f) {
   p->shadow = make("frame_shadow");
   p->gather = make("path_gather");
   p->resolve = make("path_resolve");
+  previous_ = std::move(pipelines_);
   pipelines_ = std::move(p);
 }
 
@@ -126,7 +132,8 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
   const bool area = scene.area_lights && (!shadow_mode || settings.shadow_samples > 0);
   const Features f{shadow_mode,  settings.shadows,     scene.dielectrics && !shadow_mode,
                    scene.mirrors && !shadow_mode, area, params.light_count,
-                   std::uint32_t(settings.sampling)};
+                   std::uint32_t(settings.sampling), scene_.structure() == GpuStructure::grid,
+                   scene_.has_top_level()};
   ensure_pipelines(f);
   const Pipelines& p = *pipelines_;
 

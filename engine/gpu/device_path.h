@@ -74,6 +74,7 @@ private:
   struct Features {
     bool shadow_mode, shadows, dielectrics, mirrors, area;
     std::uint32_t lights, sampling;
+    bool grid, top; ///< trace.glsl's grid walk and top level compiled in (frame_common.glsl)
     friend bool operator==(const Features&, const Features&) = default;
   };
   struct Pipelines;
@@ -84,6 +85,7 @@ private:
   Context& context_;
   const GpuScene& scene_;
   std::unique_ptr<Pipelines> pipelines_;
+  std::unique_ptr<Pipelines> previous_; ///< the set before the last change (DeviceRenderer's)
   Buffer paths_, hits_, queues_, shadows_, shadow_queues_, path_params_, emitters_,
       emitter_first_, sums_, sobol_;
   Buffer no_cache_; ///< bound at the cache's bindings 20-22, which path frames do not use

@@ -109,11 +109,17 @@ void DeviceRenderer::upload_tables(const SceneLayer& layer) {
 
 void DeviceRenderer::ensure_pipelines(const Features& f) {
   if (pipelines_ && pipelines_->features == f) return;
+  if (previous_ && previous_->features == f) {
+    std::swap(pipelines_, previous_);
+    return;
+  }
   auto p = std::make_unique<Pipelines>();
   p->features = f;
+  // frame_common.glsl's ids 0-6, path.glsl's 7-10 (absent from these kernels), then 11-12.
   const std::vector<std::uint32_t> spec = {f.whitted ? 1u : 0u, f.shadows ? 1u : 0u,
                                            f.dielectrics ? 1u : 0u, f.specular ? 1u : 0u,
-                                           f.lights, f.cache ? 1u : 0u, raster_ ? 1u : 0u};
+                                           f.lights, f.cache ? 1u : 0u, raster_ ? 1u : 0u,
+                                           0u, 0u, 0u, 0u, f.grid ? 1u : 0u, f.top ? 1u : 0u};
   const auto make = [&](const char* name) {
     return context_.make_pipeline(
         {shader_spirv(name), kFramePoolBindings, sizeof(WavePush), spec, name});
@@ -129,6 +135,7 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
   } else {
     p->single = make("frame_single");
   }
+  previous_ = std::move(pipelines_);
   pipelines_ = std::move(p);
 }
 
@@ -352,7 +359,8 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
       ensure_frame_buffers(pixels);
     } else {
       const Features f{whitted, whitted && settings.shadows, whitted && scene.dielectrics,
-                       specular, cache, light_count_};
+                       specular, cache, light_count_, scene_.structure() == GpuStructure::grid,
+                       scene_.has_top_level()};
       ensure_pipelines(f);
       ensure_buffers(pixels, f);
     }

@@ -91,6 +91,7 @@ private:
   struct Features {
     bool whitted, shadows, dielectrics, specular, cache;
     std::uint32_t lights;
+    bool grid, top; ///< trace.glsl's grid walk and top level compiled in (frame_common.glsl)
     friend bool operator==(const Features&, const Features&) = default;
   };
 
@@ -110,6 +111,9 @@ private:
   Execution execution_;
   std::uint32_t budget_ = kDefaultBudget;
   std::unique_ptr<Pipelines> pipelines_;
+  /// The set used before the last change, kept so that a scene whose top level comes and goes
+  /// switches between two sets instead of rebuilding each time.
+  std::unique_ptr<Pipelines> previous_;
   std::unique_ptr<DeviceCache> cache_;
   const Buffer* cache_buffers_[3] = {nullptr, nullptr, nullptr};
   std::uint64_t cache_mismatches_ = 0;

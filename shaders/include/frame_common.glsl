@@ -6,6 +6,13 @@
 #define SPECULA_FRAME_COMMON_GLSL
 
 #include "shared/frame_layout.h"
+// trace.glsl's grid walk and top level, as trace_rays.comp's ids 1 and 2 (llvmpipe pays for
+// untaken branches in every traversal step): false for a BVH scene / a scene without dynamic
+// instances. Ids after path.glsl's 7-10.
+layout(constant_id = 11) const bool kGridCode = true;
+layout(constant_id = 12) const bool kTopCode = true;
+#define TRACE_GRID_CODE kGridCode
+#define TRACE_TOP_CODE kTopCode
 #include "include/trace.glsl"
 #include "include/shading.glsl"
 
@@ -14,7 +21,7 @@ layout(constant_id = 1) const bool kShadows = true;     // trace shadow rays
 layout(constant_id = 2) const bool kDielectrics = true; // some material transmits
 layout(constant_id = 3) const bool kSpecular = true;    // some material reflects or transmits
 layout(constant_id = 4) const uint kLightCount = 0u;
-// constant_id 5: kCache (frame_cache.glsl), the frame has ray-cache cubes.
+// constant_id 5: kCache (frame_cache.glsl), the frame has ray-cache cubes; 7-10: path.glsl's.
 layout(constant_id = 6) const bool kRasterPrimary = false; // hybrid mode (single kernel)
 #include "include/frame_cache.glsl"
 #include "include/trace_pool.glsl"

@@ -1,7 +1,7 @@
 // What every path and shadow frame kernel shares (engine/gpu/device_path.h): the frame kernels'
 // scene, tables and counters (frame_common.glsl), the path records and their queues, the
 // emitter table, the sampler, and the scene features as specialisation constants (ids 7-10 beside
-// frame_common's 0-6), so that a scene pays only for what it has.
+// frame_common's 0-6 and 11-12), so that a scene pays only for what it has.
 #ifndef SPECULA_PATH_GLSL
 #define SPECULA_PATH_GLSL
 

@@ -277,7 +277,10 @@ void trace_enter_instance(uint box) {
 
 // One step of a BVH walk (Bvh::traverse): a leaf entry, a node, or a pop.
 void trace_bvh_step() {
-  bool in_instance = TRACE_TOP_CODE && tr.entry != kNoIndex;
+  // Not `TRACE_TOP_CODE && ...` in the initialiser: with a specialisation constant there,
+  // glslang's `precise` pass never finishes on the path kernels.
+  bool in_instance = false;
+  if (TRACE_TOP_CODE) in_instance = tr.entry != kNoIndex;
   uint node_base, index_base;
   if (tr.phase == kPhaseStatic) {
     node_base = scene_header.static_node_base;

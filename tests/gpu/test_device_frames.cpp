@@ -2,7 +2,8 @@
 // same settings on the reference backend: cast and Whitted images within PSNR 45 dB, primary
 // visibility agreeing on 99.9% of pixels, the wavefront and the single kernel giving the same
 // image, no ray cut by the driver, resumption after a small traversal budget, a moved object
-// seen where it moved, and a lost device reported as such.
+// seen where it moved, a dynamic object seen while it exists (the top level's code compiled in
+// and out), and a lost device reported as such.
 #include "device_scenes.h"
 #include "specula/core/error.h"
 #include "specula/gpu/device_renderer.h"
@@ -15,6 +16,7 @@
 
 #include <iostream>
 #include <string>
+#include <vector>
 
 namespace specula {
 namespace {
@@ -171,6 +173,60 @@ TEST(DeviceFramesScene, AMovedObjectRendersAtItsNewPosition) {
   (void)render_frame(*world.tracer, world.layer, camera, s, cpu);
   EXPECT_GE(psnr(cpu, image), 45.0);
   EXPECT_GE(primary_agreement(world, camera, device.renderer->primary_instances()), 0.999);
+}
+
+// The frame kernels compile the top level's code out for a scene without dynamic instances
+// (frame_common.glsl's kTopCode): a dynamic object that appears must be seen in the next frame,
+// and once it is gone the frame must be the first one again, in both execution styles.
+TEST(DeviceFramesScene, ATopLevelThatComesAndGoesRendersEveryFrameRight) {
+  SPECULA_NEED_DEVICE();
+  const Camera camera = test::cornell_camera();
+  const TraceSettings s = settings_for(TraceMode::Whitted);
+  for (const gpu::Execution e : {gpu::Execution::single_kernel, gpu::Execution::wavefront}) {
+    SCOPED_TRACE(e == gpu::Execution::wavefront ? "wavefront" : "single kernel");
+    ecs::Registry reg;
+    test::cornell(reg);
+    test::TracedWorld world(reg, reference_backend());
+    Device device(world.layer, e);
+    const auto matches_cpu = [&](const char* frame, const Framebuffer& image) {
+      SCOPED_TRACE(frame);
+      Framebuffer cpu(kWidth, kHeight);
+      (void)render_frame(*world.tracer, world.layer, camera, s, cpu);
+      EXPECT_GE(psnr(cpu, image), 45.0);
+      EXPECT_GE(primary_agreement(world, camera, device.renderer->primary_instances()), 0.999);
+      EXPECT_EQ(device.counters.cut, 0u);
+    };
+    ASSERT_FALSE(device.scene->has_top_level());
+    const Framebuffer before = device.render(world.layer, camera, s);
+    matches_cpu("before the ball", before);
+    const std::vector<std::uint32_t> primary_before(device.renderer->primary_instances().begin(),
+                                                    device.renderer->primary_instances().end());
+
+    Material m;
+    m.base_color = vec3(0.2f, 0.2f, 0.9f);
+    const ecs::Entity ball = test::add_mesh(reg, test::primitive("sphere", 0.2f, vec3(1), 12, 6),
+                                            test::at(vec3(0.0f, 1.0f, 0.5f)), m,
+                                            Kinematics::Type::Free);
+    world.update(reg);
+    device.scene->update(world.layer);
+    ASSERT_TRUE(device.scene->has_top_level());
+    matches_cpu("with the ball", device.render(world.layer, camera, s));
+    std::uint32_t changed = 0;
+    for (std::size_t i = 0; i < primary_before.size(); ++i)
+      changed += device.renderer->primary_instances()[i] != primary_before[i] ? 1u : 0u;
+    EXPECT_GT(changed, 20u) << "primary hits on the dynamic ball";
+
+    reg.destroy(ball);
+    world.update(reg);
+    device.scene->update(world.layer);
+    ASSERT_FALSE(device.scene->has_top_level());
+    const Framebuffer after = device.render(world.layer, camera, s);
+    matches_cpu("after the ball", after);
+    std::uint32_t differ = 0;
+    for (std::size_t i = 0; i < after.pixels().size(); ++i)
+      differ += after.pixels()[i] != before.pixels()[i] ? 1u : 0u;
+    EXPECT_EQ(differ, 0u) << "pixels that differ from the frame before the ball came";
+  }
 }
 
 TEST(DeviceFramesScene, FactoryBackendRendersOnTheDevice) {
