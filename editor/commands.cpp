@@ -40,9 +40,15 @@ struct TimeRange {
   double t1 = 0.0;
 };
 
-/// Later AFF scenes carry an animation range (`a START END FRAMES`): once Scene::settings holds
-/// it, this hook returns it and `--time` left out renders that range. JSON scenes have none.
-std::optional<TimeRange> scene_time_range(const Scene& /*scene*/) { return std::nullopt; }
+/// The animation range a scene file gives (AFF's `a START END FRAMES`, JSON's
+/// settings.animation): `--time` left out renders it. None when the file gives none, or a start
+/// before 0 (the schedule's clock starts at 0; such a file still renders with --time).
+std::optional<TimeRange> scene_time_range(const Scene& scene) {
+  const RenderSettings& s = scene.settings;
+  if (s.anim_frames == 0 || !(s.anim_start >= 0.0) || !(s.anim_end >= s.anim_start))
+    return std::nullopt;
+  return TimeRange{s.anim_start, s.anim_end};
+}
 
 /// "T0:T1" → the range; a clear error naming --time for anything else.
 TimeRange parse_time_range(const std::string& text) {

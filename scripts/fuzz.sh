@@ -3,7 +3,7 @@
 #
 #   scripts/fuzz.sh [--merge] [--seed N] [READER|all] [SECONDS]
 #
-# READER is one of: json gltf glb obj ply off stl png exr render (default: all of them);
+# READER is one of: json gltf glb aff obj ply off stl png exr render (default: all of them);
 # SECONDS is each fuzzer's budget (default 300). Builds what is missing in the `asan` preset
 # (Clang 15, ASan + UBSan, libFuzzer) first. Each fuzzer starts from its seed corpus
 # (tests/fuzz/corpus/READER/) and the regressions (tests/data/fuzz-regressions/READER/) with its
@@ -22,7 +22,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-all_readers=(json gltf glb obj ply off stl png exr render)
+all_readers=(json gltf glb aff obj ply off stl png exr render)
 merge=0
 seed=0
 readers=()

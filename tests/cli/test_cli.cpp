@@ -369,6 +369,22 @@ TEST(Cli, TimeRangeSpacesTheFramesEvenlyAndRecordsTheTimes) {
   EXPECT_NEAR(p.at("frames").at(1).at("time").get<double>(), 2.0 / 60.0, 1e-12);
 }
 
+TEST(Cli, AScenesAnimationRangeIsRenderedWhenTimeIsLeftOut) {
+  // basic.aff says `a 0 2 5`: three frames without --time show scene times 0, 1 and 2.
+  const fs::path stats =
+      fs::temp_directory_path() / ("specula_cli_aff_time_" + std::to_string(::getpid()) + ".json");
+  const std::string scene = (fs::path(SPECULA_TEST_DATA_DIR) / "aff/basic.aff").string();
+  const Result r = run({"render", scene, "--width", "8", "--height", "8", "--backend", "native",
+                        "--frames", "3", "--stats", stats.string()});
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(slurp(stats));
+  fs::remove(stats);
+  EXPECT_DOUBLE_EQ(j.at("settings").at("time0").get<double>(), 0.0);
+  EXPECT_DOUBLE_EQ(j.at("settings").at("time1").get<double>(), 2.0);
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NEAR(j.at("frames").at(i).at("time").get<double>(), double(i), 1e-12) << i;
+}
+
 TEST(Cli, GpuOptionsRejectBadValuesNamingTheOption) {
   const std::string scene =
       (fs::path(SPECULA_SOURCE_DIR) / "samples/scenes/cornell_box.json").string();
