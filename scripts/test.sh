@@ -8,7 +8,7 @@
 #   3. the `asan` preset: Clang 15, AddressSanitizer and UBSan, assertions on, so the death tests
 #      compiled out of optimised builds run, and memory errors and leaks fail the run; then each
 #      libFuzzer harness of tests/fuzz/ (built in the same preset) fuzzes for
-#      SPECULA_FUZZ_SECONDS (default 45) from its seed corpus with a fixed seed, and any finding
+#      SPECULA_FUZZ_SECONDS (default 30) from its seed corpus with a fixed seed, and any finding
 #      fails the run (scripts/fuzz.sh, docs/fuzzing.md; SPECULA_FUZZ_SECONDS=0 skips it).
 # Every preset's ctest also replays the fuzzers' corpora and regression inputs (label "fuzz").
 # SPECULA_TEST_PRESETS="ci" (or any list of them) runs those only.
@@ -24,8 +24,8 @@ for preset in ${SPECULA_TEST_PRESETS:-ci ci-native asan}; do
   cmake --preset "$preset"
   cmake --build --preset "$preset" -j "$jobs"
   ctest --preset "$preset" -j "$jobs"
-  if [ "$preset" = asan ] && [ "${SPECULA_FUZZ_SECONDS:-45}" != 0 ]; then
+  if [ "$preset" = asan ] && [ "${SPECULA_FUZZ_SECONDS:-30}" != 0 ]; then
     echo "== asan: timed fuzzing"
-    bash scripts/fuzz.sh --seed 1 all "${SPECULA_FUZZ_SECONDS:-45}"
+    bash scripts/fuzz.sh --seed 1 all "${SPECULA_FUZZ_SECONDS:-30}"
   fi
 done
