@@ -107,7 +107,7 @@ done
 wait
 failed=()
 for r in "${readers[@]}"; do
-  cat "$scratch/$r.report"
+  cat "$scratch/$r.report" 2>/dev/null || echo "!! fuzz $r: its run ended without a report"
   if [ "$(cat "$scratch/$r.rc" 2>/dev/null || echo 1)" != 0 ]; then failed+=("$r"); fi
 done
 echo "== fuzzing took $(( $(date +%s) - start_all ))s for ${#readers[@]} fuzzer(s), $parallel at a time"
