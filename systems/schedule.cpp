@@ -48,7 +48,7 @@ FrameContext Schedule::tick(ecs::Registry& registry, double dt) {
   if (RenderJob* job = registry.try_resource<RenderJob>()) {
     job->last.ms = timings.ms;
     job->last.time = ctx_.time;
-    // kStages' order (static_assert below keeps the two in step).
+    // kStages' order (the static_assert beside kStages keeps the two in step).
     SystemTimes& t = job->last.systems;
     t.animation_ms = timings.system_ms[0];
     t.transform_ms = timings.system_ms[1];

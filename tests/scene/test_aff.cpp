@@ -216,6 +216,20 @@ TEST(KochanekBartels, PassesThroughEveryInnerKeyAndClampsToThem) {
   EXPECT_EQ(sample(k, 10.0f), k.values[3]);
 }
 
+TEST(KochanekBartels, ALoopingAnimationWrapsAtTheLastInnerKey) {
+  // The last key only shapes the end tangent: the track stops changing at times[n-2] (3 here),
+  // and a looping animation must wrap there, not hold the end value until the last key (5).
+  Animation a;
+  a.translation.interpolation = Interpolation::KochanekBartels;
+  a.translation.times = {0, 1, 2.5f, 3, 5};
+  a.translation.values.assign(5, dvec3(0));
+  a.translation.tcb.assign(5, vec3(0));
+  EXPECT_FLOAT_EQ(a.duration(), 3.0f);
+  a.scale.times = {0, 4};
+  a.scale.values = {vec3(1), vec3(2)};
+  EXPECT_FLOAT_EQ(a.duration(), 4.0f); // a linear track still ends at its last key
+}
+
 TEST(KochanekBartels, ZeroTcbOnUniformKeysIsCatmullRom) {
   const std::vector<vec3> p = {vec3(0, 0, 0), vec3(1, 2, 0), vec3(3, 1, -1), vec3(4, 5, 2)};
   const auto k = kb_track({0, 1, 2, 3}, p);

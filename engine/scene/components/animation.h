@@ -20,6 +20,13 @@ struct Keyframes {
   /// KochanekBartels only: tension, continuity, bias per key (one per time); empty otherwise.
   std::vector<vec3> tcb;
   [[nodiscard]] bool empty() const { return times.empty(); }
+  /// The last time the track changes (non-empty tracks): its last key's, or for
+  /// KochanekBartels the last inner key's (the last key only shapes the end tangent).
+  [[nodiscard]] float end_time() const {
+    return interpolation == Interpolation::KochanekBartels && times.size() >= 2
+               ? times[times.size() - 2]
+               : times.back();
+  }
   friend bool operator==(const Keyframes&, const Keyframes&) = default;
 };
 
@@ -36,17 +43,18 @@ struct Animation {
   float speed = 1.0f;
   bool loop = true;
 
-  /// The last key time over all tracks (0 when there are none).
+  /// The last time any track changes (Keyframes::end_time; 0 when there are none): where a
+  /// looping animation wraps.
   [[nodiscard]] float duration() const;
   friend bool operator==(const Animation&, const Animation&) = default;
 };
 
 inline float Animation::duration() const {
   float d = 0.0f;
-  if (!translation.empty()) d = glm::max(d, translation.times.back());
-  if (!rotation.empty()) d = glm::max(d, rotation.times.back());
-  if (!scale.empty()) d = glm::max(d, scale.times.back());
-  if (!vertices.empty()) d = glm::max(d, vertices.times.back());
+  if (!translation.empty()) d = glm::max(d, translation.end_time());
+  if (!rotation.empty()) d = glm::max(d, rotation.end_time());
+  if (!scale.empty()) d = glm::max(d, scale.end_time());
+  if (!vertices.empty()) d = glm::max(d, vertices.end_time());
   return d;
 }
 
