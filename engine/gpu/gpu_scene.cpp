@@ -212,11 +212,13 @@ bool GpuScene::upload_top() {
 }
 
 const TracerUpdateStats& GpuScene::update(const SceneLayer& layer) {
+  // The delta before native_ applies it (both have applied the same syncs).
+  const SceneDelta& d = layer.delta_since(synced_);
+  synced_ = layer.syncs();
   const TracerUpdateStats& stats = native_.update(layer);
   const SceneTables& tables = layer.tables();
-  const SceneDelta& d = layer.delta();
   upload_ = GpuUploadStats{};
-  const bool full = !uploaded_ || d.static_rebuilt || d.geometry_relocated ||
+  const bool full = !uploaded_ || d.full || d.static_rebuilt || d.geometry_relocated ||
                     !d.meshes_added.empty() || !d.meshes_removed.empty() ||
                     !d.instances_added.empty() || !d.instances_removed.empty();
   if (full) {

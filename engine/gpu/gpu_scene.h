@@ -93,6 +93,7 @@ private:
   std::array<Buffer, kSceneBindings> buffers_;
   std::array<const Buffer*, kSceneBindings> bindings_{};
   bool uploaded_ = false;
+  std::uint64_t synced_ = 0; ///< the layer's sync applied last (SceneLayer::syncs)
   GpuUploadStats upload_;
   std::uint32_t stack_depth_ = 0;
   // The flattened arrays as last uploaded (bindings 4–7) and where the top level lies in them.

@@ -343,6 +343,23 @@ std::uint32_t SceneLayer::acquire_shared_mesh(const std::shared_ptr<const Triang
   return shared.record;
 }
 
+const SceneDelta& SceneLayer::delta_since(std::uint64_t applied) const {
+  if (applied + 1 == syncs_) return delta_;
+  if (whole_sync_ != syncs_) {
+    whole_ = SceneDelta{};
+    whole_.full = true;
+    whole_.static_rebuilt = true;
+    whole_.materials_changed = whole_.lights_changed = whole_.geometry_relocated = true;
+    for (const auto& [source, mesh] : shared_) whole_.meshes_added.push_back(mesh.record);
+    std::sort(whole_.meshes_added.begin(), whole_.meshes_added.end());
+    for (std::uint32_t slot = 0; slot < tables_.instances.size(); ++slot)
+      if (tables_.live(slot) && (tables_.instances[slot].flags & gpu::kInstanceStatic) == 0)
+        whole_.instances_added.push_back(slot);
+    whole_sync_ = syncs_;
+  }
+  return whole_;
+}
+
 void SceneLayer::release_shared_mesh(const TriangleMesh* source) {
   const auto it = shared_.find(source);
   if (it == shared_.end() || --it->second.users > 0) return;

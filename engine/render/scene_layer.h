@@ -75,12 +75,15 @@ struct SceneDelta {
   bool lights_changed = false;
   /// Pool offsets changed (a compaction or a static rebuild): copies of the pools are stale.
   bool geometry_relocated = false;
+  /// The whole scene, not a change (SceneLayer::delta_since, for a consumer that missed syncs):
+  /// drop every structure built from earlier deltas, then add what the lists name.
+  bool full = false;
 
   [[nodiscard]] bool empty() const {
     return !static_rebuilt && meshes_added.empty() && meshes_removed.empty() &&
            instances_removed.empty() && instances_added.empty() && instances_moved.empty() &&
            instances_deformed.empty() && !materials_changed && !lights_changed &&
-           !geometry_relocated;
+           !geometry_relocated && !full;
   }
 };
 
@@ -111,6 +114,13 @@ public:
 
   [[nodiscard]] const SceneTables& tables() const { return tables_; }
   [[nodiscard]] const SceneDelta& delta() const { return delta_; }
+  /// The delta a consumer (a tracer, a device scene) must apply when the last sync it applied was
+  /// sync number `applied` (0: none): delta() when that was the previous sync; otherwise —
+  /// a consumer made after several syncs, or one that skipped some — a delta with `full` set that
+  /// adds the whole scene as it is now (the static set, every live dynamic instance, every shared
+  /// mesh), so the consumer drops what it had and rebuilds. A delta without `full` is only ever
+  /// valid right after the sync that made it.
+  [[nodiscard]] const SceneDelta& delta_since(std::uint64_t applied) const;
   [[nodiscard]] const SceneLayerStats& stats() const { return stats_; }
   /// The area lights of the tables and the scene's features, rebuilt by every sync whose delta
   /// is not empty.
@@ -187,6 +197,8 @@ private:
   std::vector<std::uint32_t> deforming_; ///< slots of deforming instances
   std::uint64_t syncs_ = 0;
   std::uint64_t rebases_ = 0;
+  mutable SceneDelta whole_;          ///< delta_since's full delta, made once per sync
+  mutable std::uint64_t whole_sync_ = 0;
   dvec3 render_origin_{0.0};
   std::uint64_t transform_sequence_ = 0;
   std::uint64_t version_mesh_ = 0, version_transform_ = 0, version_kinematics_ = 0,

@@ -389,6 +389,53 @@ TEST_P(Conformance, MovingOneObjectRewritesOnlyItsInstanceAndTheHitFollows) {
   EXPECT_NEAR(hit.t, 8.0f, 0.01f);
 }
 
+// A tracer made for a layer that has synced before (a backend switched on a live scene), or one
+// that skipped syncs, gets the whole scene (SceneLayer::delta_since), not the latest change only.
+TEST_P(Conformance, ATracerMadeAfterSeveralSyncsSeesTheWholeScene) {
+  UpdateWorld w(backend());
+  Schedule schedule;
+  schedule.tick(w.reg, 0.0);
+  w.reg.get<Transform>(w.ball).translation.x += 1.0f;
+  w.reg.destroy(w.twin);
+  schedule.tick(w.reg, 1.0 / 60.0);
+  const SceneLayer& layer = w.reg.resource<SceneLayer>();
+  ASSERT_GE(layer.syncs(), 2u);
+  const std::unique_ptr<Tracer> late = make_tracer(backend());
+  const auto same_hits = [&](const char* when) {
+    SCOPED_TRACE(when);
+    for (float x = -6.0f; x <= 6.0f; x += 0.5f)
+      for (float z = -3.0f; z <= 5.0f; z += 0.5f) {
+        Ray down;
+        down.origin = vec3(x, 10, z);
+        down.direction = vec3(0, -1, 0);
+        Hit a, b;
+        w.tracer().intersect(std::span<const Ray>(&down, 1), std::span<Hit>(&a, 1));
+        late->intersect(std::span<const Ray>(&down, 1), std::span<Hit>(&b, 1));
+        ASSERT_EQ(a.hit(), b.hit()) << x << ", " << z;
+        if (!a.hit()) continue;
+        EXPECT_EQ(a.instance, b.instance) << x << ", " << z;
+        EXPECT_EQ(a.t, b.t) << x << ", " << z;
+      }
+  };
+  const TracerUpdateStats& first = late->update(layer);
+  EXPECT_EQ(first.static_builds, 1u);
+  EXPECT_EQ(first.instances_added, 2u); // the ball and the blob; the twin is gone
+  same_hits("made after two syncs");
+  // It skips the next sync (the ball moves again), then catches up with the one after.
+  w.reg.get<Transform>(w.ball).translation.z += 1.5f;
+  schedule.tick(w.reg, 1.0 / 60.0);
+  schedule.tick(w.reg, 1.0 / 60.0);
+  (void)late->update(layer);
+  same_hits("after a skipped sync");
+  // In step again: only the change.
+  w.reg.get<Transform>(w.ball).translation.x -= 2.0f;
+  schedule.tick(w.reg, 1.0 / 60.0);
+  const TracerUpdateStats& next = late->update(layer);
+  EXPECT_EQ(next.instances_moved, 1u);
+  EXPECT_EQ(next.static_builds + next.blas_builds + next.instances_added, 0u);
+  same_hits("in step");
+}
+
 TEST_P(Conformance, ADeformingMeshIsRefittedNotRebuiltAndTheHitFollows) {
   UpdateWorld w(backend());
   Animation anim;

@@ -188,8 +188,17 @@ void EmbreeTracer::release_dynamic(std::uint32_t slot) {
 const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
   last_ = TracerUpdateStats{};
   const SceneTables& tables = layer.tables();
-  const SceneDelta& delta = layer.delta();
+  const SceneDelta& delta = layer.delta_since(synced_);
+  synced_ = layer.syncs();
   bool top_dirty = false;
+  if (delta.full) { // made after the layer's first sync, or syncs were skipped: start over
+    std::vector<std::uint32_t> slots;
+    for (const auto& [slot, d] : dynamic_) slots.push_back(slot);
+    for (const std::uint32_t slot : slots) release_dynamic(slot);
+    for (const auto& [mesh, blas] : blas_) rtcReleaseScene(blas);
+    blas_.clear();
+    top_dirty = true;
+  }
 
   if (delta.static_rebuilt) {
     const auto start = Clock::now();

@@ -84,6 +84,7 @@ private:
   std::vector<std::uint32_t> static_slot_of_geom_;
   std::unordered_map<std::uint32_t, RTCScene> blas_;   ///< by shared mesh record
   std::unordered_map<std::uint32_t, Dynamic> dynamic_; ///< by instance slot
+  std::uint64_t synced_ = 0; ///< the layer's sync this tracer applied last (SceneLayer::syncs)
   TracerUpdateStats last_;
   std::uint32_t static_triangles_ = 0;
   std::mutex error_mutex_;

@@ -160,8 +160,14 @@ void NativeTracer::rebuild_top() {
 const TracerUpdateStats& NativeTracer::update(const SceneLayer& layer) {
   last_ = TracerUpdateStats{};
   const SceneTables& tables = layer.tables();
-  const SceneDelta& delta = layer.delta();
+  const SceneDelta& delta = layer.delta_since(synced_);
+  synced_ = layer.syncs();
   bool top_dirty = false;
+  if (delta.full) { // made after the layer's first sync, or syncs were skipped: start over
+    dynamic_.clear();
+    blas_.clear();
+    top_dirty = true;
+  }
 
   if (delta.static_rebuilt) rebuild_static(tables);
   for (const std::uint32_t slot : delta.instances_removed) {

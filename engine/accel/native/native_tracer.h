@@ -145,6 +145,7 @@ private:
   // Dynamic instances.
   std::unordered_map<std::uint32_t, std::unique_ptr<Blas>> blas_; ///< by shared mesh record
   std::unordered_map<std::uint32_t, Dynamic> dynamic_;            ///< by instance slot
+  std::uint64_t synced_ = 0; ///< the layer's sync this tracer applied last (SceneLayer::syncs)
   accel::Bvh top_;
   std::vector<std::uint32_t> top_slot_;    ///< instance slot of each top-level box
   std::vector<const Dynamic*> top_entry_;  ///< and its record
