@@ -4,14 +4,16 @@
 # Idempotent: a fast no-op when everything is present.
 set -euo pipefail
 
-# What the build, the tests and the demo use today (the Vulkan backend runs on Mesa's lavapipe
-# where there is no GPU). The GLFW/ImGui editor will add libglfw3-dev and libimgui-dev.
+# What the build, the tests and the demo use (the Vulkan backend runs on Mesa's lavapipe where
+# there is no GPU; the editor and the games present through GLFW and Dear ImGui, and their
+# windowed tests run under Xvfb).
 packages=(
   build-essential cmake ninja-build pkg-config
   libembree-dev libtbb-dev libglm-dev libopenmesh-dev
   libtinygltf-dev libstb-dev nlohmann-json3-dev libcli11-dev
   libopenexr-dev
   libvulkan-dev mesa-vulkan-drivers glslang-tools
+  libglfw3-dev libimgui-dev xvfb xauth
   libgtest-dev
   clang-15 libfuzzer-15-dev
   lld
