@@ -362,16 +362,24 @@ InvalidationStats RayCacheStore::invalidate(ecs::Registry& registry, const Scene
     }
     changes.push_back(ch);
   };
-  bool flush_everything = delta.static_rebuilt;
-  bool flush_surfaces = delta.lights_changed || delta.materials_changed;
-  for (const std::uint32_t s : delta.instances_removed) {
-    // The slot is freed: its entity index is still in the table entry.
-    if (s < tables.instances.size()) changed(s, true);
+  // The delta describes one sync. A store that missed one (caching switched off while objects
+  // moved, a store made for a layer that synced before) cannot tell what changed in between:
+  // every texel goes. The same sync seen twice brings nothing new.
+  const bool fresh = layer.syncs() != synced_;
+  const bool missed = fresh && layer.syncs() != synced_ + 1;
+  synced_ = layer.syncs();
+  bool flush_everything = missed || (fresh && delta.static_rebuilt);
+  bool flush_surfaces = fresh && (delta.lights_changed || delta.materials_changed);
+  if (fresh && !missed) {
+    for (const std::uint32_t s : delta.instances_removed) {
+      // The slot is freed: its entity index is still in the table entry.
+      if (s < tables.instances.size()) changed(s, true);
+    }
+    for (const std::uint32_t s : delta.instances_added) changed(s, false);
+    for (const std::uint32_t s : delta.instances_moved) changed(s, false);
+    for (const std::uint32_t s : delta.instances_deformed) changed(s, false);
   }
-  for (const std::uint32_t s : delta.instances_added) changed(s, false);
-  for (const std::uint32_t s : delta.instances_moved) changed(s, false);
-  for (const std::uint32_t s : delta.instances_deformed) changed(s, false);
-  if (delta.static_rebuilt)
+  if (flush_everything)
     for (std::uint32_t s = 0; s < tables.instances.size(); ++s)
       if (tables.live(s)) {
         const std::uint32_t e = tables.instances[s].entity_index;

@@ -140,6 +140,7 @@ private:
   std::vector<std::int32_t> cube_of_instance_; ///< by instance slot, -1: none
   std::vector<Sphere> bounds_;                 ///< by entity index, as last invalidated
   std::vector<std::uint8_t> has_bounds_;
+  std::uint64_t synced_ = 0; ///< SceneLayer::syncs() of the last invalidation (0: none)
   std::uint32_t width_ = 1, height_ = 1;
   std::uint64_t frame_ = 0;
   bool lookups_ = false;

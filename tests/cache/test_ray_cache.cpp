@@ -238,6 +238,44 @@ TEST(RayCacheInvalidation, MovingAnEntityOutdatesExactlyTheTexelsThatSawItOrNowC
   EXPECT_EQ(store.cube(0).texels[cache::texel_of(new_a, res)].hit, two.a.index);
 }
 
+TEST(RayCacheInvalidation, AStoreThatMissedASyncOutdatesEveryTexel) {
+  // Caching switched off (no store) while A moves: the store back on cannot know what changed in
+  // the sync it missed, so nothing it holds may be used.
+  TwoSpheres two;
+  World w;
+  make_world(w, on(LookupMode::Direction), 16, [&](ecs::Registry& r) { two(r); }, 16,
+             vec3(0.0f, 50.0f, 0.0f));
+  w.reg.patch<Camera>(w.camera, [](Camera& c) { c.look_at = vec3(0.0f, 100.0f, 1.0f); });
+  (void)frame(w);
+  auto fill = [&] {
+    store_of(w.reg).prefill(*w.reg.resource<ActiveTracer>().tracer, w.reg.resource<SceneLayer>(),
+                            w.reg.resource<RenderJob>().settings);
+  };
+  auto valid = [&] {
+    std::uint64_t n = 0;
+    for (const cache::Texel& t : store_of(w.reg).cube(0).texels) n += t.valid() ? 1 : 0;
+    return n;
+  };
+  fill();
+  ASSERT_EQ(valid(), 6u * 16u * 16u);
+  // In step: a frame where nothing moves outdates nothing.
+  (void)frame(w);
+  EXPECT_EQ(store_of(w.reg).counts().invalidated, 0u);
+  EXPECT_EQ(valid(), 6u * 16u * 16u);
+
+  std::shared_ptr<RayCacheStore> kept = std::move(w.reg.resource<cache::RayCaches>().store);
+  move(w.reg, two.a, vec3(0.0f, 0.0f, 10.0f));
+  (void)frame(w);
+  w.reg.resource<cache::RayCaches>().store = std::move(kept);
+  (void)frame(w); // nothing moves in this sync
+  EXPECT_EQ(valid(), 0u);
+  // Back in step: refilled texels stay.
+  fill();
+  (void)frame(w);
+  EXPECT_EQ(store_of(w.reg).counts().invalidated, 0u);
+  EXPECT_EQ(valid(), 6u * 16u * 16u);
+}
+
 TEST(RayCacheInvalidation, AnOwnerThatMovesOutdatesItsWholeCube) {
   TwoSpheres two;
   World w;
