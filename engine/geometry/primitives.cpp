@@ -209,6 +209,33 @@ TriangleMesh make_cone(float radius, float height, std::uint32_t segments) {
   return out.take();
 }
 
+/// A truncated cone: base `radius` at -height/2, `top_radius` (0 < top < radius) at +height/2,
+/// both ends capped. The side normal is the cone's with r replaced by the radius difference.
+TriangleMesh make_frustum(float radius, float top_radius, float height, std::uint32_t segments) {
+  const float top = 0.5f * height, bottom = -0.5f * height;
+  const double slant = std::hypot(double(height), double(radius) - double(top_radius));
+  const float radial = float(double(height) / slant);
+  const float up = float((double(radius) - double(top_radius)) / slant);
+  Builder out;
+  out.reserve(std::size_t(2) * (segments + 1) + 2 * (segments + 1), std::size_t(4) * segments);
+  for (std::uint32_t i = 0; i < 2; ++i)
+    for (std::uint32_t j = 0; j <= segments; ++j) {
+      const vec2 sc = around(j, segments);
+      const float r = i == 0 ? top_radius : radius;
+      out.vertex(vec3(r * sc.x, i == 0 ? top : bottom, r * sc.y),
+                 vec3(radial * sc.x, up, radial * sc.y), vec2(float(j) / float(segments), float(i)));
+    }
+  const std::uint32_t row = segments + 1;
+  for (std::uint32_t j = 0; j < segments; ++j) {
+    const std::uint32_t a = j, b = a + row, c = b + 1, d = a + 1;
+    out.triangle(a, b, c);
+    out.triangle(a, c, d);
+  }
+  add_cap(out, top_radius, top, segments, true);
+  add_cap(out, radius, bottom, segments, false);
+  return out.take();
+}
+
 } // namespace
 
 TriangleMesh make_primitive(const MeshSource& source, const std::string& context) {
@@ -236,8 +263,12 @@ TriangleMesh make_primitive(const MeshSource& source, const std::string& context
     require_positive(source.radius, name + " radius", context);
     require_positive(source.height, name + " height", context);
     require_range(source.segments, 3, kMaxTessellation, name + " segments", context);
-    return name == "cylinder" ? make_cylinder(source.radius, source.height, source.segments)
-                              : make_cone(source.radius, source.height, source.segments);
+    if (name == "cylinder") return make_cylinder(source.radius, source.height, source.segments);
+    if (source.top_radius == 0.0f) return make_cone(source.radius, source.height, source.segments);
+    if (!(source.top_radius > 0.0f && source.top_radius < source.radius))
+      throw Error(context, "cone top_radius must be in [0, radius), got " +
+                               std::to_string(source.top_radius));
+    return make_frustum(source.radius, source.top_radius, source.height, source.segments);
   }
   throw Error(context, "unknown primitive '" + name +
                            "' (expected sphere, box, plane, cylinder or cone)");

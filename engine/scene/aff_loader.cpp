@@ -587,10 +587,9 @@ void AffReader::cone(Lexer& lex) {
   source.height = height;
   if (r1 == r0) {
     source.primitive = "cylinder";
-  } else if (r1 == 0.0f) {
-    source.primitive = "cone";
   } else {
-    lex.fail(line, "truncated cones (two different non-zero radii) are not supported");
+    source.primitive = "cone"; // truncated when r1 > 0
+    source.top_radius = r1;
   }
   auto geometry = std::make_shared<const TriangleMesh>(make_primitive(source, lex.file()));
   add_triangles(lex, line, geometry->triangle_count());

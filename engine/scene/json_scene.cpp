@@ -226,13 +226,22 @@ MeshSource read_primitive(const Reader& r, const json& j, const std::string& pat
     if (const json* v = o.find("subdivisions"))
       s.rings = read_u32(r, *v, o.path("subdivisions"), 1, kMaxTessellation);
   } else if (s.primitive == "cylinder" || s.primitive == "cone") {
-    const Object o(r, j, path, {"primitive", "radius", "height", "segments"}, s.primitive);
+    const bool cone = s.primitive == "cone";
+    const Object o =
+        cone ? Object(r, j, path, {"primitive", "radius", "height", "segments", "top_radius"},
+                      s.primitive)
+             : Object(r, j, path, {"primitive", "radius", "height", "segments"}, s.primitive);
     if (const json* v = o.find("radius"))
       s.radius = check_length(r, read_positive(r, *v, o.path("radius")), o.path("radius"));
     if (const json* v = o.find("height"))
       s.height = check_length(r, read_positive(r, *v, o.path("height")), o.path("height"));
     if (const json* v = o.find("segments"))
       s.segments = read_u32(r, *v, o.path("segments"), 3, kMaxTessellation);
+    if (const json* v = o.find("top_radius")) {
+      s.top_radius = float(read_number(r, *v, o.path("top_radius")));
+      r.check(s.top_radius >= 0.0f && s.top_radius < s.radius, o.path("top_radius"),
+              "a cone's top_radius must be in [0, radius), got " + format_double(s.top_radius));
+    }
   } else {
     r.fail(member_path(path, "primitive"),
            "unknown primitive \"" + s.primitive +
@@ -894,6 +903,7 @@ Out write_mesh(const Writer& w, const Mesh& mesh, const std::string& context) {
       o.add("radius", w.number(s.radius));
       o.add("height", w.number(s.height));
       o.add("segments", Writer::integer(s.segments));
+      if (s.top_radius != 0.0f) o.add("top_radius", w.number(s.top_radius));
     }
     break;
   case MeshSource::Kind::File:

@@ -14,7 +14,7 @@ std::string primitive_key(const MeshSource& s) {
   std::ostringstream key;
   key.precision(9);
   key << s.primitive << '|' << s.size.x << ',' << s.size.y << ',' << s.size.z << '|' << s.radius
-      << '|' << s.height << '|' << s.segments << '|' << s.rings;
+      << '|' << s.height << '|' << s.segments << '|' << s.rings << '|' << s.top_radius;
   return key.str();
 }
 

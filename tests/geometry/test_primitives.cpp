@@ -55,8 +55,10 @@ MeshSource plane(float x, float z, std::uint32_t subdivisions) {
   s.rings = subdivisions;
   return s;
 }
-MeshSource round_solid(const std::string& name, float radius, float height, std::uint32_t segments) {
+MeshSource round_solid(const std::string& name, float radius, float height, std::uint32_t segments,
+                       float top_radius = 0.0f) {
   MeshSource s = primitive(name);
+  s.top_radius = top_radius;
   s.radius = radius;
   s.height = height;
   s.segments = segments;
@@ -73,6 +75,7 @@ std::vector<MeshSource> closed_primitives() {
   for (const std::uint32_t n : {3u, 5u, 16u, 64u}) {
     out.push_back(round_solid("cylinder", 0.75f, 2.0f, n));
     out.push_back(round_solid("cone", 0.75f, 2.0f, n));
+    out.push_back(round_solid("cone", 0.75f, 2.0f, n, 0.25f)); // truncated
   }
   return out;
 }
@@ -223,6 +226,14 @@ TEST(Primitives, VolumeConvergesToTheAnalyticVolume) {
     EXPECT_GE(cone_error, -kFloat);
     EXPECT_LE(cone_error, around + kFloat);
 
+    // A frustum over inscribed n-gons: V = pi h (R^2 + R r + r^2) / 3, each area term scaled alike.
+    const float top = 0.4f * r;
+    const double frustum_exact = kPi * h * (r * r + r * top + top * top) / 3.0;
+    const double frustum = volume(make_primitive(round_solid("cone", r, h, n, top), "test"));
+    const double frustum_error = (frustum_exact - frustum) / frustum_exact;
+    EXPECT_GE(frustum_error, -kFloat);
+    EXPECT_LE(frustum_error, around + kFloat);
+
     // The sphere loses volume around the axis and along the pole-to-pole profile; the profile
     // term is weighted towards the equator, so it gets a factor 2 (its measured asymptote: 1.5).
     const std::uint32_t rings = n / 2;
@@ -300,7 +311,9 @@ TEST(Primitives, CurvedSurfacesHaveSmoothNormalsAndCapsFlatOnes) {
 
   const TriangleMesh cylinder = make_primitive(round_solid("cylinder", r, h, 24), "test");
   const TriangleMesh cone = make_primitive(round_solid("cone", r, h, 24), "test");
-  for (const TriangleMesh* mesh : {&cylinder, &cone}) {
+  const float top = 0.5f;
+  const TriangleMesh frustum = make_primitive(round_solid("cone", r, h, 24, top), "test");
+  for (const TriangleMesh* mesh : {&cylinder, &cone, &frustum}) {
     for (const uvec3& t : mesh->triangles) {
       const vec3 n = glm::normalize(face_normal(*mesh, t));
       const bool cap = std::abs(n.y) > 1.0f - 1e-6f;
@@ -333,6 +346,31 @@ TEST(Primitives, CurvedSurfacesHaveSmoothNormalsAndCapsFlatOnes) {
       const vec3 slant = vec3(0.0f, 0.5f * h, 0.0f) - p;
       EXPECT_NEAR(glm::dot(n, glm::normalize(slant)), 0.0f, 1e-5f);
     }
+  // The frustum's side normal is orthogonal to the slant line from its bottom rim to its top rim,
+  // and points outwards and up; its top rim has the top radius.
+  int top_rim = 0;
+  for (std::size_t i = 0; i < frustum.vertex_count(); ++i) {
+    const vec3 p = frustum.positions[i];
+    const vec3 n = frustum.normals[i];
+    if (std::abs(n.y) == 1.0f) continue;
+    const vec2 out = glm::normalize(vec2(p.x, p.z));
+    const vec3 slant = vec3(top * out.x, 0.5f * h, top * out.y) - vec3(r * out.x, -0.5f * h, r * out.y);
+    EXPECT_NEAR(glm::dot(n, glm::normalize(slant)), 0.0f, 1e-5f);
+    EXPECT_GT(glm::dot(vec2(n.x, n.z), out), 0.0f);
+    EXPECT_GT(n.y, 0.0f);
+    if (p.y > 0.0f) {
+      ++top_rim;
+      EXPECT_NEAR(glm::length(vec2(p.x, p.z)), top, 1e-5f);
+    }
+  }
+  EXPECT_EQ(top_rim, 25);
+}
+
+TEST(Primitives, AConeTopRadiusOutsideZeroToRadiusIsAnError) {
+  for (const float top : {-0.5f, 1.0f, 2.0f, std::numeric_limits<float>::quiet_NaN()}) {
+    SCOPED_TRACE(top);
+    EXPECT_THROW((void)make_primitive(round_solid("cone", 1.0f, 2.0f, 8, top), "test"), Error);
+  }
 }
 
 // --- Bounds ---------------------------------------------------------------------------------

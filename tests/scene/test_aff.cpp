@@ -122,7 +122,8 @@ TEST(Aff, ParsesEveryStaticCommandIntoComponents) {
 TEST(Aff, CylindersAndConesBecomePrimitivesAlongTheirAxis) {
   const fs::path path = fs::temp_directory_path() / "specula_aff_cones.aff";
   std::ofstream(path) << "c 1 2 3 0.5 1 2 7 0.5\n" // cylinder along +Z, length 4
-                         "c 0 0 0 2 0 -3 0 0\n";   // cone pointing down -Y
+                         "c 0 0 0 2 0 -3 0 0\n"    // cone pointing down -Y
+                         "c 5 0 0 0.5 5 0 2 1.5\n"; // truncated, wider end at the apex point
   Scene scene = load_scene(path);
   ecs::Registry& reg = scene.registry;
   int found = 0;
@@ -134,14 +135,26 @@ TEST(Aff, CylindersAndConesBecomePrimitivesAlongTheirAxis) {
       EXPECT_FLOAT_EQ(m.source.height, 4.0f);
       EXPECT_EQ(t.translation, dvec3(1, 2, 5));
       EXPECT_NEAR(axis.z, 1.0f, 1e-6f);
-    } else if (m.source.primitive == "cone") {
+    } else if (m.source.primitive == "cone" && m.source.top_radius == 0.0f) {
       ++found;
       EXPECT_FLOAT_EQ(m.source.radius, 2.0f);
       EXPECT_FLOAT_EQ(m.source.height, 3.0f);
       EXPECT_NEAR(axis.y, -1.0f, 1e-6f); // apex (primitive +Y) towards the file's apex
+    } else if (m.source.primitive == "cone") {
+      ++found;
+      // The wide end is the base: the primitive's +Y (narrow top) points back to z = 0.
+      EXPECT_FLOAT_EQ(m.source.radius, 1.5f);
+      EXPECT_FLOAT_EQ(m.source.top_radius, 0.5f);
+      EXPECT_FLOAT_EQ(m.source.height, 2.0f);
+      EXPECT_EQ(t.translation, dvec3(5, 0, 1));
+      EXPECT_NEAR(axis.z, -1.0f, 1e-6f);
+      // Its world bounds: radius 1.5 across, 2 along z.
+      const Aabb b = m.geometry->bounds();
+      EXPECT_NEAR(b.max.x, 1.5f, 1e-5f);
+      EXPECT_NEAR(b.max.y - b.min.y, 2.0f, 1e-5f);
     }
   });
-  EXPECT_EQ(found, 2);
+  EXPECT_EQ(found, 3);
 }
 
 TEST(Aff, KeyframedTransformIsHierarchicalWithKochanekBartelsTracks) {
@@ -383,7 +396,6 @@ INSTANTIATE_TEST_SUITE_P(
         BadAff{"unknown_name", "k ghost {\n}\n", 1, "ghost"},
         BadAff{"unbalanced", "x n {\n}\n}\n", 3, "without an open transform"},
         BadAff{"unclosed", "\nxs 1 1 1 0 1 0 0 0 0 0 {\n", 2, "never closed"},
-        BadAff{"truncated_cone", "c 0 0 0 1 0 1 0 0.5\n", 1, "not supported"},
         BadAff{"flat_cone", "\nc 0 0 0 1 0 0 0 1\n", 2, "coincide"},
         BadAff{"missing_include", "\ni 0 nowhere.aff\n", 2, "not found"},
         BadAff{"far_view",

@@ -309,6 +309,8 @@ TEST(JsonScene, IdenticalPrimitivesShareGeometry) {
   EXPECT_EQ(floor.size.z, 6.0f);
   EXPECT_EQ(floor.rings, 4u) << "plane subdivisions live in MeshSource::rings";
   EXPECT_EQ(reg.get<Mesh>(find_named(reg, "cube")).source.size, vec3(0.75f));
+  EXPECT_EQ(reg.get<Mesh>(find_named(reg, "lampshade")).source.top_radius, 0.25f);
+  EXPECT_NE(geometry("lampshade"), geometry("hat"));
 }
 
 TEST(JsonScene, FileMeshesResolveRelativeToTheSceneFile) {
@@ -371,6 +373,8 @@ const BadCase kBadCases[] = {
     {"zero_radius.json", "entities[0].mesh.radius", "> 0"},
     {"unknown_primitive.json", "entities[0].mesh.primitive", "torus"},
     {"param_of_other_primitive.json", "entities[0].mesh.radius", "unknown key"},
+    {"cone_top_not_below_radius.json", "entities[0].mesh.top_radius", "[0, radius)"},
+    {"top_radius_on_cylinder.json", "entities[0].mesh.top_radius", "unknown key"},
     {"ray_cache_on_diffuse.json", "entities[0].ray_cache", "reflective or refractive"},
     {"ray_cache_not_power_of_two.json", "entities[0].ray_cache.resolution", "power of two"},
     {"missing_name.json", "entities[0]", "\"name\""},

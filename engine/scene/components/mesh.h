@@ -20,11 +20,13 @@ struct MeshSource {
   /// other mesh formats ignore it. The glTF loader always states the index.
   std::string path;
   int gltf_mesh = -1;
-  /// Kind::Primitive: "sphere", "box", "plane", "cylinder" or "cone" with its parameters.
+  /// Kind::Primitive: "sphere", "box", "plane", "cylinder" or "cone" with its parameters (a cone
+  /// with a top_radius is truncated: a frustum).
   std::string primitive;
   vec3 size{1.0f};             ///< box: edge lengths; plane: x/z lengths (y ignored)
   float radius = 1.0f;         ///< sphere, cylinder, cone
   float height = 1.0f;         ///< cylinder, cone
+  float top_radius = 0.0f;     ///< cone: the radius of its top (0: pointed; below radius)
   std::uint32_t segments = 32; ///< sphere, cylinder, cone: around the axis
   std::uint32_t rings = 16;    ///< sphere: from pole to pole; plane: subdivisions per side
   friend bool operator==(const MeshSource&, const MeshSource&) = default;
