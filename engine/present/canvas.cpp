@@ -9,11 +9,13 @@
 
 #include <algorithm>
 #include <cstring>
+#include <stdexcept>
+#include <utility>
 
 namespace specula::present {
 
 void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint32_t height,
-                       std::span<std::uint8_t> out) {
+                       std::span<std::uint8_t> out, bool bgra) {
   const std::uint64_t fw = frame.width(), fh = frame.height();
   // Scale to fit, aspect kept: the drawn rectangle is dw × dh, centred; the rest stays black.
   std::uint64_t dw = 0, dh = 0;
@@ -28,6 +30,7 @@ void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint3
   }
   const std::uint64_t ox = (width - dw) / 2, oy = (height - dh) / 2;
   const auto pixels = frame.pixels();
+  const std::size_t r = bgra ? 2 : 0, b = bgra ? 0 : 2;
   tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, height), [&](const auto& rows) {
     for (std::uint32_t y = rows.begin(); y != rows.end(); ++y) {
       std::uint8_t* row = out.data() + std::size_t(y) * width * 4;
@@ -43,9 +46,9 @@ void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint3
         }
         const std::uint64_t sx = ((2 * (x - ox) + 1) * fw) / (2 * dw);
         const vec3& c = pixels[std::size_t(sy * fw + sx)];
-        p[0] = specula::encode_srgb8(c.r);
+        p[r] = specula::encode_srgb8(c.r);
         p[1] = specula::encode_srgb8(c.g);
-        p[2] = specula::encode_srgb8(c.b);
+        p[b] = specula::encode_srgb8(c.b);
         p[3] = 255;
       }
     }
@@ -62,8 +65,6 @@ Rgba8Image encode_srgb8(const Framebuffer& frame, std::uint32_t width, std::uint
 }
 
 namespace {
-
-constexpr VkFormat kFormat = VK_FORMAT_R8G8B8A8_UNORM;
 
 void check_imgui(VkResult r) { gpu::check(r, "Dear ImGui's Vulkan backend"); }
 
@@ -83,11 +84,14 @@ void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageLayout from, VkIma
 
 } // namespace
 
-Canvas::Canvas(gpu::Context& context, bool ui) : context_(context), ui_(ui) {
+Canvas::Canvas(gpu::Context& context, bool ui, VkFormat format)
+    : context_(context), ui_(ui), format_(format) {
+  if (format != VK_FORMAT_R8G8B8A8_UNORM && format != VK_FORMAT_B8G8R8A8_UNORM)
+    throw std::invalid_argument("a canvas is RGBA8 or BGRA8 UNORM");
   // The frame is copied in first (TRANSFER_DST), the UI drawn over it (LOAD), and the result read
   // by a blit or a readback (TRANSFER_SRC).
   VkAttachmentDescription colour{};
-  colour.format = kFormat;
+  colour.format = format_;
   colour.samples = VK_SAMPLE_COUNT_1_BIT;
   colour.loadOp = VK_ATTACHMENT_LOAD_OP_LOAD;
   colour.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
@@ -174,7 +178,7 @@ void Canvas::resize(std::uint32_t width, std::uint32_t height) {
   }
   width_ = width;
   height_ = height;
-  image_ = context_.make_image(width, height, kFormat,
+  image_ = context_.make_image(width, height, format_,
                                VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT |
                                    VK_IMAGE_USAGE_TRANSFER_SRC_BIT);
   const VkDeviceSize bytes = VkDeviceSize(width) * height * 4;
@@ -194,7 +198,8 @@ void Canvas::resize(std::uint32_t width, std::uint32_t height) {
 
 void Canvas::record(VkCommandBuffer cmd, const Framebuffer& frame, ImDrawData* ui) {
   encode_srgb8_into(frame, width_, height_,
-                    {static_cast<std::uint8_t*>(staging_.mapped()), std::size_t(width_) * height_ * 4});
+                    {static_cast<std::uint8_t*>(staging_.mapped()), std::size_t(width_) * height_ * 4},
+                    format_ == VK_FORMAT_B8G8R8A8_UNORM);
   // The previous contents are replaced whole; the stages that last read the image (a blit or a
   // readback, both transfers) finish before the copy writes it.
   image_barrier(cmd, image_.handle(), VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
@@ -244,6 +249,8 @@ Rgba8Image Canvas::readback() const {
   out.height = height_;
   const auto* data = static_cast<const std::uint8_t*>(readback_.mapped());
   out.rgba.assign(data, data + std::size_t(width_) * height_ * 4);
+  if (format_ == VK_FORMAT_B8G8R8A8_UNORM)
+    for (std::size_t i = 0; i < out.rgba.size(); i += 4) std::swap(out.rgba[i], out.rgba[i + 2]);
   return out;
 }
 

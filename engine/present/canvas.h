@@ -1,6 +1,6 @@
 #pragma once
 /// \file
-/// What Window and Offscreen share: an R8G8B8A8_UNORM image the frame is uploaded into (already
+/// What Window and Offscreen share: an R8G8B8A8_UNORM (or B8G8R8A8_UNORM, a swapchain's order) image the frame is uploaded into (already
 /// sRGB-encoded on the CPU, letterboxed to the image's size) with Dear ImGui's draw data rendered
 /// over it in a render pass (Dear ImGui 1.86's Vulkan backend needs a VkRenderPass). A window then
 /// blits the image into its swapchain; the image persists, so read_back() reads it.
@@ -12,14 +12,16 @@
 
 namespace specula::present {
 
-/// encode_srgb8 into `out` (width * height * 4 bytes), rows in parallel.
+/// encode_srgb8 into `out` (width * height * 4 bytes), rows in parallel; `bgra`: blue first.
 void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint32_t height,
-                       std::span<std::uint8_t> out);
+                       std::span<std::uint8_t> out, bool bgra = false);
 
 class Canvas {
 public:
-  /// With `ui`, initialises Dear ImGui's Vulkan backend on the current ImGui context.
-  Canvas(gpu::Context& context, bool ui);
+  /// With `ui`, initialises Dear ImGui's Vulkan backend on the current ImGui context. `format`:
+  /// VK_FORMAT_R8G8B8A8_UNORM or VK_FORMAT_B8G8R8A8_UNORM (a window's swapchain format, so the
+  /// canvas is copied into it rather than blitted, which a software rasteriser does per pixel).
+  Canvas(gpu::Context& context, bool ui, VkFormat format = VK_FORMAT_R8G8B8A8_UNORM);
   ~Canvas();
   Canvas(const Canvas&) = delete;
   Canvas& operator=(const Canvas&) = delete;
@@ -31,7 +33,7 @@ public:
   void record(VkCommandBuffer cmd, const Framebuffer& frame, ImDrawData* ui);
   /// Records a copy of the image (in TRANSFER_SRC_OPTIMAL) into the readback buffer.
   void record_readback(VkCommandBuffer cmd);
-  /// The readback buffer's contents, after the commands of record_readback completed.
+  /// The readback buffer's contents (RGBA whatever the format), after the commands of record_readback completed.
   [[nodiscard]] Rgba8Image readback() const;
 
   [[nodiscard]] const gpu::Image& image() const { return image_; }
@@ -41,6 +43,7 @@ public:
 private:
   gpu::Context& context_;
   bool ui_ = false;
+  VkFormat format_;
   VkRenderPass render_pass_ = VK_NULL_HANDLE;
   VkDescriptorPool ui_pool_ = VK_NULL_HANDLE;
   VkFramebuffer framebuffer_ = VK_NULL_HANDLE;

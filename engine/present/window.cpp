@@ -183,7 +183,7 @@ private:
       ImGui_ImplGlfw_InitForVulkan(window_, true);
       glfw_ui_ = true;
     }
-    canvas_ = std::make_unique<Canvas>(*context_, settings.ui);
+    canvas_ = std::make_unique<Canvas>(*context_, settings.ui, surface_format().format);
 
     const VkDevice device = context_->device();
     VkSemaphoreCreateInfo sci{VK_STRUCTURE_TYPE_SEMAPHORE_CREATE_INFO};
@@ -226,6 +226,25 @@ private:
     return {std::uint32_t(std::max(w, 0)), std::uint32_t(std::max(h, 0))};
   }
 
+  /// The swapchain's format: UNORM, as the values are sRGB-encoded already (an _SRGB format
+  /// would encode them again).
+  [[nodiscard]] VkSurfaceFormatKHR surface_format() const {
+    const VkPhysicalDevice physical = context_->physical_device();
+    std::uint32_t count = 0;
+    gpu::check(vkGetPhysicalDeviceSurfaceFormatsKHR(physical, surface_, &count, nullptr),
+               "vkGetPhysicalDeviceSurfaceFormatsKHR");
+    std::vector<VkSurfaceFormatKHR> formats(count);
+    gpu::check(vkGetPhysicalDeviceSurfaceFormatsKHR(physical, surface_, &count, formats.data()),
+               "vkGetPhysicalDeviceSurfaceFormatsKHR");
+    const auto format = std::find_if(formats.begin(), formats.end(), [](VkSurfaceFormatKHR f) {
+      return (f.format == VK_FORMAT_B8G8R8A8_UNORM || f.format == VK_FORMAT_R8G8B8A8_UNORM) &&
+             f.colorSpace == VK_COLOR_SPACE_SRGB_NONLINEAR_KHR;
+    });
+    if (format == formats.end())
+      throw UnavailableError("cannot present: the surface offers no 8-bit UNORM sRGB format");
+    return *format;
+  }
+
   /// (Re)creates the swapchain for the surface's current extent; none while it is zero.
   void make_swapchain() {
     const VkDevice device = context_->device();
@@ -249,20 +268,8 @@ private:
     if ((caps.supportedUsageFlags & VK_IMAGE_USAGE_TRANSFER_DST_BIT) == 0)
       throw UnavailableError("cannot present: the surface's images cannot be copied into");
 
+    const VkSurfaceFormatKHR format = surface_format();
     std::uint32_t count = 0;
-    gpu::check(vkGetPhysicalDeviceSurfaceFormatsKHR(physical, surface_, &count, nullptr),
-               "vkGetPhysicalDeviceSurfaceFormatsKHR");
-    std::vector<VkSurfaceFormatKHR> formats(count);
-    gpu::check(vkGetPhysicalDeviceSurfaceFormatsKHR(physical, surface_, &count, formats.data()),
-               "vkGetPhysicalDeviceSurfaceFormatsKHR");
-    // UNORM: the values are sRGB-encoded already; an _SRGB format would encode them again.
-    const auto format = std::find_if(formats.begin(), formats.end(), [](VkSurfaceFormatKHR f) {
-      return (f.format == VK_FORMAT_B8G8R8A8_UNORM || f.format == VK_FORMAT_R8G8B8A8_UNORM) &&
-             f.colorSpace == VK_COLOR_SPACE_SRGB_NONLINEAR_KHR;
-    });
-    if (format == formats.end())
-      throw UnavailableError("cannot present: the surface offers no 8-bit UNORM sRGB format");
-
     gpu::check(vkGetPhysicalDeviceSurfacePresentModesKHR(physical, surface_, &count, nullptr),
                "vkGetPhysicalDeviceSurfacePresentModesKHR");
     std::vector<VkPresentModeKHR> modes(count);
@@ -278,8 +285,8 @@ private:
     sci.surface = surface_;
     sci.minImageCount = caps.minImageCount + 1;
     if (caps.maxImageCount > 0) sci.minImageCount = std::min(sci.minImageCount, caps.maxImageCount);
-    sci.imageFormat = format->format;
-    sci.imageColorSpace = format->colorSpace;
+    sci.imageFormat = format.format;
+    sci.imageColorSpace = format.colorSpace;
     sci.imageExtent = extent;
     sci.imageArrayLayers = 1;
     sci.imageUsage = VK_IMAGE_USAGE_TRANSFER_DST_BIT;
@@ -296,7 +303,7 @@ private:
     gpu::check(vkCreateSwapchainKHR(device, &sci, nullptr, &created), "vkCreateSwapchainKHR");
     destroy_swapchain();
     swapchain_ = created;
-    swap_format_ = format->format;
+    swap_format_ = format.format;
     extent_ = extent;
     gpu::check(vkGetSwapchainImagesKHR(device, swapchain_, &count, nullptr), "vkGetSwapchainImagesKHR");
     images_.resize(count);
@@ -320,7 +327,7 @@ private:
   }
 
   /// Copies the canvas (TRANSFER_SRC_OPTIMAL, the swapchain's size) into a swapchain image and
-  /// hands that to presentation; a blit where the formats differ (RGBA → BGRA).
+  /// hands that to presentation; a blit should the formats differ.
   void copy_to_swapchain(VkImage target) {
     VkImageMemoryBarrier b{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER};
     b.srcAccessMask = 0;
