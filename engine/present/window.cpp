@@ -52,6 +52,8 @@ public:
   ~WindowImpl() override { destroy(); }
 
   bool poll(InputState& input) override {
+    // ImGui's GLFW callbacks feed the current context.
+    if (ui_ != nullptr) ImGui::SetCurrentContext(ui_);
     glfwPollEvents();
     tracker_.finish(input);
     if (ui_ != nullptr) {
@@ -179,6 +181,8 @@ private:
     if (settings.ui) {
       ui_ = ImGui::CreateContext();
       ImGui::SetCurrentContext(ui_);
+      // No imgui.ini in the working directory unless the application names one.
+      ImGui::GetIO().IniFilename = nullptr;
       // Chains to the callbacks installed above, so the application's input sees every event.
       ImGui_ImplGlfw_InitForVulkan(window_, true);
       glfw_ui_ = true;
