@@ -145,6 +145,31 @@ TEST(Offscreen, RejectsAnEmptySize) {
   EXPECT_THROW((void)Offscreen::create({0, 10, false}), std::invalid_argument);
 }
 
+// The device filter a window passes to gpu::Context: a device lacking a device extension, or
+// refused by `accept`, is passed over, with a reason when none is left.
+TEST(ContextOptions, PassOverDevicesThatCannotPresent) {
+  if (!test::have_device()) GTEST_SKIP() << "no Vulkan device on this machine";
+  gpu::Context::Options missing;
+  missing.device_extensions = {"VK_SPECULA_no_such_extension"};
+  EXPECT_THROW((void)gpu::Context::create(missing), UnavailableError);
+  gpu::Context::Options refused;
+  int asked = 0;
+  refused.accept = [&](VkInstance instance, VkPhysicalDevice device, std::uint32_t) {
+    asked += instance != VK_NULL_HANDLE && device != VK_NULL_HANDLE;
+    return false;
+  };
+  try {
+    (void)gpu::Context::create(refused);
+    ADD_FAILURE() << "a refused device was chosen";
+  } catch (const UnavailableError& e) {
+    EXPECT_NE(std::string(e.what()).find("present"), std::string::npos) << e.what();
+  }
+  EXPECT_GT(asked, 0);
+  gpu::Context::Options accepted;
+  accepted.accept = [](VkInstance, VkPhysicalDevice, std::uint32_t) { return true; };
+  EXPECT_NO_THROW((void)gpu::Context::create(accepted));
+}
+
 TEST(InputTracker, ReportsEdgesOncePerPoll) {
   InputTracker tracker;
   InputState input;
