@@ -4,7 +4,7 @@
 # folders (${PROJECT_BINARY_DIR}/include/specula/<folder> -> the source); installed, the headers
 # are copied under <prefix>/include/specula/ (cmake/SpeculaInstall.cmake).
 set(SPECULA_INCLUDE_ROOT ${PROJECT_BINARY_DIR}/include)
-set(SPECULA_ENGINE_HEADER_DIRS accel cache core ecs geometry gpu image render scene trace)
+set(SPECULA_ENGINE_HEADER_DIRS accel cache core ecs geometry gpu image present render scene trace)
 file(MAKE_DIRECTORY ${SPECULA_INCLUDE_ROOT}/specula)
 foreach(dir ${SPECULA_ENGINE_HEADER_DIRS})
   if(IS_DIRECTORY ${PROJECT_SOURCE_DIR}/engine/${dir})

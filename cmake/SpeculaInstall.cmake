@@ -1,8 +1,13 @@
 # cmake --install: the libraries, their headers and a CMake package, so that an outside project
-# can find_package(Specula) and link specula::engine / specula::systems.
+# can find_package(Specula) and link specula::engine / specula::systems (and specula::present
+# where built).
 include(CMakePackageConfigHelpers)
 
-install(TARGETS specula_engine specula_systems EXPORT SpeculaTargets
+set(specula_installed_libraries specula_engine specula_systems)
+if(TARGET specula_present)
+  list(APPEND specula_installed_libraries specula_present)
+endif()
+install(TARGETS ${specula_installed_libraries} EXPORT SpeculaTargets
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
         LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
         INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})

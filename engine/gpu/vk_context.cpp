@@ -103,6 +103,20 @@ bool has_instance_extension(const char* name) {
   });
 }
 
+bool has_device_extensions(VkPhysicalDevice device, const std::vector<std::string>& names) {
+  if (names.empty()) return true;
+  std::uint32_t count = 0;
+  if (vkEnumerateDeviceExtensionProperties(device, nullptr, &count, nullptr) != VK_SUCCESS) return false;
+  std::vector<VkExtensionProperties> ext(count);
+  if (vkEnumerateDeviceExtensionProperties(device, nullptr, &count, ext.data()) != VK_SUCCESS)
+    return false;
+  return std::all_of(names.begin(), names.end(), [&](const std::string& name) {
+    return std::any_of(ext.begin(), ext.end(), [&](const VkExtensionProperties& e) {
+      return name == e.extensionName;
+    });
+  });
+}
+
 VKAPI_ATTR VkBool32 VKAPI_CALL on_validation(VkDebugUtilsMessageSeverityFlagBitsEXT severity,
                                              VkDebugUtilsMessageTypeFlagsEXT,
                                              const VkDebugUtilsMessengerCallbackDataEXT* data,
@@ -192,6 +206,11 @@ std::unique_ptr<Context> Context::create(const Options& options) {
       log_debug("Vulkan validation layers asked for but not installed (vulkan-validationlayers)");
     }
   }
+  for (const std::string& e : options.instance_extensions) {
+    if (!has_instance_extension(e.c_str()))
+      throw UnavailableError("the Vulkan instance lacks extension " + e);
+    extensions.push_back(e.c_str());
+  }
   VkApplicationInfo app{VK_STRUCTURE_TYPE_APPLICATION_INFO};
   app.pApplicationName = "specula";
   app.pEngineName = "specula";
@@ -205,7 +224,7 @@ std::unique_ptr<Context> Context::create(const Options& options) {
   if (const VkResult r = vkCreateInstance(&ici, nullptr, &ctx->instance_); r != VK_SUCCESS)
     throw UnavailableError(std::string("no Vulkan instance (") + result_name(r) +
                            "): is a Vulkan driver installed (mesa-vulkan-drivers)?");
-  if (!extensions.empty()) {
+  if (ctx->validation_ && has_instance_extension(VK_EXT_DEBUG_UTILS_EXTENSION_NAME)) {
     auto create_messenger = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
         vkGetInstanceProcAddr(ctx->instance_, "vkCreateDebugUtilsMessengerEXT"));
     if (create_messenger != nullptr) {
@@ -242,6 +261,10 @@ std::unique_ptr<Context> Context::create(const Options& options) {
     if (compute_family(d) < 0 || p.apiVersion < VK_API_VERSION_1_3) continue;
     if (!options.allow_cpu && p.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU) continue;
     if (!wanted.empty() && lower(p.deviceName).find(wanted) == std::string::npos) continue;
+    if (!has_device_extensions(d, options.device_extensions)) continue;
+    if (options.accept &&
+        !options.accept(ctx->instance_, d, std::uint32_t(compute_family(d))))
+      continue;
     const int rank = type_rank(p.deviceType);
     if (rank < best_rank) {
       best_rank = rank;
@@ -252,6 +275,8 @@ std::unique_ptr<Context> Context::create(const Options& options) {
     if (!wanted.empty())
       throw UnavailableError("no Vulkan 1.3 compute device named like '" + wanted +
                              "' (SPECULA_VK_DEVICE); devices: " + names);
+    if (!options.device_extensions.empty() || options.accept)
+      throw UnavailableError("no Vulkan 1.3 device that can present here; devices: " + names);
     throw UnavailableError(options.allow_cpu
                                ? "no Vulkan 1.3 device with a compute queue; devices: " + names
                                : "no Vulkan GPU (only software devices: " + names + ")");
@@ -306,6 +331,10 @@ std::unique_ptr<Context> Context::create(const Options& options) {
   dci.queueCreateInfoCount = 1;
   dci.pQueueCreateInfos = &qci;
   dci.pEnabledFeatures = &enable;
+  std::vector<const char*> device_extensions;
+  for (const std::string& e : options.device_extensions) device_extensions.push_back(e.c_str());
+  dci.enabledExtensionCount = std::uint32_t(device_extensions.size());
+  dci.ppEnabledExtensionNames = device_extensions.data();
   if (const VkResult r = vkCreateDevice(best, &dci, nullptr, &ctx->device_); r != VK_SUCCESS)
     throw UnavailableError("cannot open Vulkan device '" + info.name + "' (" + result_name(r) + ")");
   vkGetDeviceQueue(ctx->device_, ctx->family_, 0, &ctx->queue_);

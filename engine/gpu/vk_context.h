@@ -276,6 +276,13 @@ public:
 #endif
     /// Accept a CPU device (lavapipe). False: only a real GPU will do.
     bool allow_cpu = true;
+    /// Extra instance / device extensions (a window's surface and swapchain); a device without
+    /// every device extension is passed over.
+    std::vector<std::string> instance_extensions;
+    std::vector<std::string> device_extensions;
+    /// When set, only devices whose compute queue family it accepts are chosen (a window checks
+    /// that the family can present to its surface); called with the new instance.
+    std::function<bool(VkInstance, VkPhysicalDevice, std::uint32_t family)> accept;
   };
 
   /// Creates the instance and device. Throws specula::UnavailableError with a one-line reason
@@ -287,6 +294,7 @@ public:
   Context& operator=(const Context&) = delete;
 
   [[nodiscard]] const DeviceInfo& info() const { return info_; }
+  [[nodiscard]] VkInstance instance() const { return instance_; }
   [[nodiscard]] VkDevice device() const { return device_; }
   [[nodiscard]] VkPhysicalDevice physical_device() const { return physical_; }
   [[nodiscard]] VkQueue queue() const { return queue_; }

@@ -86,11 +86,6 @@ std::string lowercase_extension(const std::filesystem::path& path) {
 
 constexpr std::array<std::uint8_t, 8> kPngSignature = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
 
-std::uint8_t encode_srgb8(float linear) {
-  // Round to nearest: the encoded value is in [0, 1], so +0.5 and truncation is exact rounding.
-  return static_cast<std::uint8_t>(linear_to_srgb(linear) * 255.0f + 0.5f);
-}
-
 /// Owns memory returned by stb_image.
 struct StbiFree {
   void operator()(void* p) const noexcept { stbi_image_free(p); }

@@ -4,6 +4,7 @@
 /// and writer and by the metrics that work on display-encoded values.
 
 #include <cmath>
+#include <cstdint>
 
 namespace specula {
 
@@ -23,6 +24,12 @@ namespace specula {
 [[nodiscard]] inline float srgb_to_linear(float encoded) noexcept {
   const float v = clamp_unit(encoded);
   return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
+}
+
+/// Linear → 8-bit sRGB, as PNGs are written and frames presented (present/), so the two agree.
+[[nodiscard]] inline std::uint8_t encode_srgb8(float linear) noexcept {
+  // Round to nearest: the encoded value is in [0, 1], so +0.5 and truncation is exact rounding.
+  return static_cast<std::uint8_t>(linear_to_srgb(linear) * 255.0f + 0.5f);
 }
 
 } // namespace specula

@@ -75,6 +75,9 @@ public:
   /// Draws `frame` scaled to the client area (aspect kept, letterboxed), `ui` over it (null: no
   /// UI), and presents. Handles resizes and out-of-date swapchains itself.
   virtual void present(const Framebuffer& frame, ImDrawData* ui) = 0;
+  /// Asks for a new client area size (the window system may refuse or adjust it); the next
+  /// present() after the resize lands draws at the new size.
+  virtual void set_size(std::uint32_t width, std::uint32_t height) = 0;
   /// The client area now, in pixels.
   [[nodiscard]] virtual std::uint32_t width() const = 0;
   [[nodiscard]] virtual std::uint32_t height() const = 0;

@@ -1,0 +1,257 @@
+#include "specula/present/canvas.h"
+
+#include "specula/image/srgb.h"
+
+#include <backends/imgui_impl_vulkan.h>
+#include <imgui.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cstring>
+#include <stdexcept>
+#include <utility>
+
+namespace specula::present {
+
+void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint32_t height,
+                       std::span<std::uint8_t> out, bool bgra) {
+  const std::uint64_t fw = frame.width(), fh = frame.height();
+  // Scale to fit, aspect kept: the drawn rectangle is dw × dh, centred; the rest stays black.
+  std::uint64_t dw = 0, dh = 0;
+  if (fw > 0 && fh > 0 && width > 0 && height > 0) {
+    if (std::uint64_t(width) * fh <= std::uint64_t(height) * fw) { // width-bound
+      dw = width;
+      dh = std::clamp<std::uint64_t>((fh * width + fw / 2) / fw, 1, height);
+    } else {
+      dh = height;
+      dw = std::clamp<std::uint64_t>((fw * height + fh / 2) / fh, 1, width);
+    }
+  }
+  const std::uint64_t ox = (width - dw) / 2, oy = (height - dh) / 2;
+  const auto pixels = frame.pixels();
+  const std::size_t r = bgra ? 2 : 0, b = bgra ? 0 : 2;
+  tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, height), [&](const auto& rows) {
+    for (std::uint32_t y = rows.begin(); y != rows.end(); ++y) {
+      std::uint8_t* row = out.data() + std::size_t(y) * width * 4;
+      const bool inside_y = y >= oy && y < oy + dh;
+      // Nearest neighbour: the source pixel under the destination pixel's centre, in integers.
+      const std::uint64_t sy = inside_y ? ((2 * (y - oy) + 1) * fh) / (2 * dh) : 0;
+      for (std::uint32_t x = 0; x < width; ++x) {
+        std::uint8_t* p = row + std::size_t(x) * 4;
+        if (!inside_y || x < ox || x >= ox + dw) {
+          p[0] = p[1] = p[2] = 0;
+          p[3] = 255;
+          continue;
+        }
+        const std::uint64_t sx = ((2 * (x - ox) + 1) * fw) / (2 * dw);
+        const vec3& c = pixels[std::size_t(sy * fw + sx)];
+        p[r] = specula::encode_srgb8(c.r);
+        p[1] = specula::encode_srgb8(c.g);
+        p[b] = specula::encode_srgb8(c.b);
+        p[3] = 255;
+      }
+    }
+  });
+}
+
+Rgba8Image encode_srgb8(const Framebuffer& frame, std::uint32_t width, std::uint32_t height) {
+  Rgba8Image image;
+  image.width = width;
+  image.height = height;
+  image.rgba.resize(std::size_t(width) * height * 4);
+  encode_srgb8_into(frame, width, height, image.rgba);
+  return image;
+}
+
+namespace {
+
+void check_imgui(VkResult r) { gpu::check(r, "Dear ImGui's Vulkan backend"); }
+
+void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageLayout from, VkImageLayout to,
+                   VkPipelineStageFlags src_stage, VkAccessFlags src_access,
+                   VkPipelineStageFlags dst_stage, VkAccessFlags dst_access) {
+  VkImageMemoryBarrier b{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER};
+  b.srcAccessMask = src_access;
+  b.dstAccessMask = dst_access;
+  b.oldLayout = from;
+  b.newLayout = to;
+  b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  b.image = image;
+  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
+  vkCmdPipelineBarrier(cmd, src_stage, dst_stage, 0, 0, nullptr, 0, nullptr, 1, &b);
+}
+
+} // namespace
+
+Canvas::Canvas(gpu::Context& context, bool ui, VkFormat format)
+    : context_(context), ui_(ui), format_(format) {
+  if (format != VK_FORMAT_R8G8B8A8_UNORM && format != VK_FORMAT_B8G8R8A8_UNORM)
+    throw std::invalid_argument("a canvas is RGBA8 or BGRA8 UNORM");
+  // The frame is copied in first (TRANSFER_DST), the UI drawn over it (LOAD), and the result read
+  // by a blit or a readback (TRANSFER_SRC).
+  VkAttachmentDescription colour{};
+  colour.format = format_;
+  colour.samples = VK_SAMPLE_COUNT_1_BIT;
+  colour.loadOp = VK_ATTACHMENT_LOAD_OP_LOAD;
+  colour.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
+  colour.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
+  colour.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+  colour.initialLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+  colour.finalLayout = VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL;
+  VkAttachmentReference ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
+  VkSubpassDescription subpass{};
+  subpass.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
+  subpass.colorAttachmentCount = 1;
+  subpass.pColorAttachments = &ref;
+  VkSubpassDependency deps[2]{};
+  deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
+  deps[0].dstSubpass = 0;
+  deps[0].srcStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
+  deps[0].srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  deps[0].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[0].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_READ_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[1].srcSubpass = 0;
+  deps[1].dstSubpass = VK_SUBPASS_EXTERNAL;
+  deps[1].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[1].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[1].dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
+  deps[1].dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
+  VkRenderPassCreateInfo rpi{VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO};
+  rpi.attachmentCount = 1;
+  rpi.pAttachments = &colour;
+  rpi.subpassCount = 1;
+  rpi.pSubpasses = &subpass;
+  rpi.dependencyCount = 2;
+  rpi.pDependencies = deps;
+  gpu::check(vkCreateRenderPass(context_.device(), &rpi, nullptr, &render_pass_), "vkCreateRenderPass");
+  if (!ui_) return;
+
+  try {
+    // The backend needs one combined image sampler (the font atlas); a few spare for textures
+    // an application registers.
+    VkDescriptorPoolSize size{VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 16};
+    VkDescriptorPoolCreateInfo dpi{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+    dpi.flags = VK_DESCRIPTOR_POOL_CREATE_FREE_DESCRIPTOR_SET_BIT;
+    dpi.maxSets = 16;
+    dpi.poolSizeCount = 1;
+    dpi.pPoolSizes = &size;
+    gpu::check(vkCreateDescriptorPool(context_.device(), &dpi, nullptr, &ui_pool_),
+               "vkCreateDescriptorPool");
+    ImGui_ImplVulkan_InitInfo info{};
+    info.Instance = context_.instance();
+    info.PhysicalDevice = context_.physical_device();
+    info.Device = context_.device();
+    info.QueueFamily = context_.queue_family();
+    info.Queue = context_.queue();
+    info.DescriptorPool = ui_pool_;
+    // One frame in flight (present() waits for the previous frame), so two vertex buffer sets
+    // are enough.
+    info.MinImageCount = 2;
+    info.ImageCount = 2;
+    info.MSAASamples = VK_SAMPLE_COUNT_1_BIT;
+    info.CheckVkResultFn = &check_imgui;
+    if (!ImGui_ImplVulkan_Init(&info, render_pass_))
+      throw gpu::GpuError("ImGui_ImplVulkan_Init", VK_ERROR_INITIALIZATION_FAILED);
+    context_.run_now([](VkCommandBuffer cmd) { ImGui_ImplVulkan_CreateFontsTexture(cmd); });
+    ImGui_ImplVulkan_DestroyFontUploadObjects();
+  } catch (...) {
+    if (ui_pool_ != VK_NULL_HANDLE) vkDestroyDescriptorPool(context_.device(), ui_pool_, nullptr);
+    vkDestroyRenderPass(context_.device(), render_pass_, nullptr);
+    throw;
+  }
+}
+
+Canvas::~Canvas() {
+  if (!context_.lost()) (void)vkDeviceWaitIdle(context_.device());
+  if (ui_) ImGui_ImplVulkan_Shutdown();
+  if (framebuffer_ != VK_NULL_HANDLE) vkDestroyFramebuffer(context_.device(), framebuffer_, nullptr);
+  if (ui_pool_ != VK_NULL_HANDLE) vkDestroyDescriptorPool(context_.device(), ui_pool_, nullptr);
+  vkDestroyRenderPass(context_.device(), render_pass_, nullptr);
+}
+
+void Canvas::resize(std::uint32_t width, std::uint32_t height) {
+  if (width == width_ && height == height_ && image_.valid()) return;
+  if (framebuffer_ != VK_NULL_HANDLE) {
+    vkDestroyFramebuffer(context_.device(), framebuffer_, nullptr);
+    framebuffer_ = VK_NULL_HANDLE;
+  }
+  width_ = width;
+  height_ = height;
+  image_ = context_.make_image(width, height, format_,
+                               VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT |
+                                   VK_IMAGE_USAGE_TRANSFER_SRC_BIT);
+  const VkDeviceSize bytes = VkDeviceSize(width) * height * 4;
+  staging_ = context_.make_buffer(bytes, gpu::MemoryKind::host);
+  readback_ = context_.make_buffer(bytes, gpu::MemoryKind::host);
+  const VkImageView view = image_.view();
+  VkFramebufferCreateInfo fci{VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO};
+  fci.renderPass = render_pass_;
+  fci.attachmentCount = 1;
+  fci.pAttachments = &view;
+  fci.width = width;
+  fci.height = height;
+  fci.layers = 1;
+  gpu::check(vkCreateFramebuffer(context_.device(), &fci, nullptr, &framebuffer_),
+             "vkCreateFramebuffer");
+}
+
+void Canvas::record(VkCommandBuffer cmd, const Framebuffer& frame, ImDrawData* ui) {
+  encode_srgb8_into(frame, width_, height_,
+                    {static_cast<std::uint8_t*>(staging_.mapped()), std::size_t(width_) * height_ * 4},
+                    format_ == VK_FORMAT_B8G8R8A8_UNORM);
+  // The previous contents are replaced whole; the stages that last read the image (a blit or a
+  // readback, both transfers) finish before the copy writes it.
+  image_barrier(cmd, image_.handle(), VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                VK_PIPELINE_STAGE_TRANSFER_BIT, 0, VK_PIPELINE_STAGE_TRANSFER_BIT,
+                VK_ACCESS_TRANSFER_WRITE_BIT);
+  VkBufferImageCopy region{};
+  region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+  region.imageExtent = {width_, height_, 1};
+  vkCmdCopyBufferToImage(cmd, staging_.handle(), image_.handle(),
+                         VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
+  if (ui_ && ui != nullptr && ui->CmdListsCount > 0) {
+    VkRenderPassBeginInfo rbi{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};
+    rbi.renderPass = render_pass_;
+    rbi.framebuffer = framebuffer_;
+    rbi.renderArea.extent = {width_, height_};
+    vkCmdBeginRenderPass(cmd, &rbi, VK_SUBPASS_CONTENTS_INLINE);
+    ImGui_ImplVulkan_RenderDrawData(ui, cmd);
+    vkCmdEndRenderPass(cmd);
+  } else {
+    // No UI: skip the pass, whose attachment load and store cost a software rasteriser a copy.
+    image_barrier(cmd, image_.handle(), VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                  VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, VK_PIPELINE_STAGE_TRANSFER_BIT,
+                  VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT,
+                  VK_ACCESS_TRANSFER_READ_BIT);
+  }
+}
+
+void Canvas::record_readback(VkCommandBuffer cmd) {
+  VkBufferImageCopy region{};
+  region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+  region.imageExtent = {width_, height_, 1};
+  vkCmdCopyImageToBuffer(cmd, image_.handle(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
+                         readback_.handle(), 1, &region);
+  VkBufferMemoryBarrier b{VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER};
+  b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  b.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+  b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  b.buffer = readback_.handle();
+  b.size = VK_WHOLE_SIZE;
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 0,
+                       nullptr, 1, &b, 0, nullptr);
+}
+
+Rgba8Image Canvas::readback() const {
+  Rgba8Image out;
+  out.width = width_;
+  out.height = height_;
+  const auto* data = static_cast<const std::uint8_t*>(readback_.mapped());
+  out.rgba.assign(data, data + std::size_t(width_) * height_ * 4);
+  if (format_ == VK_FORMAT_B8G8R8A8_UNORM)
+    for (std::size_t i = 0; i < out.rgba.size(); i += 4) std::swap(out.rgba[i], out.rgba[i + 2]);
+  return out;
+}
+
+} // namespace specula::present
