@@ -61,7 +61,10 @@ int run_window(EditorSession& session, const std::string& script) {
         last_y = in.mouse_y;
         dragged = false;
       }
-      const int axis = in.down[GLFW_KEY_X] ? 0 : in.down[GLFW_KEY_Y] ? 1 : in.down[GLFW_KEY_Z] ? 2 : -1;
+      const int axis = in.down[GLFW_KEY_X]   ? 0
+                       : in.down[GLFW_KEY_Y] ? 1
+                       : in.down[GLFW_KEY_Z] ? 2
+                                             : -1;
       if (in.button_down[0] && axis >= 0 && session.selected() &&
           (in.mouse_x != last_x || in.mouse_y != last_y)) {
         // Window pixels to frame pixels: the gizmo works in the frame's own pixels.
@@ -86,7 +89,8 @@ int run_window(EditorSession& session, const std::string& script) {
                          double(in.down[GLFW_KEY_E]) - double(in.down[GLFW_KEY_Q]),
                          double(in.down[GLFW_KEY_W]) - double(in.down[GLFW_KEY_S]));
         if (move != dvec3(0.0))
-          session.set_camera(fly(session.camera(), move, 1.0 / 60.0, 2.0, in.mouse_dx, in.mouse_dy));
+          session.set_camera(
+              fly(session.camera(), move, 1.0 / 60.0, 2.0, in.mouse_dx, in.mouse_dy));
         else if (in.mouse_dx != 0.0 || in.mouse_dy != 0.0)
           session.set_camera(orbit(session.camera(), in.mouse_dx, in.mouse_dy));
       }

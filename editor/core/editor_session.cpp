@@ -110,7 +110,8 @@ EditorId EditorSession::id_of(ecs::Entity e) const {
   return it->second;
 }
 
-// --- frames ---------------------------------------------------------------------------------------
+// --- frames
+// ---------------------------------------------------------------------------------------
 
 void EditorSession::tick(double dt) {
   schedule_.tick(scene_.registry, dt);
@@ -131,7 +132,8 @@ const Framebuffer& EditorSession::frame() const {
   return const_cast<ecs::Registry&>(scene_.registry).resource<RenderJob>().image;
 }
 
-// --- render settings ------------------------------------------------------------------------------
+// --- render settings
+// ------------------------------------------------------------------------------
 
 void EditorSession::set_backend(const std::string& backend) {
   RenderJob& job = scene_.registry.resource<RenderJob>();
@@ -169,7 +171,8 @@ void EditorSession::set_cache(const cache::CacheSettings& cache) {
   prepare();
 }
 
-// --- selection ------------------------------------------------------------------------------------
+// --- selection
+// ------------------------------------------------------------------------------------
 
 std::optional<ecs::Entity> EditorSession::click(std::uint32_t x, std::uint32_t y) {
   const Framebuffer& image = frame();
@@ -203,7 +206,8 @@ void EditorSession::select_by_name(std::string_view name) {
   scene_.registry.view<Name>().each([&](ecs::Entity e, const Name& n) {
     if (n.value == name && (best == ecs::null_entity || e.index < best.index)) best = e;
   });
-  if (best == ecs::null_entity) throw Error("select", "no entity named \"" + std::string(name) + "\"");
+  if (best == ecs::null_entity)
+    throw Error("select", "no entity named \"" + std::string(name) + "\"");
   select(best);
 }
 
@@ -213,7 +217,8 @@ std::optional<ecs::Entity> EditorSession::selected() const {
   return e;
 }
 
-// --- edits ----------------------------------------------------------------------------------------
+// --- edits
+// ----------------------------------------------------------------------------------------
 
 EntitySnapshot EditorSession::snapshot(ecs::Entity e) const {
   // The registry's lookups are non-const (pools are created on demand); nothing is written.
@@ -258,8 +263,10 @@ void EditorSession::write(EditorId id, const std::optional<EntitySnapshot>& stat
     r.emplace_or_replace<Parent>(e, *parent);
   else if (!parent && have != nullptr)
     r.remove<Parent>(e);
-  if (state->default_tag && !r.has<DefaultTag>(e)) r.emplace<DefaultTag>(e);
-  else if (!state->default_tag) r.remove<DefaultTag>(e);
+  if (state->default_tag && !r.has<DefaultTag>(e))
+    r.emplace<DefaultTag>(e);
+  else if (!state->default_tag)
+    r.remove<DefaultTag>(e);
 }
 
 void EditorSession::apply(const Command& command, bool forward) {
@@ -416,8 +423,17 @@ std::vector<ecs::Entity> EditorSession::subtree(ecs::Entity root) {
 
 void EditorSession::remove(ecs::Entity e) {
   if (id_of(e) == kNoId) throw Error("delete", "not a live entity");
+  const std::vector<ecs::Entity> doomed = subtree(e);
+  std::size_t cameras = 0, doomed_cameras = 0;
+  scene_.registry.view<Camera>().each([&](ecs::Entity c, const Camera&) {
+    ++cameras;
+    if (std::find(doomed.begin(), doomed.end(), c) != doomed.end()) ++doomed_cameras;
+  });
+  // Every frame needs a camera (render_system): the last one stays.
+  if (doomed_cameras > 0 && doomed_cameras == cameras)
+    throw Error("delete", "the scene's last camera cannot be deleted");
   Command command;
-  for (const ecs::Entity x : subtree(e)) command.push_back(Change{id_of(x), snapshot(x), {}});
+  for (const ecs::Entity x : doomed) command.push_back(Change{id_of(x), snapshot(x), {}});
   execute(std::move(command));
 }
 
@@ -437,12 +453,15 @@ void EditorSession::reparent(ecs::Entity e, ecs::Entity parent) {
     }
   }
   edit(e, [&](EntitySnapshot& s) {
-    if (parent == ecs::null_entity) s.parent.reset();
-    else s.parent = id_of(parent);
+    if (parent == ecs::null_entity)
+      s.parent.reset();
+    else
+      s.parent = id_of(parent);
   });
 }
 
-// --- camera ---------------------------------------------------------------------------------------
+// --- camera
+// ---------------------------------------------------------------------------------------
 
 Camera EditorSession::camera() {
   const std::optional<Camera> cam = active_camera(scene_.registry);
@@ -483,7 +502,8 @@ void EditorSession::frame_selected() {
   set_camera(c);
 }
 
-// --- files ----------------------------------------------------------------------------------------
+// --- files
+// ----------------------------------------------------------------------------------------
 
 void EditorSession::save(const std::filesystem::path& path) { save_json_scene(scene_, path); }
 

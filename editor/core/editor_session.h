@@ -117,7 +117,7 @@ public:
   /// origin, selects it and returns it.
   ecs::Entity add_primitive(const std::string& primitive, const std::string& name);
   ecs::Entity add_mesh_file(const std::filesystem::path& file, const std::string& name);
-  /// Deletes the entity and its Parent subtree.
+  /// Deletes the entity and its Parent subtree; refuses to delete the scene's last camera.
   void remove(ecs::Entity e);
   /// Sets e's parent (null_entity: none); the local Transform stays as it is, now relative to
   /// the new parent. Throws when the parent is e or one of its descendants, or has no Transform.

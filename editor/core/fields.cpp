@@ -67,8 +67,8 @@ std::optional<Leaf> resolve(EntitySnapshot& s, std::string_view path) {
     return Leaf{p, lo, hi};
   };
   const auto unknown = [&]() -> Error {
-    return bad_path(path, "unknown field '" + std::string(field) + "' of " +
-                              std::string(component));
+    return bad_path(path,
+                    "unknown field '" + std::string(field) + "' of " + std::string(component));
   };
   if (component == "Transform") {
     if (!s.transform) return std::nullopt;
@@ -181,10 +181,12 @@ const std::vector<std::string>& field_paths() {
 
 void set_field(EntitySnapshot& s, std::string_view path, std::string_view value) {
   if (path == "RayCacheCube.enabled") {
-    if (value != "0" && value != "1") throw bad_path(path, "expected 0 or 1, got '" +
-                                                               std::string(value) + "'");
-    if (value == "0") s.ray_cache_cube.reset();
-    else if (!s.ray_cache_cube) s.ray_cache_cube = RayCacheCube{};
+    if (value != "0" && value != "1")
+      throw bad_path(path, "expected 0 or 1, got '" + std::string(value) + "'");
+    if (value == "0")
+      s.ray_cache_cube.reset();
+    else if (!s.ray_cache_cube)
+      s.ray_cache_cube = RayCacheCube{};
     return;
   }
   const std::optional<Leaf> leaf = resolve(s, path);
@@ -194,17 +196,25 @@ void set_field(EntitySnapshot& s, std::string_view path, std::string_view value)
       [&](auto* p) {
         using T = std::remove_pointer_t<decltype(p)>;
         if constexpr (std::is_same_v<T, Kinematics::Type>) {
-          if (value == "static") *p = T::Static;
-          else if (value == "hierarchical") *p = T::Hierarchical;
-          else if (value == "free") *p = T::Free;
-          else throw bad_path(path, "expected static, hierarchical or free, got '" +
-                                        std::string(value) + "'");
+          if (value == "static")
+            *p = T::Static;
+          else if (value == "hierarchical")
+            *p = T::Hierarchical;
+          else if (value == "free")
+            *p = T::Free;
+          else
+            throw bad_path(path, "expected static, hierarchical or free, got '" +
+                                     std::string(value) + "'");
         } else if constexpr (std::is_same_v<T, Light::Type>) {
-          if (value == "point") *p = T::Point;
-          else if (value == "directional") *p = T::Directional;
-          else if (value == "spot") *p = T::Spot;
-          else throw bad_path(path, "expected point, directional or spot, got '" +
-                                        std::string(value) + "'");
+          if (value == "point")
+            *p = T::Point;
+          else if (value == "directional")
+            *p = T::Directional;
+          else if (value == "spot")
+            *p = T::Spot;
+          else
+            throw bad_path(path,
+                           "expected point, directional or spot, got '" + std::string(value) + "'");
         } else {
           const double v = parse_number(path, value);
           if (v < leaf->lo || v > leaf->hi)

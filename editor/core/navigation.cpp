@@ -10,7 +10,9 @@ namespace {
 using dvec2 = glm::dvec2;
 
 /// (yaw, pitch) of a direction about world +Y, and back.
-dvec2 angles(const dvec3& d) { return dvec2(std::atan2(d.x, d.z), std::asin(std::clamp(d.y, -1.0, 1.0))); }
+dvec2 angles(const dvec3& d) {
+  return dvec2(std::atan2(d.x, d.z), std::asin(std::clamp(d.y, -1.0, 1.0)));
+}
 dvec3 direction(const dvec2& a) {
   return dvec3(std::cos(a.y) * std::sin(a.x), std::sin(a.y), std::cos(a.y) * std::cos(a.x));
 }

@@ -80,8 +80,10 @@ void entity_tree_panel(EditorSession& s, PanelState& state) {
   std::multimap<std::uint32_t, ecs::Entity> children; // by parent index
   std::vector<ecs::Entity> roots;
   s.registry().each_entity([&](ecs::Entity e) {
-    if (const Parent* p = s.registry().try_get<Parent>(e)) children.emplace(p->entity.index, e);
-    else roots.push_back(e);
+    if (const Parent* p = s.registry().try_get<Parent>(e))
+      children.emplace(p->entity.index, e);
+    else
+      roots.push_back(e);
   });
   ImGui::TextUnformatted("(scene root: drop here to unparent)");
   if (ImGui::BeginDragDropTarget()) {
@@ -204,8 +206,9 @@ void cache_panel(EditorSession& s) {
     const cache::CubeView c = store.cube(i);
     std::size_t valid = 0;
     for (const cache::Texel& t : c.texels) valid += t.valid() ? 1 : 0;
-    ImGui::Text("%s: %zu valid, %zu outdated (%ux%u x6)%s", entity_label(s.registry(), c.owner).c_str(), valid,
-                c.texels.size() - valid, c.resolution, c.resolution, c.enabled ? "" : ", off");
+    ImGui::Text("%s: %zu valid, %zu outdated (%ux%u x6)%s",
+                entity_label(s.registry(), c.owner).c_str(), valid, c.texels.size() - valid,
+                c.resolution, c.resolution, c.enabled ? "" : ", off");
   }
   if (const std::optional<ecs::Entity> e = s.selected())
     if (const std::optional<std::size_t> i = store.cube_of(*e)) {

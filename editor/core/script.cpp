@@ -109,9 +109,12 @@ void run_line(EditorSession& s, const std::vector<std::string>& w,
     s.set_field(selection(s), w[1], w[2]);
   } else if (op == "add") {
     want(3, 3, "add primitive KIND NAME | add mesh FILE NAME");
-    if (w[1] == "primitive") (void)s.add_primitive(w[2], w[3]);
-    else if (w[1] == "mesh") (void)s.add_mesh_file(w[2], w[3]);
-    else throw std::invalid_argument("expected 'primitive' or 'mesh' after add, got '" + w[1] + "'");
+    if (w[1] == "primitive")
+      (void)s.add_primitive(w[2], w[3]);
+    else if (w[1] == "mesh")
+      (void)s.add_mesh_file(w[2], w[3]);
+    else
+      throw std::invalid_argument("expected 'primitive' or 'mesh' after add, got '" + w[1] + "'");
   } else if (op == "delete") {
     want(0, 0, "delete");
     s.remove(selection(s));
