@@ -14,6 +14,7 @@
 
 #include <gtest/gtest.h>
 
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -382,6 +383,36 @@ TEST(EditorScript, EditsSaveAndUndoThroughTheProgram) {
       EXPECT_EQ(t.translation.x, 0.5);
     }
   });
+}
+
+std::string shortest(double v) {
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
+}
+
+TEST(EditorScript, ClickThenDragOneUnitAlongXMovesTheSavedEntityByOne) {
+  // The pixel and the screen vector of one unit, from the camera at the program's size.
+  EditorSession s(kScenes / "cornell_box.json", small_view(64, 48));
+  s.tick();
+  const Camera cam = s.camera();
+  const dvec3 p = world_position(s, named(s, "mirror sphere"));
+  const double x0 = s.registry().get<Transform>(named(s, "mirror sphere")).translation.x;
+  const dvec2 px = pixel_of(cam, 64, 48, p);
+  const dvec2 unit = pixel_of(cam, 64, 48, p + dvec3(1, 0, 0)) - px;
+  const fs::path saved = temp_dir() / "script-dragged.json";
+  const fs::path script = write_script(
+      "drag.txt", "click " + std::to_string(int(px.x)) + " " + std::to_string(int(px.y)) +
+                      "\nexpect selected \"mirror sphere\"\ndrag x " + shortest(unit.x) + " " +
+                      shortest(unit.y) + "\nframes 1\nsave " + saved.string() + "\n");
+  const ProgramRun r = run_editor(editor_args(script));
+  ASSERT_EQ(r.code, 0) << r.output;
+  Scene loaded = load_scene(saved);
+  double x1 = NAN;
+  loaded.registry.view<Name, Transform>().each([&](const Name& n, const Transform& t) {
+    if (n.value == "mirror sphere") x1 = t.translation.x;
+  });
+  EXPECT_NEAR(x1 - x0, 1.0, 1e-5);
 }
 
 TEST(EditorScript, ErrorsNameFileAndLineAndExitNonZero) {
