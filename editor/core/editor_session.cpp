@@ -25,6 +25,11 @@ bool same(const T& a, const T& b) {
   return a == b;
 }
 
+template <typename T>
+bool same_optional(const std::optional<T>& a, const std::optional<T>& b) {
+  return a.has_value() == b.has_value() && (!a || same(*a, *b));
+}
+
 /// Makes e's T match `want`, writing only when it differs (so unchanged components keep their
 /// pool versions and the scene layer does no work for them).
 template <typename T>
@@ -243,29 +248,37 @@ EntitySnapshot EditorSession::snapshot(ecs::Entity e) const {
   return s;
 }
 
-void EditorSession::write(EditorId id, const std::optional<EntitySnapshot>& state) {
+void EditorSession::write(EditorId id, const EntitySnapshot& state, const EntitySnapshot* other) {
   ecs::Registry& r = scene_.registry;
   const ecs::Entity e = entity(id);
-  sync_component(r, e, state->name);
-  sync_component(r, e, state->transform);
-  sync_component(r, e, state->mesh);
-  sync_component(r, e, state->material);
-  sync_component(r, e, state->kinematics);
-  sync_component(r, e, state->light);
-  sync_component(r, e, state->camera);
-  sync_component(r, e, state->camera_path);
-  sync_component(r, e, state->ray_cache_cube);
-  sync_component(r, e, state->animation);
-  std::optional<Parent> parent;
-  if (state->parent) parent = Parent{entity(*state->parent)};
-  const Parent* have = r.try_get<Parent>(e);
-  if (parent && (have == nullptr || have->entity != parent->entity))
-    r.emplace_or_replace<Parent>(e, *parent);
-  else if (!parent && have != nullptr)
-    r.remove<Parent>(e);
-  if (state->default_tag && !r.has<DefaultTag>(e))
+  // With `other` (the command's other side), only what the command changed is written: undoing
+  // a Material edit leaves the Transform an animation has moved since where it is.
+  const auto take = [&](const auto& member) {
+    const auto& want = state.*member;
+    if (other == nullptr || !same_optional(want, other->*member)) sync_component(r, e, want);
+  };
+  take(&EntitySnapshot::name);
+  take(&EntitySnapshot::transform);
+  take(&EntitySnapshot::mesh);
+  take(&EntitySnapshot::material);
+  take(&EntitySnapshot::kinematics);
+  take(&EntitySnapshot::light);
+  take(&EntitySnapshot::camera);
+  take(&EntitySnapshot::camera_path);
+  take(&EntitySnapshot::ray_cache_cube);
+  take(&EntitySnapshot::animation);
+  if (other == nullptr || state.parent != other->parent) {
+    std::optional<Parent> parent;
+    if (state.parent) parent = Parent{entity(*state.parent)};
+    const Parent* have = r.try_get<Parent>(e);
+    if (parent && (have == nullptr || have->entity != parent->entity))
+      r.emplace_or_replace<Parent>(e, *parent);
+    else if (!parent && have != nullptr)
+      r.remove<Parent>(e);
+  }
+  if (state.default_tag && !r.has<DefaultTag>(e))
     r.emplace<DefaultTag>(e);
-  else if (!state->default_tag)
+  else if (!state.default_tag)
     r.remove<DefaultTag>(e);
 }
 
@@ -288,7 +301,8 @@ void EditorSession::apply(const Command& command, bool forward) {
   }
   for (const Change& c : command) {
     const auto& state = forward ? c.after : c.before;
-    if (state) write(c.id, state);
+    const auto& other = forward ? c.before : c.after;
+    if (state) write(c.id, *state, other ? &*other : nullptr);
   }
 }
 

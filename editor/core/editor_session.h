@@ -156,7 +156,8 @@ private:
   void apply(const Command& command, bool forward);
   /// One undoable edit of e: `change` edits a copy of its snapshot (and may throw: no change).
   void edit(ecs::Entity e, const std::function<void(EntitySnapshot&)>& change);
-  void write(EditorId id, const std::optional<EntitySnapshot>& state);
+  /// Writes `state` into the entity; with `other`, only the components that differ from it.
+  void write(EditorId id, const EntitySnapshot& state, const EntitySnapshot* other);
   ecs::Entity add_entity(EntitySnapshot s);
   EditorId assign_id(ecs::Entity e);
   void prepare();

@@ -4,6 +4,7 @@
 
 #include "editor/core/editor_session.h"
 #include "editor/core/fields.h"
+#include "editor/core/navigation.h"
 #include "editor/core/panels.h"
 #include "editor/core/script.h"
 #include "specula/cache/ray_cache.h"
@@ -18,6 +19,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -81,7 +83,14 @@ bool same_state(const EntitySnapshot& a, const EntitySnapshot& b) {
   const auto name_eq = [](const std::optional<Name>& x, const std::optional<Name>& y) {
     return x.has_value() == y.has_value() && (!x || x->value == y->value);
   };
-  return name_eq(a.name, b.name) && a.transform == b.transform && a.parent == b.parent &&
+  // Transforms bit for bit (== would let -0 stand for +0).
+  const auto bits_eq = [](const std::optional<Transform>& x, const std::optional<Transform>& y) {
+    if (x.has_value() != y.has_value()) return false;
+    return !x || (std::memcmp(&x->translation, &y->translation, sizeof(dvec3)) == 0 &&
+                  std::memcmp(&x->rotation, &y->rotation, sizeof(quat)) == 0 &&
+                  std::memcmp(&x->scale, &y->scale, sizeof(vec3)) == 0);
+  };
+  return name_eq(a.name, b.name) && bits_eq(a.transform, b.transform) && a.parent == b.parent &&
          mesh_eq(a.mesh, b.mesh) && a.material == b.material && a.kinematics == b.kinematics &&
          a.light == b.light && a.camera == b.camera && a.camera_path == b.camera_path &&
          a.ray_cache_cube == b.ray_cache_cube && a.animation == b.animation &&
@@ -307,6 +316,36 @@ TEST(EditorSession, BackendSwitchOnALiveSceneRendersTheSameFrame) {
     EXPECT_EQ(s.click(std::uint32_t(px.x), std::uint32_t(px.y)),
               std::optional<ecs::Entity>(named(s, "tall block")));
   }
+}
+
+TEST(EditorNavigation, OrbitKeepsDistanceAndTargetFlyMovesBoth) {
+  Camera c;
+  c.position = dvec3(1.0, 2.0, 6.0);
+  c.look_at = dvec3(0.5, 1.0, 0.0);
+  const double distance = glm::length(c.position - c.look_at);
+  const Camera o = orbit(c, 40.0, -25.0);
+  EXPECT_EQ(o.look_at, c.look_at);
+  EXPECT_NEAR(glm::length(o.position - o.look_at), distance, 1e-9);
+  EXPECT_GT(glm::length(o.position - c.position), 0.1);
+  const Camera pole = orbit(c, 0.0, 1e6); // far past the pole: stops short of it
+  EXPECT_LT(std::abs(glm::normalize(pole.position - pole.look_at).y), 1.0);
+  // One second forward at speed 2: both points move 2 units along the view direction.
+  const Camera f = fly(c, dvec3(0, 0, 1), 1.0, 2.0);
+  const dvec3 view = glm::normalize(c.look_at - c.position);
+  EXPECT_NEAR(glm::length(f.position - c.position - 2.0 * view), 0.0, 1e-9);
+  EXPECT_NEAR(glm::length(f.look_at - c.look_at - 2.0 * view), 0.0, 1e-9);
+}
+
+TEST(EditorNavigation, FrameSelectedCentresTheSelection) {
+  EditorSession s(kScenes / "cornell_box.json", small_view(64, 48));
+  s.tick();
+  const ecs::Entity block = named(s, "short block");
+  s.frame_selected();
+  const dvec2 px = pixel_of(s.camera(), 64, 48, world_position(s, block));
+  EXPECT_NEAR(px.x, 32.0, 1.0);
+  EXPECT_NEAR(px.y, 24.0, 1.0);
+  s.tick();
+  EXPECT_EQ(s.click(32, 24), std::optional<ecs::Entity>(block));
 }
 
 TEST(EditorPanels, RunHeadlessOverEveryComponent) {
