@@ -23,8 +23,9 @@ void section_editor(const Options& o) {
   std::printf("\n### Editor viewport and picking (Cornell box, %ux%u, Whitted depth 5, %u threads, "
               "%d frames)\n\n",
               width, height, o.threads, frames);
-  std::printf("| backend | frame ms (median) | frames/s | with panels: frame ms | frames/s | "
-              "pick ms (median / max of 1000) | pick / frame |\n|---|---:|---:|---:|---:|---:|---:|\n");
+  std::printf(
+      "| backend | frame ms (median) | frames/s | with panels: frame ms | frames/s | "
+      "pick ms (median / max of 1000) | pick / frame |\n|---|---:|---:|---:|---:|---:|---:|\n");
   for (const char* backend : {"native", "embree"}) {
     if (!backend_info(backend).available) continue;
     editor::ViewSettings view;
@@ -33,7 +34,7 @@ void section_editor(const Options& o) {
     view.height = height;
     view.threads = o.threads;
     editor::EditorSession session(fs::path(o.source_dir) / "samples/scenes/cornell_box.json", view);
-    editor::HeadlessUi ui(float(width), float(height));
+    editor::HeadlessUi ui{float(width), float(height)};
     for (int i = 0; i < 3; ++i) session.tick(); // first build, caches warm
     std::vector<double> bare, with_ui, pick;
     for (int i = 0; i < frames; ++i) {
@@ -50,7 +51,7 @@ void section_editor(const Options& o) {
       pick.push_back(time_ms([&] { (void)session.click(px, py); }));
     }
     const double frame = median(bare), framed = median(with_ui), picked = median(pick);
-    std::printf("| %s | %.2f | %.1f | %.2f | %.1f | %.4f / %.4f | %.5f |\n", backend, frame,
+    std::printf("| %s | %.2f | %.1f | %.2f | %.1f | %.4f / %.4f | %.1e |\n", backend, frame,
                 1e3 / frame, framed, 1e3 / framed, picked,
                 *std::max_element(pick.begin(), pick.end()), picked / frame);
   }
