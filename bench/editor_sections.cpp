@@ -20,7 +20,8 @@ void section_editor(const Options& o) {
   const std::uint32_t width = std::min(960u, o.size);
   const std::uint32_t height = std::max(1u, width * 9 / 16);
   const int frames = std::max(3, o.frames);
-  std::printf("\n### Editor viewport and picking (Cornell box, %ux%u, Whitted depth 5, %u threads, "
+  std::printf("\n### Editor viewport and picking (Cornell box, %ux%u, Whitted, the scene's depth, "
+              "%u threads, "
               "%d frames)\n\n",
               width, height, o.threads, frames);
   std::printf(

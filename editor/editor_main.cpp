@@ -14,6 +14,7 @@
 
 #include <cstdio>
 #include <iostream>
+#include <optional>
 #include <string>
 
 namespace {
@@ -37,14 +38,15 @@ int main(int argc, char** argv) {
   std::string scene, script, backend = "auto", mode = "whitted", size = "960x540", caches = "off",
                              screenshot;
   bool headless = false;
-  std::uint32_t depth = 5, frames = 1;
+  std::optional<std::uint32_t> depth;
+  std::uint32_t frames = 1;
   app.add_option("scene", scene, "Scene file")->required();
   app.add_flag("--headless", headless, "No window: run the script (or --frames) and exit");
   app.add_option("--script", script, "Replay editor actions from FILE (editor/core/script.h)");
   app.add_option("--backend", backend, "Tracing backend (auto, native, embree, vulkan, ...)");
   app.add_option("--mode", mode, "cast, whitted, path or shadow");
   app.add_option("--size", size, "Viewport size WxH");
-  app.add_option("--depth", depth, "Longest secondary ray chain");
+  app.add_option("--depth", depth, "Longest secondary ray chain (default: the scene's)");
   app.add_option("--cache", caches, "Ray-cache cubes: off, on or auto");
   app.add_option("--frames", frames, "Headless without a script: frames to render");
   app.add_option("--screenshot", screenshot, "Headless: write the last frame to this PNG");

@@ -84,12 +84,13 @@ EditorSession::EditorSession(const std::filesystem::path& scene_path, ViewSettin
 }
 
 void EditorSession::prepare() {
-  if (view_.max_depth > kMaxTraceDepth)
+  if (!view_.max_depth) view_.max_depth = scene_.settings.max_depth;
+  if (*view_.max_depth > kMaxTraceDepth)
     throw Error("--depth", "must be at most " + std::to_string(kMaxTraceDepth));
   RenderJob job;
   job.backend = view_.backend;
   job.settings.mode = view_.mode;
-  job.settings.max_depth = view_.max_depth;
+  job.settings.max_depth = *view_.max_depth;
   job.settings.background = scene_.settings.background;
   job.settings.threads = view_.threads;
   job.image = Framebuffer(view_.width, view_.height);

@@ -53,7 +53,8 @@ struct EntitySnapshot {
 struct ViewSettings {
   std::string backend = "auto";
   TraceMode mode = TraceMode::Whitted;
-  std::uint32_t max_depth = 5;
+  /// Longest secondary chain; empty: the scene file's (RenderSettings::max_depth).
+  std::optional<std::uint32_t> max_depth;
   std::uint32_t width = 960, height = 540;
   std::uint32_t threads = 0;
   cache::CacheSettings cache;

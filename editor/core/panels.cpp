@@ -161,7 +161,7 @@ void render_settings_panel(EditorSession& s, PanelState& state) {
   std::string mode = trace_mode_name(v.mode);
   if (combo("mode", mode, {"cast", "whitted", "path", "shadow"}))
     act(state, [&] { s.set_mode(*parse_trace_mode(mode)); });
-  int depth = int(v.max_depth);
+  int depth = int(v.max_depth.value_or(0));
   if (ImGui::SliderInt("depth", &depth, 0, 16))
     act(state, [&] { s.set_max_depth(std::uint32_t(depth)); });
   bool caches = v.cache.policy != cache::CachePolicy::Off;
