@@ -95,6 +95,8 @@ void section_gpu_cache(const Options& o);
 // per-frame plots, and the paper's Table 1 grid (Markdown and PNGs under --out-dir, default
 // docs/dynamic-report).
 void section_dynamic(const Options& o);
+// The editor's viewport frames and picking (editor_sections.cpp; builds with the editor only).
+void section_editor(const Options& o);
 
 /// A report section's Markdown: printed to stdout as it is written and kept to be saved.
 class Report {

@@ -25,6 +25,8 @@
 //   dynamic  animated scenes (dynamic_sections.cpp; not in the default list): the acceleration
 //            update against the frame per backend on the three-classes sample and a ~90k-triangle
 //            variant, per-frame plots, and the paper's Table 1 grid (under --out-dir).
+//   editor   the editor session (editor_sections.cpp; not in the default list; with the editor
+//            only): Cornell box frames at 960x540 with and without the ImGui panels, and picking.
 
 #include "bench_common.h"
 #include "specula/accel/embree/embree_tracer.h"
@@ -352,7 +354,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 6));
   app.add_option("--sections", o.sections,
                  "Comma-separated: primary,tiles,whitted,depth,build,refit,native,paper,cache,"
-                 "cache-paper,path-reference,path-error,gpu,gpu-cache,dynamic");
+                 "cache-paper,path-reference,path-error,gpu,gpu-cache,dynamic,editor");
   app.add_option("--out-dir", o.out_dir,
                  "Where cache, cache-paper and path-error write Markdown and PNGs (default: "
                  "SOURCE_DIR/docs/cache-report, SOURCE_DIR/docs/path-report)");
@@ -419,6 +421,9 @@ int main(int argc, char** argv) {
     if (has("path-reference")) section_path_reference(o);
     if (has("path-error")) section_path_error(o);
     if (has("dynamic")) section_dynamic(o);
+#ifdef SPECULA_BENCH_EDITOR
+    if (has("editor")) section_editor(o);
+#endif
     if (has("gpu")) section_gpu(o);
     if (has("gpu-cache") && !has("gpu")) section_gpu_cache(o);
   } catch (const std::exception& e) {

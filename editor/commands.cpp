@@ -255,8 +255,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   const std::optional<TraceMode> mode = parse_trace_mode(options.mode);
   if (!mode) throw Error("--mode", "unknown mode '" + printable(options.mode) + "'");
   if (options.spp < 1 || options.spp > kMaxSpp)
-    throw Error("--spp", "expected a whole number in [1 - " + std::to_string(kMaxSpp) +
-                             "], got " + std::to_string(options.spp));
+    throw Error("--spp", "expected a whole number in [1 - " + std::to_string(kMaxSpp) + "], got " +
+                             std::to_string(options.spp));
   if (options.shadow_samples < 1 || options.shadow_samples > kMaxShadowSamples)
     throw Error("--shadow-samples", "expected a whole number in [1 - " +
                                         std::to_string(kMaxShadowSamples) + "], got " +
@@ -291,8 +291,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   gpu.grid_density = options.grid_density;
   const bool stochastic = stochastic_mode(*mode);
   if (options.denoise && !stochastic)
-    throw Error("--denoise", "filters the noise of --mode path and shadow; mode '" +
-                                 options.mode + "' has none");
+    throw Error("--denoise", "filters the noise of --mode path and shadow; mode '" + options.mode +
+                                 "' has none");
   // The output paths too: a render of an hour must not end with "unsupported extension".
   std::optional<ImageFormat> out_format;
   if (!options.out.empty())
@@ -318,12 +318,12 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   job.accumulate = options.accumulate == "on";
   if (options.denoise) job.denoise = DenoiseSettings{};
   const std::optional<DenoiseSettings> denoise = job.denoise;
-  check_memory(
-      render_memory_bytes(width, height, options.frames, out_format, !options.stats.empty(),
-                          stochastic, job.accumulate, options.denoise),
-      budget, options.scene,
-      "rendering " + std::to_string(options.frames) + " frame(s) of " + std::to_string(width) +
-          "x" + std::to_string(height));
+  check_memory(render_memory_bytes(width, height, options.frames, out_format,
+                                   !options.stats.empty(), stochastic, job.accumulate,
+                                   options.denoise),
+               budget, options.scene,
+               "rendering " + std::to_string(options.frames) + " frame(s) of " +
+                   std::to_string(width) + "x" + std::to_string(height));
   job.image = Framebuffer(width, height);
   job.cache = cache_settings;
   job.gpu = gpu;
@@ -351,8 +351,14 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
       *notes << "specula: note: --backend auto: " << *why << "\n";
 
   RunStats stats;
-  stats.settings = {options.scene,   backend,        options.mode,    width,
-                    height,          options.frames, options.threads, scene.settings.max_depth,
+  stats.settings = {options.scene,
+                    backend,
+                    options.mode,
+                    width,
+                    height,
+                    options.frames,
+                    options.threads,
+                    scene.settings.max_depth,
                     cache_settings.resolution};
   stats.settings.cache_policy = cache::cache_policy_name(cache_settings.policy);
   stats.settings.cache_lookup = cache::lookup_mode_name(cache_settings.lookup);
@@ -387,9 +393,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
     // With a range, each tick advances to frame f's time (the first from 0 to T0).
     double dt = 1.0 / 60.0;
     if (time_range) {
-      const double step = options.frames > 1 ? (time_range->t1 - time_range->t0) /
-                                                   double(options.frames - 1)
-                                             : 0.0;
+      const double step =
+          options.frames > 1 ? (time_range->t1 - time_range->t0) / double(options.frames - 1) : 0.0;
       dt = time_range->t0 + double(f) * step - schedule.last().time;
     }
     naming_device_failures([&] { schedule.tick(scene.registry, dt); });
@@ -449,9 +454,9 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
       return median(v);
     };
     const double accel_ms = med(&SystemTimes::acceleration_ms);
-    out << "  systems ms (median): animation " << med(&SystemTimes::animation_ms)
-        << ", transform " << med(&SystemTimes::transform_ms) << ", scene layer "
-        << med(&SystemTimes::scene_layer_ms) << ", acceleration " << accel_ms << " (build "
+    out << "  systems ms (median): animation " << med(&SystemTimes::animation_ms) << ", transform "
+        << med(&SystemTimes::transform_ms) << ", scene layer " << med(&SystemTimes::scene_layer_ms)
+        << ", acceleration " << accel_ms << " (build "
         << med_accel(&AccelStats::static_build_ms) + med_accel(&AccelStats::blas_build_ms)
         << ", refit " << med_accel(&AccelStats::refit_ms) << ", restructure "
         << med_accel(&AccelStats::restructure_ms) << ", top level "
@@ -472,8 +477,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   if (cache_settings.policy != cache::CachePolicy::Off) {
     const CacheCounts& c = last.cache;
     out << "  cache: " << c.lookups << " lookups, " << c.hits << " served ("
-        << (c.lookups > 0 ? 100.0 * double(c.hits) / double(c.lookups) : 0.0) << "%), "
-        << c.valid << "/" << c.texels << " texels valid, " << c.memory_bytes / 1024 << " KiB\n";
+        << (c.lookups > 0 ? 100.0 * double(c.hits) / double(c.lookups) : 0.0) << "%), " << c.valid
+        << "/" << c.texels << " texels valid, " << c.memory_bytes / 1024 << " KiB\n";
     for (const CubeReport& r : c.cubes)
       out << "    cube of entity " << r.entity << " (" << r.resolution << "²): " << r.mode << " — "
           << r.reason << "\n";
@@ -487,9 +492,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
     }
     out << "  samples per pixel: " << last.accumulated_samples << " in the image ("
         << (*mode == TraceMode::Path ? options.spp : options.shadow_samples) << " per frame, "
-        << (options.accumulate == "on" ? "accumulated" : "not accumulated") << ", "
-        << restarts << " restart(s)), " << options.sampling << " sampling, seed " << options.seed
-        << "\n";
+        << (options.accumulate == "on" ? "accumulated" : "not accumulated") << ", " << restarts
+        << " restart(s)), " << options.sampling << " sampling, seed " << options.seed << "\n";
     if (options.denoise)
       out << "  denoised: à-trous, " << denoise->iterations << " levels, median "
           << median(denoise_ms) << " ms per frame\n";

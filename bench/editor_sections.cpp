@@ -1,0 +1,61 @@
+// The editor's viewport and picking (section "editor", not in the default list): frames of the
+// Cornell box through the editor session at 960x540 (or --size, if smaller), Whitted, with and
+// without the headless ImGui panels built; and picking — a camera ray through the active tracer
+// per click — against the frame time, in one run.
+
+#include "bench_common.h"
+#include "editor/core/editor_session.h"
+#include "editor/core/panels.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <random>
+#include <vector>
+
+namespace specula::bench {
+
+namespace fs = std::filesystem;
+
+void section_editor(const Options& o) {
+  const std::uint32_t width = std::min(960u, o.size);
+  const std::uint32_t height = std::max(1u, width * 9 / 16);
+  const int frames = std::max(3, o.frames);
+  std::printf("\n### Editor viewport and picking (Cornell box, %ux%u, Whitted, the scene's depth, "
+              "%u threads, "
+              "%d frames)\n\n",
+              width, height, o.threads, frames);
+  std::printf(
+      "| backend | frame ms (median) | frames/s | with panels: frame ms | frames/s | "
+      "pick ms (median / max of 1000) | pick / frame |\n|---|---:|---:|---:|---:|---:|---:|\n");
+  for (const char* backend : {"native", "embree"}) {
+    if (!backend_info(backend).available) continue;
+    editor::ViewSettings view;
+    view.backend = backend;
+    view.width = width;
+    view.height = height;
+    view.threads = o.threads;
+    editor::EditorSession session(fs::path(o.source_dir) / "samples/scenes/cornell_box.json", view);
+    editor::HeadlessUi ui{float(width), float(height)};
+    for (int i = 0; i < 3; ++i) session.tick(); // first build, caches warm
+    std::vector<double> bare, with_ui, pick;
+    for (int i = 0; i < frames; ++i) {
+      bare.push_back(time_ms([&] { session.tick(); }));
+      with_ui.push_back(time_ms([&] {
+        session.tick();
+        ui.frame(session);
+      }));
+    }
+    std::mt19937 rng(7);
+    std::uniform_int_distribution<std::uint32_t> x(0, width - 1), y(0, height - 1);
+    for (int i = 0; i < 1000; ++i) {
+      const std::uint32_t px = x(rng), py = y(rng);
+      pick.push_back(time_ms([&] { (void)session.click(px, py); }));
+    }
+    const double frame = median(bare), framed = median(with_ui), picked = median(pick);
+    std::printf("| %s | %.2f | %.1f | %.2f | %.1f | %.4f / %.4f | %.1e |\n", backend, frame,
+                1e3 / frame, framed, 1e3 / framed, picked,
+                *std::max_element(pick.begin(), pick.end()), picked / frame);
+  }
+}
+
+} // namespace specula::bench

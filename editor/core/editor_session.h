@@ -1,0 +1,184 @@
+#pragma once
+/// \file
+/// The editor's session and its action layer: one loaded scene, its schedule and render job, and
+/// every edit the editor can make. Mouse, keyboard, the ImGui panels and `--script` all call these
+/// actions; none writes components any other way. Every edit is a command holding the edited
+/// entities' components before and after (EntitySnapshot), so undo restores them bit for bit, and
+/// it writes them with emplace_or_replace / remove, so the next tick's transform and scene-layer
+/// systems see the change as they see an animation's (registry rule 5).
+
+#include "specula/cache/cache_settings.h"
+#include "specula/core/math.h"
+#include "specula/render/render_job.h"
+#include "specula/scene/components.h"
+#include "specula/scene/mesh_library.h"
+#include "specula/scene/scene.h"
+#include "specula/systems/schedule.h"
+
+#include <cstdint>
+#include <deque>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+#include <vector>
+
+namespace specula::editor {
+
+using dvec2 = glm::dvec2;
+
+/// A stable name for an entity across delete/undo (which makes a new ECS handle).
+using EditorId = std::uint64_t;
+inline constexpr EditorId kNoId = 0;
+
+/// Every component the editor edits or recreates, by value; Parent as an EditorId.
+struct EntitySnapshot {
+  std::optional<Name> name;
+  std::optional<Transform> transform;
+  std::optional<EditorId> parent;
+  std::optional<Mesh> mesh;
+  std::optional<Material> material;
+  std::optional<Kinematics> kinematics;
+  std::optional<Light> light;
+  std::optional<Camera> camera;
+  std::optional<CameraPath> camera_path;
+  std::optional<RayCacheCube> ray_cache_cube;
+  std::optional<Animation> animation;
+  bool default_tag = false; ///< DefaultTag: the writer leaves the entity out
+};
+
+/// How the viewport renders (switchable on a live session).
+struct ViewSettings {
+  std::string backend = "auto";
+  TraceMode mode = TraceMode::Whitted;
+  /// Longest secondary chain; empty: the scene file's (RenderSettings::max_depth).
+  std::optional<std::uint32_t> max_depth;
+  std::uint32_t width = 960, height = 540;
+  std::uint32_t threads = 0;
+  cache::CacheSettings cache;
+};
+
+enum class GizmoMode { Translate, Rotate, Scale };
+
+/// Radians a rotate drag turns per pixel of its screen vector's x.
+inline constexpr double kRotateRadiansPerPixel = 0.01;
+
+/// Per-frame history the overlay plots.
+struct FrameSample {
+  double ms = 0.0;
+  std::vector<double> system_ms; ///< Schedule::system_names() order
+  double rays_per_second = 0.0;
+};
+
+class EditorSession {
+public:
+  /// Loads the scene (load_scene) and prepares rendering with `view`. Throws specula::Error.
+  EditorSession(const std::filesystem::path& scene_path, ViewSettings view);
+
+  // --- frames -----------------------------------------------------------------------------------
+  /// Runs the schedule once (dt seconds) and records the history.
+  void tick(double dt = 1.0 / 60.0);
+  [[nodiscard]] const Framebuffer& frame() const;
+  [[nodiscard]] const std::deque<FrameSample>& history() const { return history_; }
+  static constexpr std::size_t kHistory = 120;
+
+  // --- render settings (live) -------------------------------------------------------------------
+  [[nodiscard]] const ViewSettings& view() const { return view_; }
+  /// A new tracer for the live layer: its first update catches up through delta_since.
+  void set_backend(const std::string& backend);
+  void set_mode(TraceMode mode);
+  void set_max_depth(std::uint32_t depth);
+  /// Caches on or off (or another policy): the render job is prepared again (new layer, store).
+  void set_cache(const cache::CacheSettings& cache);
+
+  // --- selection --------------------------------------------------------------------------------
+  /// Casts the camera ray through pixel (x, y) of the last frame with the active tracer and
+  /// selects the entity hit (none on a miss). Returns the selection.
+  std::optional<ecs::Entity> click(std::uint32_t x, std::uint32_t y);
+  void select(ecs::Entity e);
+  /// Selects the first entity (lowest index) with this Name; throws when there is none.
+  void select_by_name(std::string_view name);
+  void clear_selection() { selected_ = kNoId; }
+  [[nodiscard]] std::optional<ecs::Entity> selected() const;
+
+  // --- edits (all undoable) ---------------------------------------------------------------------
+  /// Pixels per world unit along world axis `axis` (0 x, 1 y, 2 z) at the entity's origin: the
+  /// screen vector of one unit, from the camera and the frame size.
+  [[nodiscard]] dvec2 screen_axis(ecs::Entity e, int axis) const;
+  /// Drags the selection's gizmo handle for `axis` by a screen vector (pixels): translate and
+  /// scale move by the drag's projection on screen_axis in world units; rotate turns by
+  /// kRotateRadiansPerPixel per pixel of drag.x about the world axis.
+  void drag(GizmoMode mode, int axis, dvec2 screen_delta);
+  /// Sets a field by path ("Transform.translation.x", "Material.reflectivity",
+  /// "Kinematics.type", "RayCacheCube.enabled", ...; fields.h lists them) from text.
+  void set_field(ecs::Entity e, std::string_view path, std::string_view value);
+  /// Adds a primitive ("sphere", "box", "plane", "cylinder", "cone") or a mesh file at the
+  /// origin, selects it and returns it.
+  ecs::Entity add_primitive(const std::string& primitive, const std::string& name);
+  ecs::Entity add_mesh_file(const std::filesystem::path& file, const std::string& name);
+  /// Deletes the entity and its Parent subtree; refuses to delete the scene's last camera.
+  void remove(ecs::Entity e);
+  /// Sets e's parent (null_entity: none); the local Transform stays as it is, now relative to
+  /// the new parent. Throws when the parent is e or one of its descendants, or has no Transform.
+  void reparent(ecs::Entity e, ecs::Entity parent);
+  bool undo();
+  bool redo();
+  [[nodiscard]] std::size_t undo_depth() const { return undo_.size(); }
+
+  // --- camera (not undoable: navigation) --------------------------------------------------------
+  [[nodiscard]] Camera camera();
+  void set_camera(const Camera& camera);
+  /// Points the camera at the selection's bounds, from the current direction.
+  void frame_selected();
+
+  // --- files ------------------------------------------------------------------------------------
+  void save(const std::filesystem::path& path);
+  /// The last frame as PNG.
+  void screenshot(const std::filesystem::path& path) const;
+
+  // --- access -----------------------------------------------------------------------------------
+  [[nodiscard]] ecs::Registry& registry() { return scene_.registry; }
+  [[nodiscard]] Scene& scene() { return scene_; }
+  [[nodiscard]] EntitySnapshot snapshot(ecs::Entity e) const;
+  [[nodiscard]] ecs::Entity entity(EditorId id) const;
+  [[nodiscard]] EditorId id_of(ecs::Entity e) const;
+  /// Renders the current layer state once without caches (reference for the cached frame).
+  [[nodiscard]] Framebuffer render_uncached();
+
+private:
+  struct Change {
+    EditorId id;
+    std::optional<EntitySnapshot> before, after; ///< empty: the entity does not exist
+  };
+  using Command = std::vector<Change>;
+  void execute(Command command);
+  void apply(const Command& command, bool forward);
+  /// One undoable edit of e: `change` edits a copy of its snapshot (and may throw: no change).
+  void edit(ecs::Entity e, const std::function<void(EntitySnapshot&)>& change);
+  /// Writes `state` into the entity; with `other`, only the components that differ from it.
+  void write(EditorId id, const EntitySnapshot& state, const EntitySnapshot* other);
+  ecs::Entity add_entity(EntitySnapshot s);
+  EditorId assign_id(ecs::Entity e);
+  void prepare();
+  [[nodiscard]] std::vector<ecs::Entity> subtree(ecs::Entity root);
+
+  Scene scene_;
+  ViewSettings view_;
+  Schedule schedule_;
+  MeshLibrary meshes_;
+  EditorId next_id_ = 1;
+  std::unordered_map<EditorId, ecs::Entity> entities_;
+  std::unordered_map<std::uint32_t, EditorId> ids_; ///< by entity index
+  EditorId selected_ = kNoId;
+  std::vector<Command> undo_, redo_;
+  std::deque<FrameSample> history_;
+};
+
+/// Projects a world point to pixel coordinates (x right, y down) of a width × height frame;
+/// empty behind the camera.
+[[nodiscard]] std::optional<dvec2> project(const Camera& camera, std::uint32_t width,
+                                           std::uint32_t height, const dvec3& world);
+
+} // namespace specula::editor

@@ -1,0 +1,89 @@
+// specula-editor SCENE [--headless] [--script FILE] [--backend B] [--mode M] [--size WxH]
+//   [--depth N] [--cache off|on] [--frames N] [--screenshot PNG]
+// Windowed by default (editor_window.cpp, when this build has specula::present); --headless runs
+// the same session and panels without a window. Exit codes: 0 done, 1 bad input or a failed
+// script line (the message names file:line), 2 a feature this build or machine lacks.
+
+#include "editor/core/editor_session.h"
+#include "editor/core/panels.h"
+#include "editor/core/script.h"
+#include "editor/editor_window.h"
+#include "specula/core/error.h"
+
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <iostream>
+#include <optional>
+#include <string>
+
+namespace {
+
+/// "WxH" → (W, H), each 1 … kMaxImageSide.
+bool parse_size(const std::string& text, std::uint32_t& w, std::uint32_t& h) {
+  unsigned long a = 0, b = 0;
+  char tail = 0;
+  if (std::sscanf(text.c_str(), "%lux%lu%c", &a, &b, &tail) != 2) return false;
+  if (a < 1 || b < 1 || a > specula::kMaxImageSide || b > specula::kMaxImageSide) return false;
+  w = std::uint32_t(a);
+  h = std::uint32_t(b);
+  return true;
+}
+
+} // namespace
+
+int main(int argc, char** argv) {
+  using namespace specula;
+  CLI::App app{"Specula editor"};
+  std::string scene, script, backend = "auto", mode = "whitted", size = "960x540", caches = "off",
+                             screenshot;
+  bool headless = false;
+  std::optional<std::uint32_t> depth;
+  std::uint32_t frames = 1;
+  app.add_option("scene", scene, "Scene file")->required();
+  app.add_flag("--headless", headless, "No window: run the script (or --frames) and exit");
+  app.add_option("--script", script, "Replay editor actions from FILE (editor/core/script.h)");
+  app.add_option("--backend", backend, "Tracing backend (auto, native, embree, vulkan, ...)");
+  app.add_option("--mode", mode, "cast, whitted, path or shadow");
+  app.add_option("--size", size, "Viewport size WxH");
+  app.add_option("--depth", depth, "Longest secondary ray chain (default: the scene's)");
+  app.add_option("--cache", caches, "Ray-cache cubes: off, on or auto");
+  app.add_option("--frames", frames, "Headless without a script: frames to render");
+  app.add_option("--screenshot", screenshot, "Headless: write the last frame to this PNG");
+  CLI11_PARSE(app, argc, argv);
+
+  try {
+    editor::ViewSettings view;
+    view.backend = backend;
+    const std::optional<TraceMode> m = parse_trace_mode(mode);
+    if (!m) throw Error("--mode", "expected cast, whitted, path or shadow, got '" + mode + "'");
+    view.mode = *m;
+    view.max_depth = depth;
+    if (!parse_size(size, view.width, view.height))
+      throw Error("--size", "expected WxH with sides 1 to " + std::to_string(kMaxImageSide) +
+                                ", got '" + size + "'");
+    const std::optional<cache::CachePolicy> policy = cache::parse_cache_policy(caches);
+    if (!policy) throw Error("--cache", "expected off, on or auto, got '" + caches + "'");
+    view.cache.policy = *policy;
+    editor::EditorSession session(scene, view);
+    session.tick(); // a first frame, so that clicks have something to pick in
+    if (!headless) return editor::run_window(session, script);
+    editor::HeadlessUi ui(float(view.width), float(view.height));
+    ui.frame(session);
+    if (!script.empty())
+      editor::run_script(session, script, [&] { ui.frame(session); });
+    else
+      for (std::uint32_t i = 1; i < frames; ++i) {
+        session.tick();
+        ui.frame(session);
+      }
+    if (!screenshot.empty()) session.screenshot(screenshot);
+    return 0;
+  } catch (const UnavailableError& e) {
+    std::cerr << "specula-editor: " << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "specula-editor: error: " << e.what() << "\n";
+    return 1;
+  }
+}

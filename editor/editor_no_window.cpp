@@ -1,0 +1,12 @@
+// run_window for builds without specula::present (no Vulkan or GLFW): headless only.
+#include "editor/editor_window.h"
+
+#include "specula/core/error.h"
+
+namespace specula::editor {
+
+int run_window(EditorSession& /*session*/, const std::string& /*script*/) {
+  throw UnavailableError("this build has no windowed editor (specula::present): use --headless");
+}
+
+} // namespace specula::editor
