@@ -46,7 +46,7 @@ HeadlessResult run_headless(Game& game, const std::string& game_name, const Inpu
   Schedule schedule;
   HeadlessResult result;
   double total_ms = 0.0, trace_ms = 0.0;
-  std::uint64_t invalidated = 0, cache_hits = 0;
+  std::uint64_t invalidated = 0, cache_hits = 0, rays = 0;
   for (std::uint64_t frame = 0; frame < options.frames; ++frame) {
     const auto start = std::chrono::steady_clock::now();
     game.step(kFrameDt, script.at(frame));
@@ -57,6 +57,7 @@ HeadlessResult run_headless(Game& game, const std::string& game_name, const Inpu
     trace_ms += done.last.trace_ms;
     invalidated += done.last.cache.invalidated;
     cache_hits += done.last.cache.hits;
+    rays += done.last.rays.total();
     bool finite = true;
     for (const vec3& p : done.image.pixels()) finite = finite && is_finite(p);
     if (!finite) {
@@ -75,13 +76,15 @@ HeadlessResult run_headless(Game& game, const std::string& game_name, const Inpu
         head, sizeof head,
         "{\n  \"game\": \"%s\",\n  \"frames\": %llu,\n  \"width\": %u,\n  \"height\": %u,\n"
         "  \"backend\": \"%s\",\n  \"ms_per_frame\": %.4f,\n  \"fps\": %.3f,\n"
-        "  \"trace_ms_per_frame\": %.4f,\n  \"nonfinite_frames\": %llu,\n"
+        "  \"trace_ms_per_frame\": %.4f,\n  \"rays_per_frame\": %.1f,\n"
+        "  \"nonfinite_frames\": %llu,\n"
         "  \"first_nonfinite_frame\": %lld,\n  \"cache_texels_invalidated\": %llu,\n"
         "  \"cache_hits\": %llu,\n",
         game_name.c_str(), static_cast<unsigned long long>(result.frames), options.width,
         options.height, done.backend.c_str(), result.mean_ms,
         result.mean_ms > 0.0 ? 1000.0 / result.mean_ms : 0.0,
         options.frames ? trace_ms / double(options.frames) : 0.0,
+        options.frames ? double(rays) / double(options.frames) : 0.0,
         static_cast<unsigned long long>(result.nonfinite_frames),
         static_cast<long long>(result.first_nonfinite_frame),
         static_cast<unsigned long long>(invalidated), static_cast<unsigned long long>(cache_hits));
@@ -174,7 +177,7 @@ int game_main(int argc, char** argv, const std::string& game_name,
   }
 }
 
-#ifndef SPECULA_HAS_PRESENT
+#ifndef SPECULA_GAMES_WINDOW
 int run_windowed(Game&, const std::string&, const WindowedOptions&) {
   throw UnavailableError("this build has no window (specula::present); run with --headless");
 }

@@ -1,6 +1,7 @@
 // The windowed front end: compiled only where specula::present exists (samples/games/CMakeLists.txt).
 #include "front_end.h"
 
+#include <specula/core/error.h>
 #include <specula/present/window.h>
 #include <specula/systems/schedule.h>
 
