@@ -161,6 +161,24 @@ TEST(MirrorRun, NeverInsideAnObstacleAsTheEnginePlacesIt) {
   });
 }
 
+TEST(MirrorRun, StillBallServesItsCacheMovingOutdatesIt) {
+  MirrorRun game;
+  prepare_rendering(game.registry(), game.render_job(40, 24));
+  Schedule schedule;
+  const auto frame = [&] {
+    schedule.tick(game.registry(), kFrameDt);
+    return game.registry().resource<RenderJob>().last.cache;
+  };
+  // Not stepped: nothing moves, so after the first frames fill the cube its texels serve rays.
+  for (int f = 0; f < 3; ++f) (void)frame();
+  std::uint64_t hits = 0;
+  for (int f = 0; f < 3; ++f) hits += frame().hits;
+  EXPECT_GT(hits, 0u);
+  EXPECT_EQ(frame().invalidated, 0u);
+  game.place_player(game.position() + dvec3(1.0, 0.0, 0.0), dvec3(0.0));
+  EXPECT_GT(frame().invalidated, 0u) << "moving the ball outdates its cube";
+}
+
 TEST(MirrorRun, ReplayReachesTheGoal) {
   const InputScript script = load_input_script(kGames / "mirror_run/demo_input.txt");
   MirrorRun game;
