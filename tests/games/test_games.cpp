@@ -105,6 +105,15 @@ void play(G& game, const InputScript& script, std::uint64_t frames, F&& after_ti
   }
 }
 
+TEST(Orrery, SameInputSameState) {
+  const InputScript script = load_input_script(kGames / "orrery/demo_input.txt");
+  Orrery a, b;
+  play(a, script, 300, [](std::uint64_t) {});
+  play(b, script, 300, [](std::uint64_t) {});
+  EXPECT_EQ(a.state_json(), b.state_json());
+  EXPECT_EQ(a.shots().size(), 4u);
+}
+
 TEST(MirrorRun, SameInputSameState) {
   const InputScript script = load_input_script(kGames / "mirror_run/demo_input.txt");
   MirrorRun a, b;
@@ -193,6 +202,7 @@ TEST(MirrorRun, ReplayReachesTheGoal) {
   EXPECT_EQ(r.nonfinite_frames, 0u);
   EXPECT_EQ(stats["frames"], 600);
   EXPECT_EQ(stats["nonfinite_frames"], 0);
+  EXPECT_EQ(stats["nonfinite_samples"], 0);
   EXPECT_GT(stats["cache_texels_invalidated"].get<std::uint64_t>(), 0u) << "the ball moved";
   const nlohmann::json& state = stats["state"];
   ASSERT_TRUE(state["won"].get<bool>());
@@ -241,8 +251,8 @@ TEST(Orrery, ReplayHitsEveryPlanetAndScoresByTheRules) {
     const Orrery::Shot& shot = game.shots()[seen++];
     const int body = first_body_hit(reg, game, shot.angle);
     EXPECT_EQ(shot.body, body) << "frame " << f;
-    const bool scores = body >= 0 && game.bodies()[std::size_t(body)].target &&
-                        !hit[std::size_t(body)];
+    const bool scores =
+        body >= 0 && game.bodies()[std::size_t(body)].target && !hit[std::size_t(body)];
     if (scores) hit[std::size_t(body)] = true;
     score = scores ? score + 100 : std::max<std::int64_t>(0, score - 10);
   });
@@ -277,6 +287,7 @@ TEST(Orrery, ReplayRendersFiniteFramesAndWritesTheStats) {
   std::filesystem::remove(*options.stats);
   std::filesystem::remove(*options.out);
   EXPECT_EQ(stats["nonfinite_frames"], 0);
+  EXPECT_EQ(stats["nonfinite_samples"], 0);
   EXPECT_TRUE(stats["state"]["won"].get<bool>());
   EXPECT_EQ(stats["state"]["score"], game.score());
   EXPECT_EQ(stats["state"]["shots"], 4);

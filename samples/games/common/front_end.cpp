@@ -46,19 +46,22 @@ HeadlessResult run_headless(Game& game, const std::string& game_name, const Inpu
   Schedule schedule;
   HeadlessResult result;
   double total_ms = 0.0, trace_ms = 0.0;
-  std::uint64_t invalidated = 0, cache_hits = 0, rays = 0;
+  std::uint64_t invalidated = 0, cache_hits = 0, rays = 0, nonfinite_samples = 0;
   for (std::uint64_t frame = 0; frame < options.frames; ++frame) {
     const auto start = std::chrono::steady_clock::now();
     game.step(kFrameDt, script.at(frame));
     schedule.tick(game.registry(), kFrameDt);
-    total_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                    .count();
+    total_ms +=
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     const RenderJob& done = game.registry().resource<RenderJob>();
     trace_ms += done.last.trace_ms;
     invalidated += done.last.cache.invalidated;
     cache_hits += done.last.cache.hits;
     rays += done.last.rays.total();
-    bool finite = true;
+    nonfinite_samples += done.last.rays.nonfinite;
+    // The integrators write a NaN or infinite sample as 0 and count it: a frame with either is
+    // not a finite frame.
+    bool finite = done.last.rays.nonfinite == 0;
     for (const vec3& p : done.image.pixels()) finite = finite && is_finite(p);
     if (!finite) {
       ++result.nonfinite_frames;
@@ -77,7 +80,7 @@ HeadlessResult run_headless(Game& game, const std::string& game_name, const Inpu
         "{\n  \"game\": \"%s\",\n  \"frames\": %llu,\n  \"width\": %u,\n  \"height\": %u,\n"
         "  \"backend\": \"%s\",\n  \"ms_per_frame\": %.4f,\n  \"fps\": %.3f,\n"
         "  \"trace_ms_per_frame\": %.4f,\n  \"rays_per_frame\": %.1f,\n"
-        "  \"nonfinite_frames\": %llu,\n"
+        "  \"nonfinite_frames\": %llu,\n  \"nonfinite_samples\": %llu,\n"
         "  \"first_nonfinite_frame\": %lld,\n  \"cache_texels_invalidated\": %llu,\n"
         "  \"cache_hits\": %llu,\n",
         game_name.c_str(), static_cast<unsigned long long>(result.frames), options.width,
@@ -86,6 +89,7 @@ HeadlessResult run_headless(Game& game, const std::string& game_name, const Inpu
         options.frames ? trace_ms / double(options.frames) : 0.0,
         options.frames ? double(rays) / double(options.frames) : 0.0,
         static_cast<unsigned long long>(result.nonfinite_frames),
+        static_cast<unsigned long long>(nonfinite_samples),
         static_cast<long long>(result.first_nonfinite_frame),
         static_cast<unsigned long long>(invalidated), static_cast<unsigned long long>(cache_hits));
     write_text(*options.stats, std::string(head) + "  \"state\": {" + game.state_json() + "}\n}\n");
@@ -145,7 +149,8 @@ int game_main(int argc, char** argv, const std::string& game_name,
       }
     }
     if (headless) {
-      if (!frames_given || h.input.empty()) throw Error("--headless needs --frames N and --input FILE");
+      if (!frames_given || h.input.empty())
+        throw Error("--headless needs --frames N and --input FILE");
       if (w.record) throw Error("--record is for the windowed mode");
       const InputScript script = load_input_script(h.input);
       std::unique_ptr<Game> game = make_game();

@@ -30,8 +30,8 @@ struct HeadlessOptions {
 
 struct HeadlessResult {
   std::uint64_t frames = 0;
-  double mean_ms = 0.0;              ///< per frame: game step and schedule tick
-  std::uint64_t nonfinite_frames = 0; ///< frames with a NaN or infinite pixel
+  double mean_ms = 0.0;               ///< per frame: game step and schedule tick
+  std::uint64_t nonfinite_frames = 0; ///< frames with a NaN or infinite pixel or sample
   std::int64_t first_nonfinite_frame = -1;
 };
 

@@ -12,8 +12,8 @@ namespace specula::games {
 
 namespace {
 
-constexpr std::array<const char*, kKeyCount> kKeyNames = {"left", "right", "up", "down",
-                                                          "space", "q", "e"};
+constexpr std::array<const char*, kKeyCount> kKeyNames = {"left",  "right", "up", "down",
+                                                          "space", "q",     "e"};
 
 std::vector<std::string_view> split(std::string_view text, char separator) {
   std::vector<std::string_view> parts;
@@ -87,21 +87,24 @@ InputScript parse_input_script(std::string_view text, const std::string& name) {
 
     std::uint64_t first = 0, last = 0;
     const std::size_t dash = w[0].find('-');
-    const bool range_ok = dash == std::string_view::npos
-                              ? parse_frame(w[0], first) && ((last = first), true)
-                              : parse_frame(w[0].substr(0, dash), first) &&
-                                    parse_frame(w[0].substr(dash + 1), last);
+    const bool range_ok =
+        dash == std::string_view::npos
+            ? parse_frame(w[0], first) && ((last = first), true)
+            : parse_frame(w[0].substr(0, dash), first) && parse_frame(w[0].substr(dash + 1), last);
     if (!range_ok) {
-      throw Error(name, line_number, "expected FRAME or FIRST-LAST, got '" + std::string(w[0]) + "'");
+      throw Error(name, line_number,
+                  "expected FRAME or FIRST-LAST, got '" + std::string(w[0]) + "'");
     }
     if (last < first) throw Error(name, line_number, "frame range ends before it starts");
     if (last >= kMaxScriptFrames) {
-      throw Error(name, line_number, "frame " + std::to_string(last) + " is beyond the limit of " +
-                                         std::to_string(kMaxScriptFrames));
+      throw Error(name, line_number,
+                  "frame " + std::to_string(last) + " is beyond the limit of " +
+                      std::to_string(kMaxScriptFrames));
     }
     if (first < script.frames.size()) {
-      throw Error(name, line_number, "frames must ascend without overlapping (frame " +
-                                         std::to_string(first) + " already given)");
+      throw Error(name, line_number,
+                  "frames must ascend without overlapping (frame " + std::to_string(first) +
+                      " already given)");
     }
 
     GameInput input;
@@ -110,8 +113,9 @@ InputScript parse_input_script(std::string_view text, const std::string& name) {
       const std::string_view field = w[i].substr(0, eq);
       const std::string_view value = eq == std::string_view::npos ? "" : w[i].substr(eq + 1);
       if (eq == std::string_view::npos || value.empty()) {
-        throw Error(name, line_number, "expected down=KEYS, press=KEYS or mouse=DX,DY, got '" +
-                                           std::string(w[i]) + "'");
+        throw Error(name, line_number,
+                    "expected down=KEYS, press=KEYS or mouse=DX,DY, got '" + std::string(w[i]) +
+                        "'");
       }
       if (field == "down") {
         input.down |= parse_keys(value, name, line_number);
@@ -121,12 +125,12 @@ InputScript parse_input_script(std::string_view text, const std::string& name) {
         const std::vector<std::string_view> d = split(value, ',');
         if (d.size() != 2 || !parse_float(d[0], input.mouse_dx) ||
             !parse_float(d[1], input.mouse_dy)) {
-          throw Error(name, line_number, "mouse needs two finite numbers DX,DY, got '" +
-                                             std::string(value) + "'");
+          throw Error(name, line_number,
+                      "mouse needs two finite numbers DX,DY, got '" + std::string(value) + "'");
         }
       } else {
-        throw Error(name, line_number, "unknown field '" + std::string(field) +
-                                           "' (down, press, mouse)");
+        throw Error(name, line_number,
+                    "unknown field '" + std::string(field) + "' (down, press, mouse)");
       }
     }
     script.frames.resize(last + 1);
@@ -145,7 +149,8 @@ std::string format_input_script(std::span<const GameInput> frames) {
   const auto keys = [](std::uint32_t bits) {
     std::string s;
     for (int k = 0; k < kKeyCount; ++k) {
-      if ((bits >> unsigned(k)) & 1u) s += (s.empty() ? "" : ",") + std::string(kKeyNames[std::size_t(k)]);
+      if ((bits >> unsigned(k)) & 1u)
+        s += (s.empty() ? "" : ",") + std::string(kKeyNames[std::size_t(k)]);
     }
     return s;
   };
@@ -161,7 +166,8 @@ std::string format_input_script(std::span<const GameInput> frames) {
       if (in.pressed) out += " press=" + keys(in.pressed);
       if (in.mouse_dx != 0.0f || in.mouse_dy != 0.0f) {
         char buf[64];
-        std::snprintf(buf, sizeof buf, " mouse=%.9g,%.9g", double(in.mouse_dx), double(in.mouse_dy));
+        std::snprintf(buf, sizeof buf, " mouse=%.9g,%.9g", double(in.mouse_dx),
+                      double(in.mouse_dy));
         out += buf;
       }
       out += "\n";

@@ -1,4 +1,5 @@
-// The windowed front end: compiled only where specula::present exists (samples/games/CMakeLists.txt).
+// The windowed front end: compiled only where specula::present exists
+// (samples/games/CMakeLists.txt).
 #include "front_end.h"
 
 #include <specula/core/error.h>
@@ -20,11 +21,13 @@ namespace {
 
 /// Arrows or WASD for the directions, space, Q and E.
 GameInput game_input(const present::InputState& in) {
-  const std::pair<Key, std::array<int, 2>> map[] = {
-      {Key::Left, {GLFW_KEY_LEFT, GLFW_KEY_A}},   {Key::Right, {GLFW_KEY_RIGHT, GLFW_KEY_D}},
-      {Key::Up, {GLFW_KEY_UP, GLFW_KEY_W}},       {Key::Down, {GLFW_KEY_DOWN, GLFW_KEY_S}},
-      {Key::Space, {GLFW_KEY_SPACE, GLFW_KEY_SPACE}}, {Key::Q, {GLFW_KEY_Q, GLFW_KEY_Q}},
-      {Key::E, {GLFW_KEY_E, GLFW_KEY_E}}};
+  const std::pair<Key, std::array<int, 2>> map[] = {{Key::Left, {GLFW_KEY_LEFT, GLFW_KEY_A}},
+                                                    {Key::Right, {GLFW_KEY_RIGHT, GLFW_KEY_D}},
+                                                    {Key::Up, {GLFW_KEY_UP, GLFW_KEY_W}},
+                                                    {Key::Down, {GLFW_KEY_DOWN, GLFW_KEY_S}},
+                                                    {Key::Space, {GLFW_KEY_SPACE, GLFW_KEY_SPACE}},
+                                                    {Key::Q, {GLFW_KEY_Q, GLFW_KEY_Q}},
+                                                    {Key::E, {GLFW_KEY_E, GLFW_KEY_E}}};
   GameInput g;
   if (in.ui_wants_keyboard) return g;
   for (const auto& [key, codes] : map) {

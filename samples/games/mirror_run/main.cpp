@@ -4,7 +4,6 @@
 #include "../common/front_end.h"
 
 int main(int argc, char** argv) {
-  return specula::games::game_main(argc, argv, "mirror_run", [] {
-    return std::make_unique<specula::games::MirrorRun>();
-  });
+  return specula::games::game_main(argc, argv, "mirror_run",
+                                   [] { return std::make_unique<specula::games::MirrorRun>(); });
 }

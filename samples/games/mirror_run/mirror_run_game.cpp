@@ -20,8 +20,8 @@ Material matte(vec3 color) {
 MirrorRun::MirrorRun() {
   ecs::Registry& reg = registry_;
   using K = Kinematics::Type;
-  add_mesh(reg, primitive("plane", 1, vec3(12, 1, 44)), at({0, 0, -16}), matte({0.55f, 0.55f, 0.6f}),
-           K::Static);
+  add_mesh(reg, primitive("plane", 1, vec3(12, 1, 44)), at({0, 0, -16}),
+           matte({0.55f, 0.55f, 0.6f}), K::Static);
   for (const double x : {-6.0, 6.0}) {
     obstacles_.push_back({add_mesh(reg, primitive("box", 1, vec3(1, 1.2f, 44)), at({x, 0.6, -16}),
                                    matte({0.6f, 0.3f, 0.25f}), K::Static),
@@ -39,8 +39,9 @@ MirrorRun::MirrorRun() {
                   matte({0.3f, 0.3f, 0.9f}), K::Hierarchical);
   obstacles_.push_back({hub_, {}});
   for (const double x : {-2.2, 2.2}) {
-    const ecs::Entity arm = add_mesh(reg, primitive("box", 1, vec3(3.5f, 0.6f, 0.5f)), at({x, 0, 0}),
-                                     matte({0.4f, 0.4f, 1.0f}), K::Hierarchical, hub_);
+    const ecs::Entity arm =
+        add_mesh(reg, primitive("box", 1, vec3(3.5f, 0.6f, 0.5f)), at({x, 0, 0}),
+                 matte({0.4f, 0.4f, 1.0f}), K::Hierarchical, hub_);
     arms_.push_back(arm);
     obstacles_.push_back({arm, {}});
   }
@@ -126,7 +127,8 @@ void MirrorRun::step(double dt, const GameInput& input) {
   }
   if (push != dvec3(0.0)) velocity_ += kAccel * dt * glm::normalize(push);
   velocity_ *= std::exp(-kDamping * dt);
-  if (const double speed = glm::length(velocity_); speed > kMaxSpeed) velocity_ *= kMaxSpeed / speed;
+  if (const double speed = glm::length(velocity_); speed > kMaxSpeed)
+    velocity_ *= kMaxSpeed / speed;
   position_ += velocity_ * dt;
   collide();
   if (!won_ && glm::length(position_ - dvec3(kGoal.x, kPlayerRadius, kGoal.z)) <
@@ -139,8 +141,8 @@ void MirrorRun::step(double dt, const GameInput& input) {
 
 std::int64_t MirrorRun::score() const {
   if (!won_) return 0;
-  return std::max<std::int64_t>(
-      0, 1000 - 50 * std::int64_t(hits_) - 10 * std::int64_t(std::floor(finish_time_)));
+  return std::max<std::int64_t>(0, 1000 - 50 * std::int64_t(hits_) -
+                                       10 * std::int64_t(std::floor(finish_time_)));
 }
 
 std::string MirrorRun::state_json() const {

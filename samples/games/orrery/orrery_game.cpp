@@ -74,8 +74,8 @@ Orrery::Orrery() {
                      matte({0.3f, 0.8f, 0.4f}), K::Hierarchical);
   Material beam = matte({1.0f, 0.1f, 0.1f});
   beam.emission = vec3(4.0f, 0.3f, 0.3f);
-  beam_ = add_mesh(reg, primitive("cylinder", 0.05f, vec3(1), 1.0f), at(kBeamParked), beam,
-                   K::Free);
+  beam_ =
+      add_mesh(reg, primitive("cylinder", 0.05f, vec3(1), 1.0f), at(kBeamParked), beam, K::Free);
 
   const ecs::Entity light = add_node(reg, at({0, 8, 6}), K::Static);
   Light l;
@@ -153,7 +153,8 @@ void Orrery::step(double dt, const GameInput& input) {
 
 std::string Orrery::state_json() const {
   std::string hit;
-  for (const Body& b : bodies_) hit += std::string(hit.empty() ? "" : ", ") + (b.hit ? "true" : "false");
+  for (const Body& b : bodies_)
+    hit += std::string(hit.empty() ? "" : ", ") + (b.hit ? "true" : "false");
   char buf[256];
   std::snprintf(buf, sizeof buf,
                 "\"score\": %lld, \"won\": %s, \"time\": %.9g, \"angle\": %.9g, \"shots\": %zu, "

@@ -30,9 +30,9 @@ public:
 
   struct Body {
     ecs::Entity entity;
-    double radius;   ///< of its bounding sphere in world units
-    bool target;     ///< scores when first hit (the sun does not)
-    bool is_planet;  ///< needed for the goal
+    double radius;  ///< of its bounding sphere in world units
+    bool target;    ///< scores when first hit (the sun does not)
+    bool is_planet; ///< needed for the goal
     bool hit = false;
   };
   struct Shot {
