@@ -35,7 +35,6 @@ Orrery::Orrery() {
   mirror.reflectivity = 0.85f;
   add_mesh(reg, primitive("box", 1, vec3(20, 5, 0.3f)), at({0, 2.5, -10}), mirror, K::Static);
   add_mesh(reg, primitive("box", 1, vec3(0.3f, 5, 24)), at({-10, 2.5, 2}), mirror, K::Static);
-  add_mesh(reg, primitive("box", 1, vec3(0.3f, 5, 24)), at({10, 2.5, 2}), mirror, K::Static);
 
   Material sun = matte({1.0f, 0.8f, 0.3f});
   sun.emission = vec3(2.0f, 1.5f, 0.6f);
