@@ -263,6 +263,28 @@ TEST(Orrery, ReplayHitsEveryPlanetAndScoresByTheRules) {
   for (const Orrery::Body& b : game.bodies()) EXPECT_TRUE(!b.is_planet || b.hit);
 }
 
+TEST(Orrery, KeysAndMouseTurnTheTurret) {
+  Orrery game;
+  GameInput left;
+  left.set_down(Key::Left);
+  for (int f = 0; f < 30; ++f) game.step(kFrameDt, left);
+  EXPECT_NEAR(game.angle(), 30 * kFrameDt * Orrery::kTurnRate, 1e-12);
+  GameInput mouse;
+  mouse.mouse_dx = 100.0f; // rightwards: turns right
+  game.step(kFrameDt, mouse);
+  EXPECT_NEAR(game.angle(), 30 * kFrameDt * Orrery::kTurnRate - 100 * Orrery::kMouseTurn, 1e-12);
+  // The turret entity turns with it: its -z axis is the beam's direction.
+  Schedule schedule;
+  schedule.tick(game.registry(), kFrameDt);
+  dvec3 forward(0.0);
+  game.registry().view<Transform, Mesh>().each([&](ecs::Entity e, const Transform& t, const Mesh&) {
+    if (t.translation == Orrery::kTurret) {
+      forward = -dvec3(game.registry().get<WorldTransform>(e).world_from_object[2]);
+    }
+  });
+  EXPECT_NEAR(glm::length(forward - Orrery::aim(game.angle())), 0.0, 1e-6);
+}
+
 TEST(Orrery, CooldownBetweenShots) {
   Orrery game;
   GameInput fire;

@@ -16,8 +16,8 @@
 namespace specula::games {
 
 /// The keys the games use (the window maps arrows and WASD onto the four directions).
-enum class Key : std::uint8_t { Left, Right, Up, Down, Space, Q, E };
-inline constexpr int kKeyCount = 7;
+enum class Key : std::uint8_t { Left, Right, Up, Down, Space };
+inline constexpr int kKeyCount = 5;
 
 [[nodiscard]] std::optional<Key> parse_key(std::string_view name);
 [[nodiscard]] const char* key_name(Key key);

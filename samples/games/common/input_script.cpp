@@ -12,8 +12,7 @@ namespace specula::games {
 
 namespace {
 
-constexpr std::array<const char*, kKeyCount> kKeyNames = {"left",  "right", "up", "down",
-                                                          "space", "q",     "e"};
+constexpr std::array<const char*, kKeyCount> kKeyNames = {"left", "right", "up", "down", "space"};
 
 std::vector<std::string_view> split(std::string_view text, char separator) {
   std::vector<std::string_view> parts;
@@ -54,8 +53,7 @@ std::uint32_t parse_keys(std::string_view list, const std::string& name, int lin
   for (const std::string_view k : split(list, ',')) {
     const std::optional<Key> key = parse_key(k);
     if (!key) {
-      throw Error(name, line,
-                  "unknown key '" + std::string(k) + "' (left right up down space q e)");
+      throw Error(name, line, "unknown key '" + std::string(k) + "' (left right up down space)");
     }
     bits |= 1u << unsigned(*key);
   }

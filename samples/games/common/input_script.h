@@ -7,7 +7,7 @@
 ///   FRAME[-LAST] [down=KEY,KEY...] [press=KEY,...] [mouse=DX,DY]
 ///
 /// Frames count from 0; ranges ascend without overlapping; frames not named have no input.
-/// Keys: left right up down space q e. Example: `0-59 down=up` holds up for a second at 60 Hz.
+/// Keys: left right up down space. Example: `0-59 down=up` holds up for a second at 60 Hz.
 
 #include "game.h"
 

@@ -19,15 +19,13 @@ namespace specula::games {
 
 namespace {
 
-/// Arrows or WASD for the directions, space, Q and E.
+/// Arrows or WASD for the directions, and space.
 GameInput game_input(const present::InputState& in) {
   const std::pair<Key, std::array<int, 2>> map[] = {{Key::Left, {GLFW_KEY_LEFT, GLFW_KEY_A}},
                                                     {Key::Right, {GLFW_KEY_RIGHT, GLFW_KEY_D}},
                                                     {Key::Up, {GLFW_KEY_UP, GLFW_KEY_W}},
                                                     {Key::Down, {GLFW_KEY_DOWN, GLFW_KEY_S}},
-                                                    {Key::Space, {GLFW_KEY_SPACE, GLFW_KEY_SPACE}},
-                                                    {Key::Q, {GLFW_KEY_Q, GLFW_KEY_Q}},
-                                                    {Key::E, {GLFW_KEY_E, GLFW_KEY_E}}};
+                                                    {Key::Space, {GLFW_KEY_SPACE, GLFW_KEY_SPACE}}};
   GameInput g;
   if (in.ui_wants_keyboard) return g;
   for (const auto& [key, codes] : map) {

@@ -141,6 +141,7 @@ void Orrery::step(double dt, const GameInput& input) {
   if (!won_) {
     if (input.held(Key::Left)) angle_ += kTurnRate * dt;
     if (input.held(Key::Right)) angle_ -= kTurnRate * dt;
+    angle_ -= kMouseTurn * double(input.mouse_dx);
   }
   turn_clockwork();
   if (time_ - last_shot_ > kBeamShown) {

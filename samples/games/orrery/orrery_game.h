@@ -5,8 +5,10 @@
 /// turret (left / right) and fires (space) to hit each planet once.
 ///
 /// Rules (the tests recompute them):
-/// - the turret at kTurret turns at kTurnRate rad/s; angle 0 aims along −z, positive turns left
-///   (towards −x); a shot needs kCooldown seconds since the previous one;
+/// - the turret at kTurret turns at kTurnRate rad/s while left / right is held, and by
+///   kMouseTurn rad per pixel of horizontal mouse motion (rightwards turns right); angle 0 aims
+///   along −z, positive turns left (towards −x); a shot needs kCooldown seconds since the
+///   previous one;
 /// - a shot is a ray in the floor plane at the planets' height; it hits the first body whose
 ///   bounding sphere (mesh bounds, world scale) it crosses: planets, the moon and the sun;
 /// - a planet or the moon hit for the first time scores +100; a shot that scores nothing −10
@@ -25,6 +27,7 @@ public:
   static constexpr double kHeight = 1.0; ///< the planets' and the beam's height
   static constexpr dvec3 kTurret{0.0, kHeight, 10.0};
   static constexpr double kTurnRate = 1.0;
+  static constexpr double kMouseTurn = 0.004;
   static constexpr double kCooldown = 0.5;
   static constexpr double kBeamShown = 0.25; ///< seconds the beam stays visible
 
