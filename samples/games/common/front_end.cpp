@@ -30,9 +30,9 @@ bool parse_u64(std::string_view s, std::uint64_t& out) {
 
 void usage(const std::string& game) {
   std::fprintf(stderr,
-               "usage: %s [--size WxH] [--backend NAME] [--record FILE]\n"
+               "usage: %s [--size WxH] [--backend NAME] [--mode MODE] [--record FILE]\n"
                "       %s --headless --frames N --input FILE [--out PNG] [--stats JSON] "
-               "[--size WxH] [--backend NAME]\n",
+               "[--size WxH] [--backend NAME] [--mode MODE]\n",
                game.c_str(), game.c_str());
 }
 
@@ -42,6 +42,7 @@ HeadlessResult run_headless(Game& game, const std::string& game_name, const Inpu
                             const HeadlessOptions& options) {
   RenderJob job = game.render_job(options.width, options.height);
   job.backend = options.backend;
+  if (options.mode) job.settings.mode = *options.mode;
   prepare_rendering(game.registry(), std::move(job));
   Schedule schedule;
   HeadlessResult result;
@@ -78,13 +79,13 @@ HeadlessResult run_headless(Game& game, const std::string& game_name, const Inpu
     std::snprintf(
         head, sizeof head,
         "{\n  \"game\": \"%s\",\n  \"frames\": %llu,\n  \"width\": %u,\n  \"height\": %u,\n"
-        "  \"backend\": \"%s\",\n  \"ms_per_frame\": %.4f,\n  \"fps\": %.3f,\n"
+        "  \"backend\": \"%s\",\n  \"mode\": \"%s\",\n  \"ms_per_frame\": %.4f,\n  \"fps\": %.3f,\n"
         "  \"trace_ms_per_frame\": %.4f,\n  \"rays_per_frame\": %.1f,\n"
         "  \"nonfinite_frames\": %llu,\n  \"nonfinite_samples\": %llu,\n"
         "  \"first_nonfinite_frame\": %lld,\n  \"cache_texels_invalidated\": %llu,\n"
         "  \"cache_hits\": %llu,\n",
         game_name.c_str(), static_cast<unsigned long long>(result.frames), options.width,
-        options.height, done.backend.c_str(), result.mean_ms,
+        options.height, done.backend.c_str(), trace_mode_name(done.settings.mode), result.mean_ms,
         result.mean_ms > 0.0 ? 1000.0 / result.mean_ms : 0.0,
         options.frames ? trace_ms / double(options.frames) : 0.0,
         options.frames ? double(rays) / double(options.frames) : 0.0,
@@ -129,6 +130,10 @@ int game_main(int argc, char** argv, const std::string& game_name,
         w.record = value();
       } else if (arg == "--backend") {
         h.backend = w.backend = value();
+      } else if (arg == "--mode") {
+        const std::string_view v = value();
+        h.mode = w.mode = parse_trace_mode(v);
+        if (!h.mode) throw Error("--mode: unknown mode '" + std::string(v) + "'");
       } else if (arg == "--size") {
         const std::string_view v = value();
         const std::size_t x = v.find('x');

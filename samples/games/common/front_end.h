@@ -26,6 +26,7 @@ struct HeadlessOptions {
   std::uint32_t width = 320;
   std::uint32_t height = 180;
   std::string backend = "auto";
+  std::optional<TraceMode> mode; ///< none: the game's own (both games: Whitted)
 };
 
 struct HeadlessResult {
@@ -49,6 +50,7 @@ struct WindowedOptions {
   std::uint32_t width = 960;
   std::uint32_t height = 540;
   std::string backend = "auto";
+  std::optional<TraceMode> mode;
   std::optional<std::filesystem::path> record; ///< write the input played, replayable headless
 };
 

@@ -52,6 +52,7 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
   const std::unique_ptr<present::Window> window = present::Window::open(settings);
   RenderJob job = game.render_job(options.width, options.height);
   job.backend = options.backend;
+  if (options.mode) job.settings.mode = *options.mode;
   prepare_rendering(game.registry(), std::move(job));
   Schedule schedule;
   std::vector<GameInput> played;
