@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs the build tree into a scratch prefix, then configures, builds and runs an outside
-# project that finds Specula with find_package(Specula).
+# project that finds Specula with find_package(Specula), and the game samples the same way.
 set -euo pipefail
 build_dir=$1
 source_dir=$2
@@ -22,3 +22,13 @@ cmake -S "$source_dir/tests/install/consumer" -B "$work/build" -G Ninja \
       -DCMAKE_CXX_FLAGS="$cxx_flags" -DCMAKE_EXE_LINKER_FLAGS="$linker_flags" >/dev/null
 cmake --build "$work/build" >/dev/null
 "$work/build/consumer" "$source_dir/samples/scenes/cornell_box.json"
+# The game samples build on the installed package alone (their CMakeLists finds Specula when
+# built on their own), and replay a recording headless.
+cmake -S "$source_dir/samples/games" -B "$work/games" -G Ninja \
+      -DCMAKE_PREFIX_PATH="$work/prefix" -DCMAKE_BUILD_TYPE=Release \
+      ${cxx_compiler:+-DCMAKE_CXX_COMPILER="$cxx_compiler"} \
+      -DCMAKE_CXX_FLAGS="$cxx_flags" -DCMAKE_EXE_LINKER_FLAGS="$linker_flags" >/dev/null
+cmake --build "$work/games" >/dev/null
+"$work/games/mirror_run" --headless --frames 600 --size 32x18 \
+    --input "$source_dir/samples/games/mirror_run/demo_input.txt" --stats "$work/stats.json"
+grep -q '"won": true' "$work/stats.json"

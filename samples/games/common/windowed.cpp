@@ -1,0 +1,86 @@
+// The windowed front end: compiled only where specula::present exists
+// (samples/games/CMakeLists.txt).
+#include "front_end.h"
+
+#include <specula/core/error.h>
+#include <specula/present/window.h>
+#include <specula/systems/schedule.h>
+
+#include <GLFW/glfw3.h>
+#include <imgui.h>
+
+#include <array>
+#include <cstdio>
+#include <fstream>
+#include <utility>
+#include <vector>
+
+namespace specula::games {
+
+namespace {
+
+/// Arrows or WASD for the directions, and space.
+GameInput game_input(const present::InputState& in) {
+  const std::pair<Key, std::array<int, 2>> map[] = {{Key::Left, {GLFW_KEY_LEFT, GLFW_KEY_A}},
+                                                    {Key::Right, {GLFW_KEY_RIGHT, GLFW_KEY_D}},
+                                                    {Key::Up, {GLFW_KEY_UP, GLFW_KEY_W}},
+                                                    {Key::Down, {GLFW_KEY_DOWN, GLFW_KEY_S}},
+                                                    {Key::Space, {GLFW_KEY_SPACE, GLFW_KEY_SPACE}}};
+  GameInput g;
+  if (in.ui_wants_keyboard) return g;
+  for (const auto& [key, codes] : map) {
+    for (const int code : codes) {
+      if (in.down[std::size_t(code)]) g.set_down(key);
+      if (in.pressed[std::size_t(code)]) g.set_pressed(key);
+    }
+  }
+  if (!in.ui_wants_mouse) {
+    g.mouse_dx = float(in.mouse_dx);
+    g.mouse_dy = float(in.mouse_dy);
+  }
+  return g;
+}
+
+} // namespace
+
+int run_windowed(Game& game, const std::string& game_name, const WindowedOptions& options) {
+  present::WindowSettings settings;
+  settings.title = game_name;
+  settings.width = options.width;
+  settings.height = options.height;
+  settings.ui = true;
+  const std::unique_ptr<present::Window> window = present::Window::open(settings);
+  RenderJob job = game.render_job(options.width, options.height);
+  job.backend = options.backend;
+  if (options.mode) job.settings.mode = *options.mode;
+  prepare_rendering(game.registry(), std::move(job));
+  Schedule schedule;
+  std::vector<GameInput> played;
+  present::InputState input;
+  while (window->poll(input) && !input.down[GLFW_KEY_ESCAPE]) {
+    const GameInput g = game_input(input);
+    played.push_back(g);
+    // Fixed dt, as the replay uses: a recording replays to the same state.
+    game.step(kFrameDt, g);
+    schedule.tick(game.registry(), kFrameDt);
+    const RenderJob& done = game.registry().resource<RenderJob>();
+    window->begin_ui();
+    ImGui::SetNextWindowPos(ImVec2(8, 8));
+    ImGui::Begin("HUD", nullptr, ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoDecoration);
+    ImGui::TextUnformatted(game.hud_text().c_str());
+    ImGui::Text("%.1f ms/frame, %s", done.last.ms, done.backend.c_str());
+    ImGui::End();
+    ImGui::Render();
+    window->present(done.image, ImGui::GetDrawData());
+  }
+  if (options.record) {
+    std::ofstream f(*options.record, std::ios::binary);
+    f << format_input_script(played);
+    if (!f) throw Error(options.record->string(), "cannot write the recording");
+    std::printf("%s: recorded %zu frames to %s\n", game_name.c_str(), played.size(),
+                options.record->string().c_str());
+  }
+  return 0;
+}
+
+} // namespace specula::games
