@@ -1,7 +1,8 @@
 // specula-editor SCENE [--headless] [--script FILE] [--backend B] [--mode M] [--size WxH]
 //   [--depth N] [--cache off|on] [--frames N] [--screenshot PNG]
 // Windowed by default (editor_window.cpp, when this build has specula::present); --headless runs
-// the same session and panels without a window. Exit codes: 0 done, 1 bad input or a failed
+// the same session and panels without a window. Windowed, --frames N closes the window after N
+// frames and --screenshot writes the last one. Exit codes: 0 done, 1 bad input or a failed
 // script line (the message names file:line), 2 a feature this build or machine lacks.
 
 #include "editor/core/editor_session.h"
@@ -39,7 +40,7 @@ int main(int argc, char** argv) {
                              screenshot;
   bool headless = false;
   std::optional<std::uint32_t> depth;
-  std::uint32_t frames = 1;
+  std::optional<std::uint32_t> frames;
   app.add_option("scene", scene, "Scene file")->required();
   app.add_flag("--headless", headless, "No window: run the script (or --frames) and exit");
   app.add_option("--script", script, "Replay editor actions from FILE (editor/core/script.h)");
@@ -48,8 +49,9 @@ int main(int argc, char** argv) {
   app.add_option("--size", size, "Viewport size WxH");
   app.add_option("--depth", depth, "Longest secondary ray chain (default: the scene's)");
   app.add_option("--cache", caches, "Ray-cache cubes: off, on or auto");
-  app.add_option("--frames", frames, "Headless without a script: frames to render");
-  app.add_option("--screenshot", screenshot, "Headless: write the last frame to this PNG");
+  app.add_option("--frames", frames, "Frames to render (headless, no script) or to show before closing (windowed)")
+      ->check(CLI::Range(1u, 1000000u));
+  app.add_option("--screenshot", screenshot, "Write the last frame to this PNG");
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -67,13 +69,19 @@ int main(int argc, char** argv) {
     view.cache.policy = *policy;
     editor::EditorSession session(scene, view);
     session.tick(); // a first frame, so that clicks have something to pick in
-    if (!headless) return editor::run_window(session, script);
+    if (!headless) {
+      editor::WindowRun run;
+      run.script = script;
+      run.frames = frames;
+      if (!screenshot.empty()) run.screenshot = screenshot;
+      return editor::run_window(session, run);
+    }
     editor::HeadlessUi ui(float(view.width), float(view.height));
     ui.frame(session);
     if (!script.empty())
       editor::run_script(session, script, [&] { ui.frame(session); });
     else
-      for (std::uint32_t i = 1; i < frames; ++i) {
+      for (std::uint32_t i = 1; i < frames.value_or(1); ++i) {
         session.tick();
         ui.frame(session);
       }

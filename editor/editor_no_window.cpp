@@ -5,7 +5,7 @@
 
 namespace specula::editor {
 
-int run_window(EditorSession& /*session*/, const std::string& /*script*/) {
+int run_window(EditorSession& /*session*/, const WindowRun& /*run*/) {
   throw UnavailableError("this build has no windowed editor (specula::present): use --headless");
 }
 

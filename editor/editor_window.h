@@ -5,12 +5,21 @@
 
 #include "editor/core/editor_session.h"
 
+#include <cstdint>
+#include <filesystem>
+#include <optional>
 #include <string>
 
 namespace specula::editor {
 
-/// Runs the interactive editor on the session until the window closes; replays `script` (if
-/// not empty) first, through the same actions. Returns the process exit code.
-int run_window(EditorSession& session, const std::string& script);
+struct WindowRun {
+  std::string script;                            ///< replayed first (empty: none)
+  std::optional<std::uint64_t> frames;           ///< close after this many frames (none: on close)
+  std::optional<std::filesystem::path> screenshot; ///< the last frame, PNG, when the window closes
+};
+
+/// Runs the interactive editor on the session until the window closes (or run.frames have been
+/// shown). Input goes through WindowControls (window_controls.h). Returns the exit code.
+int run_window(EditorSession& session, const WindowRun& run);
 
 } // namespace specula::editor

@@ -308,12 +308,14 @@ void EditorSession::apply(const Command& command, bool forward) {
 }
 
 void EditorSession::execute(Command command) {
+  gesture_merges_ = false;
   apply(command, true);
   undo_.push_back(std::move(command));
   redo_.clear();
 }
 
 bool EditorSession::undo() {
+  gesture_merges_ = false;
   if (undo_.empty()) return false;
   apply(undo_.back(), false);
   redo_.push_back(std::move(undo_.back()));
@@ -322,6 +324,7 @@ bool EditorSession::undo() {
 }
 
 bool EditorSession::redo() {
+  gesture_merges_ = false;
   if (redo_.empty()) return false;
   apply(redo_.back(), true);
   undo_.push_back(std::move(redo_.back()));
@@ -335,8 +338,25 @@ void EditorSession::edit(ecs::Entity e, const std::function<void(EntitySnapshot&
   EntitySnapshot before = snapshot(e);
   EntitySnapshot after = before;
   change(after);
-  execute({Change{id, std::move(before), std::move(after)}});
+  Command step{Change{id, std::move(before), std::move(after)}};
+  if (gesture_merges_ && !undo_.empty() && undo_.back().size() == 1 &&
+      undo_.back().front().id == id && undo_.back().front().after) {
+    // The gesture's step keeps its first "before" and takes this edit's "after".
+    apply(step, true);
+    undo_.back().front().after = std::move(step.front().after);
+    redo_.clear();
+    return;
+  }
+  execute(std::move(step));
+  gesture_merges_ = gesture_;
 }
+
+void EditorSession::begin_gesture() {
+  gesture_ = true;
+  gesture_merges_ = false;
+}
+
+void EditorSession::end_gesture() { gesture_ = gesture_merges_ = false; }
 
 dvec2 EditorSession::screen_axis(ecs::Entity e, int axis) const {
   if (axis < 0 || axis > 2) throw Error("drag", "axis must be x, y or z");

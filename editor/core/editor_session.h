@@ -125,6 +125,11 @@ public:
   void reparent(ecs::Entity e, ecs::Entity parent);
   bool undo();
   bool redo();
+  /// Between begin_gesture and end_gesture (a mouse drag: button down to up), successive edits
+  /// of one entity make one undo step: Ctrl+Z after a drag undoes the whole drag, not its last
+  /// mouse move. An undo, a redo or an edit of another entity starts a new step.
+  void begin_gesture();
+  void end_gesture();
   [[nodiscard]] std::size_t undo_depth() const { return undo_.size(); }
 
   // --- camera (not undoable: navigation) --------------------------------------------------------
@@ -154,6 +159,8 @@ private:
   };
   using Command = std::vector<Change>;
   void execute(Command command);
+  bool gesture_ = false;        ///< inside begin_gesture / end_gesture
+  bool gesture_merges_ = false; ///< undo_.back() is this gesture's step, edits merge into it
   void apply(const Command& command, bool forward);
   /// One undoable edit of e: `change` edits a copy of its snapshot (and may throw: no change).
   void edit(ecs::Entity e, const std::function<void(EntitySnapshot&)>& change);

@@ -166,6 +166,46 @@ TEST(EditorSession, ClickOnBackgroundSelectsNothing) {
   EXPECT_EQ(s.selected(), std::nullopt);
 }
 
+TEST(EditorSession, AGestureIsOneUndoStepAndAnUndoInsideItStartsANewOne) {
+  EditorSession s(kScenes / "cornell_box.json", small_view(32, 24));
+  s.tick();
+  const ecs::Entity sphere = named(s, "mirror sphere");
+  const ecs::Entity block = named(s, "tall block");
+  const dvec3 sphere0 = s.registry().get<Transform>(sphere).translation;
+  const dvec3 block0 = s.registry().get<Transform>(block).translation;
+  const std::size_t depth0 = s.undo_depth();
+  const dvec2 step = s.screen_axis(sphere, 0) * 0.25; // a quarter unit along x per move
+
+  s.select(sphere);
+  s.begin_gesture();
+  for (int i = 0; i < 4; ++i) s.drag(GizmoMode::Translate, 0, step);
+  s.end_gesture();
+  EXPECT_EQ(s.undo_depth(), depth0 + 1);
+  EXPECT_NEAR(s.registry().get<Transform>(sphere).translation.x - sphere0.x, 1.0, 1e-5);
+  s.drag(GizmoMode::Translate, 0, step); // after the gesture: a step of its own
+  EXPECT_EQ(s.undo_depth(), depth0 + 2);
+  ASSERT_TRUE(s.undo());
+  ASSERT_TRUE(s.undo());
+  EXPECT_EQ(s.registry().get<Transform>(sphere).translation, sphere0) << "the whole gesture undone";
+
+  // In one gesture: an edit of another entity, and an undo, each start a new step.
+  s.begin_gesture();
+  s.drag(GizmoMode::Translate, 0, step);
+  s.select(block);
+  s.drag(GizmoMode::Translate, 0, s.screen_axis(block, 0));
+  s.drag(GizmoMode::Translate, 0, s.screen_axis(block, 0));
+  EXPECT_EQ(s.undo_depth(), depth0 + 2) << "sphere, then block";
+  ASSERT_TRUE(s.undo());
+  EXPECT_EQ(s.registry().get<Transform>(block).translation, block0);
+  s.drag(GizmoMode::Translate, 0, s.screen_axis(block, 0));
+  EXPECT_EQ(s.undo_depth(), depth0 + 2) << "after an undo, no merging into the sphere's step";
+  s.end_gesture();
+  ASSERT_TRUE(s.undo());
+  EXPECT_EQ(s.registry().get<Transform>(block).translation, block0);
+  ASSERT_TRUE(s.undo());
+  EXPECT_EQ(s.registry().get<Transform>(sphere).translation, sphere0);
+}
+
 TEST(EditorSession, EveryEditIsUndoneExactly) {
   EditorSession s(kScenes / "dynamic_three_classes.json", small_view(32, 18));
   s.tick(0.0);

@@ -31,6 +31,7 @@ bool parse_u64(std::string_view s, std::uint64_t& out) {
 void usage(const std::string& game) {
   std::fprintf(stderr,
                "usage: %s [--size WxH] [--backend NAME] [--mode MODE] [--record FILE]\n"
+               "          [--input FILE [--frames N]] [--out PNG]\n"
                "       %s --headless --frames N --input FILE [--out PNG] [--stats JSON] "
                "[--size WxH] [--backend NAME] [--mode MODE]\n",
                game.c_str(), game.c_str());
@@ -172,9 +173,12 @@ int game_main(int argc, char** argv, const std::string& game_name,
       }
       return 0;
     }
-    if (frames_given || !h.input.empty() || h.out || h.stats) {
-      throw Error("--frames, --input, --out and --stats are for --headless");
-    }
+    // Windowed: --input plays a recording instead of the keyboard, --frames closes the window,
+    // --out keeps the last frame.
+    if (h.stats) throw Error("--stats is for --headless");
+    if (!h.input.empty()) w.input = load_input_script(h.input);
+    if (frames_given) w.frames = h.frames;
+    w.out = h.out;
     std::unique_ptr<Game> game = make_game();
     return run_windowed(*game, game_name, w);
   } catch (const UnavailableError& e) {

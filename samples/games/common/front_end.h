@@ -52,9 +52,15 @@ struct WindowedOptions {
   std::string backend = "auto";
   std::optional<TraceMode> mode;
   std::optional<std::filesystem::path> record; ///< write the input played, replayable headless
+  /// Play this recording instead of the keyboard (a demo in the window); Esc still quits.
+  std::optional<InputScript> input;
+  std::optional<std::uint64_t> frames;      ///< close after this many frames (none: on close)
+  std::optional<std::filesystem::path> out; ///< the final frame, PNG
 };
 
-/// Plays in a window until it is closed (needs specula::present).
+/// Plays in a window until it is closed or options.frames have been shown (needs
+/// specula::present). With the same input, frames and size the final frame equals
+/// run_headless's: both step by kFrameDt and render through the same schedule.
 int run_windowed(Game& game, const std::string& game_name, const WindowedOptions& options);
 
 } // namespace specula::games

@@ -3,6 +3,7 @@
 #include "front_end.h"
 
 #include <specula/core/error.h>
+#include <specula/image/image_io.h>
 #include <specula/present/window.h>
 #include <specula/systems/schedule.h>
 
@@ -57,8 +58,11 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
   Schedule schedule;
   std::vector<GameInput> played;
   present::InputState input;
-  while (window->poll(input) && !input.down[GLFW_KEY_ESCAPE]) {
-    const GameInput g = game_input(input);
+  std::uint64_t frame = 0;
+  for (; (!options.frames || frame < *options.frames) && window->poll(input) &&
+         !input.down[GLFW_KEY_ESCAPE];
+       ++frame) {
+    const GameInput g = options.input ? options.input->at(frame) : game_input(input);
     played.push_back(g);
     // Fixed dt, as the replay uses: a recording replays to the same state.
     game.step(kFrameDt, g);
@@ -73,6 +77,7 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
     ImGui::Render();
     window->present(done.image, ImGui::GetDrawData());
   }
+  if (options.out) write_png(game.registry().resource<RenderJob>().image, *options.out);
   if (options.record) {
     std::ofstream f(*options.record, std::ios::binary);
     f << format_input_script(played);
