@@ -7,7 +7,13 @@
 #include "editor/window_controls.h"
 #include "specula/present/window.h"
 
+#include "specula/trace/stats.h"
+
 #include <imgui.h>
+
+#include <chrono>
+#include <cstdio>
+#include <vector>
 
 namespace specula::editor {
 
@@ -23,17 +29,37 @@ int run_window(EditorSession& session, const WindowRun& run) {
   WindowControls controls;
   present::InputState in;
   std::uint64_t shown = 0;
+  using Clock = std::chrono::steady_clock;
+  const auto ms = [](Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+  };
+  std::vector<double> frame_ms, tick_ms, present_ms; // poll to poll; the tick; UI + present
+  Clock::time_point last = Clock::now();
   while ((!run.frames || shown < *run.frames) && window->poll(in)) {
+    const Clock::time_point start = Clock::now();
+    if (shown > 0) frame_ms.push_back(ms(last, start));
+    last = start;
     controls.apply(session, in, window->width(), window->height());
     if (!controls.status().empty()) panels.status = controls.status();
     session.tick();
+    const Clock::time_point ticked = Clock::now();
     window->begin_ui();
     draw_panels(session, panels);
     ImGui::Render();
     window->present(session.frame(), ImGui::GetDrawData());
+    tick_ms.push_back(ms(start, ticked));
+    present_ms.push_back(ms(ticked, Clock::now()));
     ++shown;
   }
   if (run.screenshot) session.screenshot(*run.screenshot);
+  if (run.frames && !frame_ms.empty()) {
+    // The presented rate, for docs/PERFORMANCE.md (a run with --frames is a measurement or a test).
+    const double f = median(frame_ms);
+    std::printf("specula-editor: %llu frames shown at %ux%u, median %.2f ms per frame (%.1f "
+                "frames/s): tick %.2f ms, panels and present %.2f ms\n",
+                static_cast<unsigned long long>(shown), window->width(), window->height(), f,
+                1e3 / f, median(tick_ms), median(present_ms));
+  }
   return 0;
 }
 

@@ -9,6 +9,8 @@
 #include "editor/core/script.h"
 #include "specula/cache/ray_cache.h"
 #include "specula/core/error.h"
+#include "specula/image/flip.h"
+#include "specula/image/image_io.h"
 #include "specula/image/metrics.h"
 #include "specula/scene/hierarchy.h"
 #include "specula/scene/json_scene.h"
@@ -155,6 +157,41 @@ TEST(EditorSession, ClickSelectsDragMovesOneUnitUndoRestoresTheImageBitForBit) {
   s.tick();
   EXPECT_TRUE(s.frame() == moved) << "redo re-applies the move";
   EXPECT_NEAR(s.registry().get<Transform>(sphere).translation.x - x0, 1.0, 1e-5);
+}
+
+// The editor's frame after a click and a one-unit drag against a committed reference (linear EXR,
+// tests/data/golden/editor/), within the golden images' tolerance (tests/trace/test_golden.cpp:
+// PSNR >= 60 dB, mean FLIP <= 0.001). SPECULA_UPDATE_GOLDEN=1 rewrites it (review the PNG first).
+TEST(EditorSession, FrameAfterADragMatchesTheGolden) {
+  EditorSession s(kScenes / "cornell_box.json", small_view(128, 96));
+  s.tick();
+  const Camera cam = s.camera();
+  const ecs::Entity sphere = named(s, "mirror sphere");
+  s.clear_selection();
+  const dvec3 p = world_position(s, sphere);
+  const dvec2 px = pixel_of(cam, 128, 96, p);
+  ASSERT_EQ(s.click(std::uint32_t(px.x), std::uint32_t(px.y)), std::optional<ecs::Entity>(sphere));
+  s.drag(GizmoMode::Translate, 0, pixel_of(cam, 128, 96, p + dvec3(1, 0, 0)) - px);
+  s.tick();
+  const Framebuffer& image = s.frame();
+  const fs::path reference =
+      fs::path(SPECULA_TEST_DATA_DIR) / "golden" / "editor" / "cornell_box_sphere_dragged.exr";
+  if (std::getenv("SPECULA_UPDATE_GOLDEN") != nullptr) {
+    fs::create_directories(reference.parent_path());
+    write_exr(image, reference);
+    write_png(image, fs::path(reference).replace_extension(".png"));
+    GTEST_SKIP() << "rewrote " << reference;
+  }
+  ASSERT_TRUE(fs::exists(reference)) << reference << " is missing (SPECULA_UPDATE_GOLDEN=1)";
+  const Framebuffer golden = read_exr(reference);
+  const double db = psnr(golden, image);
+  const FlipResult f = flip(golden, image);
+  if (db < 60.0 || f.mean > 0.001) {
+    const fs::path out = temp_dir() / "editor_golden";
+    write_png(image, out.string() + "_actual.png");
+    write_flip_heatmap(f, out.string() + "_flip.png");
+    ADD_FAILURE() << "PSNR " << db << " dB, FLIP " << f.mean << "; wrote " << out << "_*.png";
+  }
 }
 
 TEST(EditorSession, ClickOnBackgroundSelectsNothing) {

@@ -10,7 +10,9 @@
 #include <GLFW/glfw3.h>
 #include <imgui.h>
 
+#include <algorithm>
 #include <array>
+#include <chrono>
 #include <cstdio>
 #include <fstream>
 #include <utility>
@@ -59,9 +61,14 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
   std::vector<GameInput> played;
   present::InputState input;
   std::uint64_t frame = 0;
+  std::vector<double> frame_ms; // poll to poll: what the player sees
+  auto last = std::chrono::steady_clock::now();
   for (; (!options.frames || frame < *options.frames) && window->poll(input) &&
          !input.down[GLFW_KEY_ESCAPE];
        ++frame) {
+    const auto now = std::chrono::steady_clock::now();
+    if (frame > 0) frame_ms.push_back(std::chrono::duration<double, std::milli>(now - last).count());
+    last = now;
     const GameInput g = options.input ? options.input->at(frame) : game_input(input);
     played.push_back(g);
     // Fixed dt, as the replay uses: a recording replays to the same state.
@@ -76,6 +83,13 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
     ImGui::End();
     ImGui::Render();
     window->present(done.image, ImGui::GetDrawData());
+  }
+  if (options.frames && !frame_ms.empty()) {
+    std::sort(frame_ms.begin(), frame_ms.end());
+    const double median = frame_ms[frame_ms.size() / 2];
+    std::printf("%s: %llu frames shown at %ux%u, median %.2f ms per frame (%.1f frames/s)\n",
+                game_name.c_str(), static_cast<unsigned long long>(frame), options.width,
+                options.height, median, 1e3 / median);
   }
   if (options.out) write_png(game.registry().resource<RenderJob>().image, *options.out);
   if (options.record) {
