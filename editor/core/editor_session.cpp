@@ -416,10 +416,7 @@ ecs::Entity EditorSession::add_entity(EntitySnapshot s) {
   return entity(id);
 }
 
-ecs::Entity EditorSession::add_primitive(const std::string& primitive, const std::string& name) {
-  MeshSource source;
-  source.kind = MeshSource::Kind::Primitive;
-  source.primitive = primitive;
+ecs::Entity EditorSession::add_mesh_entity(const MeshSource& source, const std::string& name) {
   EntitySnapshot s;
   s.mesh = Mesh{meshes_.get(source, scene_.source.parent_path()), source, {}, 0, 0.0f};
   s.name = Name{name};
@@ -430,18 +427,19 @@ ecs::Entity EditorSession::add_primitive(const std::string& primitive, const std
   return add_entity(std::move(s));
 }
 
+ecs::Entity EditorSession::add_primitive(const std::string& primitive, const std::string& name) {
+  MeshSource source;
+  source.kind = MeshSource::Kind::Primitive;
+  source.primitive = primitive;
+  return add_mesh_entity(source, name);
+}
+
 ecs::Entity EditorSession::add_mesh_file(const std::filesystem::path& file,
                                          const std::string& name) {
   MeshSource source;
   source.kind = MeshSource::Kind::File;
   source.path = file.generic_string();
-  EntitySnapshot s;
-  s.mesh = Mesh{meshes_.get(source, scene_.source.parent_path()), source, {}, 0, 0.0f};
-  s.name = Name{name};
-  s.transform = Transform{};
-  s.material = Material{};
-  s.kinematics = Kinematics{Kinematics::Type::Free};
-  return add_entity(std::move(s));
+  return add_mesh_entity(source, name);
 }
 
 std::vector<ecs::Entity> EditorSession::subtree(ecs::Entity root) {

@@ -167,6 +167,8 @@ private:
   /// Writes `state` into the entity; with `other`, only the components that differ from it.
   void write(EditorId id, const EntitySnapshot& state, const EntitySnapshot* other);
   ecs::Entity add_entity(EntitySnapshot s);
+  /// A new free entity with this mesh, a default Transform and Material; selected.
+  ecs::Entity add_mesh_entity(const MeshSource& source, const std::string& name);
   EditorId assign_id(ecs::Entity e);
   void prepare();
   [[nodiscard]] std::vector<ecs::Entity> subtree(ecs::Entity root);

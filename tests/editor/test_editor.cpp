@@ -7,6 +7,7 @@
 #include "editor/core/navigation.h"
 #include "editor/core/panels.h"
 #include "editor/core/script.h"
+#include "editor_test_util.h"
 #include "specula/cache/ray_cache.h"
 #include "specula/core/error.h"
 #include "specula/image/flip.h"
@@ -57,18 +58,7 @@ ecs::Entity named(EditorSession& s, const std::string& name) {
   return *s.selected();
 }
 
-/// The test's own projection of a world point to continuous pixel coordinates: the pinhole of
-/// CameraRays (pixel x's centre at x + 0.5), written out here rather than taken from the editor.
-dvec2 pixel_of(const Camera& c, std::uint32_t w, std::uint32_t h, const dvec3& p) {
-  const dvec3 f = glm::normalize(c.look_at - c.position);
-  const dvec3 r = glm::normalize(glm::cross(f, dvec3(c.up)));
-  const dvec3 u = glm::cross(r, f);
-  const double t = std::tan(0.5 * double(c.vertical_fov));
-  const dvec3 v = p - c.position;
-  const double z = glm::dot(v, f);
-  return dvec2((glm::dot(v, r) / (z * t * double(w) / double(h)) + 1.0) * 0.5 * double(w),
-               (1.0 - glm::dot(v, u) / (z * t)) * 0.5 * double(h));
-}
+using test::pixel_of;
 
 dvec3 world_position(EditorSession& s, ecs::Entity e) {
   return dvec3(s.registry().get<WorldTransform>(e).world_from_object[3]);

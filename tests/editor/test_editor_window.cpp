@@ -4,6 +4,7 @@
 // as one undo step, Ctrl+Z / Ctrl+Y undo and redo it, input a panel holds is ignored, a right drag orbits.
 
 #include "editor/window_controls.h"
+#include "editor_test_util.h"
 
 #include <GLFW/glfw3.h>
 #include <gtest/gtest.h>
@@ -32,16 +33,8 @@ ViewSettings view() {
   return v;
 }
 
-/// The test's own pinhole projection (pixel x's centre at x + 0.5), as in test_editor.cpp.
 dvec2 pixel_of(const Camera& c, const dvec3& p) {
-  const dvec3 f = glm::normalize(c.look_at - c.position);
-  const dvec3 r = glm::normalize(glm::cross(f, dvec3(c.up)));
-  const dvec3 u = glm::cross(r, f);
-  const double t = std::tan(0.5 * double(c.vertical_fov));
-  const dvec3 v = p - c.position;
-  const double z = glm::dot(v, f);
-  return dvec2((glm::dot(v, r) / (z * t * double(kFrameW) / double(kFrameH)) + 1.0) * 0.5 * kFrameW,
-               (1.0 - glm::dot(v, u) / (z * t)) * 0.5 * kFrameH);
+  return test::pixel_of(c, kFrameW, kFrameH, p);
 }
 
 dvec2 window_of(const dvec2& frame_pixel) {
