@@ -184,6 +184,33 @@ TEST(EditorSession, FrameAfterADragMatchesTheGolden) {
   }
 }
 
+TEST(EditorSession, PathModeAccumulatesUntilAnEditOrACameraMoveRestartsIt) {
+  ViewSettings v = small_view(32, 24);
+  v.mode = TraceMode::Path;
+  EditorSession s(kScenes / "cornell_box.json", v);
+  const auto last = [&] { return s.registry().resource<RenderJob>().last; };
+  s.tick();
+  const std::uint64_t per_frame = last().accumulated_samples;
+  ASSERT_GT(per_frame, 0u);
+  s.tick();
+  s.tick();
+  EXPECT_EQ(last().accumulated_samples, 3 * per_frame) << "a still scene refines";
+  EXPECT_FALSE(last().accumulation_restarted);
+
+  s.select_by_name("mirror sphere");
+  s.drag(GizmoMode::Translate, 0, s.screen_axis(*s.selected(), 0));
+  s.tick();
+  EXPECT_TRUE(last().accumulation_restarted) << "an edit restarts the refinement";
+  EXPECT_EQ(last().accumulated_samples, per_frame);
+  s.tick();
+  EXPECT_EQ(last().accumulated_samples, 2 * per_frame);
+
+  s.set_camera(orbit(s.camera(), 10.0, 0.0));
+  s.tick();
+  EXPECT_TRUE(last().accumulation_restarted) << "so does a camera move";
+  EXPECT_EQ(last().accumulated_samples, per_frame);
+}
+
 TEST(EditorSession, ClickOnBackgroundSelectsNothing) {
   EditorSession s(kScenes / "dynamic_three_classes.json", small_view(64, 36));
   s.tick();
