@@ -6,9 +6,12 @@
 #include "bench_common.h"
 #include "editor/core/editor_session.h"
 #include "editor/core/panels.h"
+#include "specula/image/flip.h"
+#include "specula/image/metrics.h"
 
 #include <algorithm>
 #include <cstdio>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -55,6 +58,37 @@ void section_editor(const Options& o) {
     std::printf("| %s | %.2f | %.1f | %.2f | %.1f | %.4f / %.4f | %.1e |\n", backend, frame,
                 1e3 / frame, framed, 1e3 / framed, picked,
                 *std::max_element(pick.begin(), pick.end()), picked / frame);
+  }
+
+  // Dynamic resolution (the windows' --target-fps): what a render scale saves, and what it costs
+  // against the full-size frame once scaled up to the window as presentation does.
+  const char* backend = backend_info("embree").available ? "embree" : "native";
+  std::printf("\n#### Dynamic resolution: render scale against error (%s, %ux%u shown, %d frames "
+              "each)\n\n| scale | rendered | frame ms (median) | speed-up | PSNR dB | FLIP mean "
+              "|\n|---:|---|---:|---:|---:|---:|\n",
+              backend, width, height, frames);
+  editor::ViewSettings view;
+  view.backend = backend;
+  view.width = width;
+  view.height = height;
+  view.threads = o.threads;
+  editor::EditorSession session(fs::path(o.source_dir) / "samples/scenes/cornell_box.json", view);
+  double full_ms = 0.0;
+  std::optional<Framebuffer> full;
+  for (const float scale : {1.0f, 0.75f, 0.5f, 0.4375f, 0.34375f, 0.25f}) {
+    session.set_render_scale(scale);
+    for (int i = 0; i < 2; ++i) session.tick(); // the new size allocated
+    std::vector<double> ms;
+    for (int i = 0; i < frames; ++i) ms.push_back(time_ms([&] { session.tick(); }));
+    const double m = median(ms);
+    const Framebuffer shown = resample_nearest(session.frame(), width, height);
+    if (!full) {
+      full = shown;
+      full_ms = m;
+    }
+    std::printf("| %.3f | %ux%u | %.2f | %.2f | %.1f | %.4f |\n", double(scale),
+                session.frame().width(), session.frame().height(), m, full_ms / m,
+                psnr(*full, shown), flip(*full, shown).mean);
   }
 }
 

@@ -2,7 +2,8 @@
 //   [--depth N] [--cache off|on] [--frames N] [--screenshot PNG]
 // Windowed by default (editor_window.cpp, when this build has specula::present); --headless runs
 // the same session and panels without a window. Windowed, --frames N closes the window after N
-// frames and --screenshot writes the last one. Exit codes: 0 done, 1 bad input or a failed
+// frames and --screenshot writes the last one; --target-fps F (default 30, 0 off) renders below
+// the window's size when frames take longer than 1/F s (dynamic resolution). Exit codes: 0 done, 1 bad input or a failed
 // script line (the message names file:line), 2 a feature this build or machine lacks.
 
 #include "editor/core/editor_session.h"
@@ -41,6 +42,7 @@ int main(int argc, char** argv) {
   bool headless = false;
   std::optional<std::uint32_t> depth;
   std::optional<std::uint32_t> frames;
+  double target_fps = 30.0;
   app.add_option("scene", scene, "Scene file")->required();
   app.add_flag("--headless", headless, "No window: run the script (or --frames) and exit");
   app.add_option("--script", script, "Replay editor actions from FILE (editor/core/script.h)");
@@ -52,6 +54,9 @@ int main(int argc, char** argv) {
   app.add_option("--frames", frames, "Frames to render (headless, no script) or to show before closing (windowed)")
       ->check(CLI::Range(1u, 1000000u));
   app.add_option("--screenshot", screenshot, "Write the last frame to this PNG");
+  app.add_option("--target-fps", target_fps,
+                 "Window: frame rate held by rendering below the window's size (0: full size)")
+      ->check(CLI::Range(0.0, 1000.0));
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -73,6 +78,7 @@ int main(int argc, char** argv) {
       editor::WindowRun run;
       run.script = script;
       run.frames = frames;
+      run.target_fps = target_fps;
       if (!screenshot.empty()) run.screenshot = screenshot;
       return editor::run_window(session, run);
     }

@@ -6,6 +6,7 @@
 #include "editor/core/script.h"
 #include "editor/window_controls.h"
 #include "specula/present/window.h"
+#include "specula/render/resolution_governor.h"
 
 #include "specula/trace/stats.h"
 
@@ -34,10 +35,16 @@ int run_window(EditorSession& session, const WindowRun& run) {
     return std::chrono::duration<double, std::milli>(b - a).count();
   };
   std::vector<double> frame_ms, tick_ms, present_ms; // poll to poll; the tick; UI + present
+  std::vector<double> scales;
+  ResolutionGovernor governor(run.target_fps > 0.0 ? 1e3 / run.target_fps : 0.0);
   Clock::time_point last = Clock::now();
   while ((!run.frames || shown < *run.frames) && window->poll(in)) {
     const Clock::time_point start = Clock::now();
-    if (shown > 0) frame_ms.push_back(ms(last, start));
+    if (shown > 0) {
+      frame_ms.push_back(ms(last, start));
+      session.set_render_scale(governor.next(frame_ms.back()));
+    }
+    scales.push_back(governor.scale());
     last = start;
     controls.apply(session, in, window->width(), window->height());
     if (!controls.status().empty()) panels.status = controls.status();
@@ -56,9 +63,9 @@ int run_window(EditorSession& session, const WindowRun& run) {
     // The presented rate, for docs/PERFORMANCE.md (a run with --frames is a measurement or a test).
     const double f = median(frame_ms);
     std::printf("specula-editor: %llu frames shown at %ux%u, median %.2f ms per frame (%.1f "
-                "frames/s): tick %.2f ms, panels and present %.2f ms\n",
+                "frames/s): tick %.2f ms, panels and present %.2f ms; render scale median %.3f\n",
                 static_cast<unsigned long long>(shown), window->width(), window->height(), f,
-                1e3 / f, median(tick_ms), median(present_ms));
+                1e3 / f, median(tick_ms), median(present_ms), median(scales));
   }
   return 0;
 }

@@ -3,6 +3,7 @@
 #include "editor/core/fields.h"
 #include "specula/core/error.h"
 #include "specula/image/image_io.h"
+#include "specula/render/resolution_governor.h"
 #include "specula/scene/hierarchy.h"
 #include "specula/scene/json_scene.h"
 #include "specula/trace/camera_rays.h"
@@ -119,7 +120,12 @@ EditorId EditorSession::id_of(ecs::Entity e) const {
 // --- frames
 // ---------------------------------------------------------------------------------------
 
+void EditorSession::set_render_scale(float scale) { render_scale_ = scale; }
+
 void EditorSession::tick(double dt) {
+  Framebuffer& image = scene_.registry.resource<RenderJob>().image;
+  const auto [w, h] = ResolutionGovernor::scaled(view_.width, view_.height, render_scale_);
+  if (image.width() != w || image.height() != h) image = Framebuffer(w, h);
   schedule_.tick(scene_.registry, dt);
   FrameSample s;
   if (const auto* t = scene_.registry.try_resource<FrameTimings>()) {

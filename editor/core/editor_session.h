@@ -80,6 +80,10 @@ public:
   // --- frames -----------------------------------------------------------------------------------
   /// Runs the schedule once (dt seconds) and records the history.
   void tick(double dt = 1.0 / 60.0);
+  /// Renders from the next tick on at view width·scale × height·scale (dynamic resolution:
+  /// the window shows the frame scaled up; picking and gizmos work in the frame's own pixels).
+  /// 1 is the view's size.
+  void set_render_scale(float scale);
   [[nodiscard]] const Framebuffer& frame() const;
   [[nodiscard]] const std::deque<FrameSample>& history() const { return history_; }
   static constexpr std::size_t kHistory = 120;
@@ -159,6 +163,7 @@ private:
   };
   using Command = std::vector<Change>;
   void execute(Command command);
+  float render_scale_ = 1.0f;
   bool gesture_ = false;        ///< inside begin_gesture / end_gesture
   bool gesture_merges_ = false; ///< undo_.back() is this gesture's step, edits merge into it
   void apply(const Command& command, bool forward);

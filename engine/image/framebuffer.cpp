@@ -36,4 +36,14 @@ const vec3& Framebuffer::at(std::uint32_t x, std::uint32_t y) const {
 
 void Framebuffer::fill(vec3 value) { std::fill(pixels_.begin(), pixels_.end(), value); }
 
+Framebuffer resample_nearest(const Framebuffer& image, std::uint32_t width, std::uint32_t height) {
+  Framebuffer out(width, height);
+  for (std::uint32_t y = 0; y < height; ++y) {
+    const auto sy = std::uint32_t(nearest_source(y, height, image.height()));
+    for (std::uint32_t x = 0; x < width; ++x)
+      out.at(x, y) = image.at(std::uint32_t(nearest_source(x, width, image.width())), sy);
+  }
+  return out;
+}
+
 } // namespace specula

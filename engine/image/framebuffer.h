@@ -46,4 +46,16 @@ private:
   std::vector<vec3> pixels_;
 };
 
+/// Nearest-neighbour resampling: the source index under destination index `i`'s centre when
+/// `dst` samples span `src` ones, in integers (what presentation uses to scale a frame up).
+[[nodiscard]] constexpr std::uint64_t nearest_source(std::uint64_t i, std::uint64_t dst,
+                                                     std::uint64_t src) noexcept {
+  return ((2 * i + 1) * src) / (2 * dst);
+}
+
+/// `image` resampled to width × height by nearest_source on each axis (no letterbox: the aspect
+/// follows the new size).
+[[nodiscard]] Framebuffer resample_nearest(const Framebuffer& image, std::uint32_t width,
+                                           std::uint32_t height);
+
 } // namespace specula

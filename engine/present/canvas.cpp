@@ -36,7 +36,7 @@ void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint3
       std::uint8_t* row = out.data() + std::size_t(y) * width * 4;
       const bool inside_y = y >= oy && y < oy + dh;
       // Nearest neighbour: the source pixel under the destination pixel's centre, in integers.
-      const std::uint64_t sy = inside_y ? ((2 * (y - oy) + 1) * fh) / (2 * dh) : 0;
+      const std::uint64_t sy = inside_y ? nearest_source(y - oy, dh, fh) : 0;
       for (std::uint32_t x = 0; x < width; ++x) {
         std::uint8_t* p = row + std::size_t(x) * 4;
         if (!inside_y || x < ox || x >= ox + dw) {
@@ -44,7 +44,7 @@ void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint3
           p[3] = 255;
           continue;
         }
-        const std::uint64_t sx = ((2 * (x - ox) + 1) * fw) / (2 * dw);
+        const std::uint64_t sx = nearest_source(x - ox, dw, fw);
         const vec3& c = pixels[std::size_t(sy * fw + sx)];
         p[r] = specula::encode_srgb8(c.r);
         p[1] = specula::encode_srgb8(c.g);

@@ -211,6 +211,26 @@ TEST(EditorSession, PathModeAccumulatesUntilAnEditOrACameraMoveRestartsIt) {
   EXPECT_EQ(last().accumulated_samples, per_frame);
 }
 
+TEST(EditorSession, AtHalfRenderScalePickingAndAOneUnitDragWorkInTheSmallerFrame) {
+  EditorSession s(kScenes / "cornell_box.json", small_view(96, 72));
+  s.set_render_scale(0.5f);
+  s.tick();
+  ASSERT_EQ(s.frame().width(), 48u);
+  ASSERT_EQ(s.frame().height(), 36u);
+  const ecs::Entity sphere = named(s, "mirror sphere");
+  s.clear_selection();
+  const Camera cam = s.camera();
+  const dvec3 p = world_position(s, sphere);
+  const dvec2 px = pixel_of(cam, 48, 36, p);
+  ASSERT_EQ(s.click(std::uint32_t(px.x), std::uint32_t(px.y)), std::optional<ecs::Entity>(sphere));
+  const double x0 = s.registry().get<Transform>(sphere).translation.x;
+  s.drag(GizmoMode::Translate, 0, pixel_of(cam, 48, 36, p + dvec3(1, 0, 0)) - px);
+  EXPECT_NEAR(s.registry().get<Transform>(sphere).translation.x - x0, 1.0, 1e-5);
+  s.set_render_scale(1.0f);
+  s.tick();
+  EXPECT_EQ(s.frame().width(), 96u) << "back to the view's size";
+}
+
 TEST(EditorSession, ClickOnBackgroundSelectsNothing) {
   EditorSession s(kScenes / "dynamic_three_classes.json", small_view(64, 36));
   s.tick();

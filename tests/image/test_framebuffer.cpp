@@ -70,5 +70,21 @@ TEST(Srgb, TransferFunctionsInvertEachOtherAndClamp) {
   EXPECT_NEAR(linear_to_srgb(std::numeric_limits<float>::infinity()), 1.0f, 1e-6f);
 }
 
+TEST(ResampleNearest, SameSizeIsTheImageDoublingMakesBlocksHalvingTakesCentres) {
+  Framebuffer img(3, 2);
+  for (std::uint32_t y = 0; y < 2; ++y)
+    for (std::uint32_t x = 0; x < 3; ++x) img.at(x, y) = vec3(float(x), float(y), 1.0f);
+  EXPECT_TRUE(resample_nearest(img, 3, 2) == img);
+  const Framebuffer big = resample_nearest(img, 6, 4);
+  for (std::uint32_t y = 0; y < 4; ++y)
+    for (std::uint32_t x = 0; x < 6; ++x) EXPECT_EQ(big.at(x, y), img.at(x / 2, y / 2)) << x << "," << y;
+  EXPECT_TRUE(resample_nearest(big, 3, 2) == img) << "halving undoes doubling";
+  // Never out of range, at any ratio.
+  const Framebuffer odd = resample_nearest(img, 7, 5);
+  EXPECT_EQ(odd.at(6, 4), img.at(2, 1));
+  EXPECT_EQ(odd.at(0, 0), img.at(0, 0));
+  EXPECT_EQ(nearest_source(0, 1, 5), 2u) << "one sample takes the centre";
+}
+
 } // namespace
 } // namespace specula

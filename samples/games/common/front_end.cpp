@@ -31,7 +31,7 @@ bool parse_u64(std::string_view s, std::uint64_t& out) {
 void usage(const std::string& game) {
   std::fprintf(stderr,
                "usage: %s [--size WxH] [--backend NAME] [--mode MODE] [--record FILE]\n"
-               "          [--input FILE [--frames N]] [--out PNG]\n"
+               "          [--input FILE [--frames N]] [--out PNG] [--target-fps F]\n"
                "       %s --headless --frames N --input FILE [--out PNG] [--stats JSON] "
                "[--size WxH] [--backend NAME] [--mode MODE]\n",
                game.c_str(), game.c_str());
@@ -127,6 +127,13 @@ int game_main(int argc, char** argv, const std::string& game_name,
         h.out = value();
       } else if (arg == "--stats") {
         h.stats = value();
+      } else if (arg == "--target-fps") {
+        // The window's; headless replays always render the full size.
+        const std::string_view v = value();
+        std::uint64_t fps = 0;
+        if (!parse_u64(v, fps) || fps > 1000)
+          throw Error("--target-fps: expected 0 … 1000, got '" + std::string(v) + "'");
+        w.target_fps = double(fps);
       } else if (arg == "--record") {
         w.record = value();
       } else if (arg == "--backend") {

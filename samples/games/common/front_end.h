@@ -56,6 +56,9 @@ struct WindowedOptions {
   std::optional<InputScript> input;
   std::optional<std::uint64_t> frames;      ///< close after this many frames (none: on close)
   std::optional<std::filesystem::path> out; ///< the final frame, PNG
+  /// Dynamic resolution: the frame rate held by rendering below the window's size
+  /// (specula::ResolutionGovernor); 0: always the full size.
+  double target_fps = 30.0;
 };
 
 /// Plays in a window until it is closed or options.frames have been shown (needs

@@ -5,6 +5,7 @@
 #include <specula/core/error.h>
 #include <specula/image/image_io.h>
 #include <specula/present/window.h>
+#include <specula/render/resolution_governor.h>
 #include <specula/systems/schedule.h>
 
 #include <GLFW/glfw3.h>
@@ -62,12 +63,22 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
   present::InputState input;
   std::uint64_t frame = 0;
   std::vector<double> frame_ms; // poll to poll: what the player sees
+  std::vector<float> scales;
+  ResolutionGovernor governor(options.target_fps > 0.0 ? 1e3 / options.target_fps : 0.0);
   auto last = std::chrono::steady_clock::now();
   for (; (!options.frames || frame < *options.frames) && window->poll(input) &&
          !input.down[GLFW_KEY_ESCAPE];
        ++frame) {
     const auto now = std::chrono::steady_clock::now();
-    if (frame > 0) frame_ms.push_back(std::chrono::duration<double, std::milli>(now - last).count());
+    if (frame > 0) {
+      frame_ms.push_back(std::chrono::duration<double, std::milli>(now - last).count());
+      // Dynamic resolution: the next frame at the governor's scale, shown scaled up.
+      const auto [w, h] =
+          ResolutionGovernor::scaled(options.width, options.height, governor.next(frame_ms.back()));
+      Framebuffer& image = game.registry().resource<RenderJob>().image;
+      if (image.width() != w || image.height() != h) image = Framebuffer(w, h);
+    }
+    scales.push_back(governor.scale());
     last = now;
     const GameInput g = options.input ? options.input->at(frame) : game_input(input);
     played.push_back(g);
@@ -86,10 +97,12 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
   }
   if (options.frames && !frame_ms.empty()) {
     std::sort(frame_ms.begin(), frame_ms.end());
+    std::sort(scales.begin(), scales.end());
     const double median = frame_ms[frame_ms.size() / 2];
-    std::printf("%s: %llu frames shown at %ux%u, median %.2f ms per frame (%.1f frames/s)\n",
+    std::printf("%s: %llu frames shown at %ux%u, median %.2f ms per frame (%.1f frames/s), "
+                "render scale median %.3f\n",
                 game_name.c_str(), static_cast<unsigned long long>(frame), options.width,
-                options.height, median, 1e3 / median);
+                options.height, median, 1e3 / median, double(scales[scales.size() / 2]));
   }
   if (options.out) write_png(game.registry().resource<RenderJob>().image, *options.out);
   if (options.record) {
