@@ -42,9 +42,11 @@ int run_window(EditorSession& session, const WindowRun& run) {
     const Clock::time_point start = Clock::now();
     if (shown > 0) {
       frame_ms.push_back(ms(last, start));
-      session.set_render_scale(governor.next(frame_ms.back()));
+      // Path and shadow modes refine over frames at one size: they render the full size.
+      const float scale = governor.next(frame_ms.back());
+      session.set_render_scale(stochastic_mode(session.view().mode) ? 1.0f : scale);
     }
-    scales.push_back(governor.scale());
+    scales.push_back(stochastic_mode(session.view().mode) ? 1.0f : governor.scale());
     last = start;
     controls.apply(session, in, window->width(), window->height());
     if (!controls.status().empty()) panels.status = controls.status();

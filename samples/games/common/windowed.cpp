@@ -64,7 +64,11 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
   std::uint64_t frame = 0;
   std::vector<double> frame_ms; // poll to poll: what the player sees
   std::vector<float> scales;
-  ResolutionGovernor governor(options.target_fps > 0.0 ? 1e3 / options.target_fps : 0.0);
+  // Path and shadow modes refine over frames at one size: no dynamic resolution there.
+  const bool progressive =
+      stochastic_mode(game.registry().resource<RenderJob>().settings.mode);
+  ResolutionGovernor governor(options.target_fps > 0.0 && !progressive ? 1e3 / options.target_fps
+                                                                       : 0.0);
   auto last = std::chrono::steady_clock::now();
   for (; (!options.frames || frame < *options.frames) && window->poll(input) &&
          !input.down[GLFW_KEY_ESCAPE];
