@@ -7,11 +7,11 @@
 #include <specula/present/window.h>
 #include <specula/render/resolution_governor.h>
 #include <specula/systems/schedule.h>
+#include <specula/trace/stats.h>
 
 #include <GLFW/glfw3.h>
 #include <imgui.h>
 
-#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstdio>
@@ -63,7 +63,7 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
   present::InputState input;
   std::uint64_t frame = 0;
   std::vector<double> frame_ms; // poll to poll: what the player sees
-  std::vector<float> scales;
+  std::vector<double> scales;
   // Path and shadow modes refine over frames at one size: no dynamic resolution there.
   const bool progressive =
       stochastic_mode(game.registry().resource<RenderJob>().settings.mode);
@@ -100,13 +100,11 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
     window->present(done.image, ImGui::GetDrawData());
   }
   if (options.frames && !frame_ms.empty()) {
-    std::sort(frame_ms.begin(), frame_ms.end());
-    std::sort(scales.begin(), scales.end());
-    const double median = frame_ms[frame_ms.size() / 2];
+    const double ms = median(frame_ms);
     std::printf("%s: %llu frames shown at %ux%u, median %.2f ms per frame (%.1f frames/s), "
                 "render scale median %.3f\n",
                 game_name.c_str(), static_cast<unsigned long long>(frame), options.width,
-                options.height, median, 1e3 / median, double(scales[scales.size() / 2]));
+                options.height, ms, 1e3 / ms, median(scales));
   }
   if (options.out) write_png(game.registry().resource<RenderJob>().image, *options.out);
   if (options.record) {
