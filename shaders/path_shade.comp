@@ -76,18 +76,15 @@ void shade_shadow_caster(uint i, GpuPath p, GpuHit hit, GpuMaterial m) {
         GpuEmitter e = emitters[k];
         precise float below = e.cdf - e.pick;
         precise float reused = clamp((u0 - below) / e.pick, 0.0, uintBitsToFloat(0x3f7fffffu));
-        AreaLightSample ls = sample_emitter_triangle(k, sp.position, reused, u1);
+        // Sampled from the shadow ray's origin, as the CPU does: its direction and distance.
+        AreaLightSample ls = sample_emitter_triangle(k, origin, reused, u1);
         if (!(ls.pdf > 0.0)) continue;
         if (dot3(ls.to_light, sp.geometric_normal) <= 0.0) continue;
         float cos_theta = dot3(ls.to_light, sp.shading_normal);
         if (cos_theta <= 0.0) continue;
-        precise vec3 to_point = ls.position - origin;
-        float distance = length3(to_point);
-        if (!(distance > 0.0)) continue;
-        precise vec3 dir = to_point / distance;
-        precise float tfar = distance * (1.0 - 1e-5);
+        precise float tfar = ls.distance * (1.0 - 1e-5);
         precise vec3 value = albedo * ls.emission * (cos_theta / ls.pdf * inv_samples);
-        add_shadow(i, count, origin, dir, tfar, value);
+        add_shadow(i, count, origin, ls.to_light, tfar, value);
       }
     }
   }

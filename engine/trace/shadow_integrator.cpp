@@ -76,19 +76,18 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
     }
     if constexpr (kAreaLights) {
       const PixelSampler sampler(pixel, settings.seed);
-      for (std::uint32_t n = 0; n < samples; ++n) {
-        const vec2 u = sampler.get2(settings.sample_offset + n, kAreaLightSet);
-        const AreaLightSample ls = area_light_point(*frame.emitters, sp.position, u);
+      for (std::uint32_t j = 0; j < samples; ++j) {
+        const vec2 u = sampler.get2(settings.sample_offset + j, kAreaLightSet);
+        // Sampled from the shadow ray's own origin, so that the sample's direction and distance
+        // are the ray's (one normalisation, not two); the density is the solid angle there.
+        const AreaLightSample ls = area_light_point(*frame.emitters, origin, u);
         if (!(ls.pdf > 0.0f)) continue;
         if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) continue; // behind the surface
         const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
         if (cos_theta <= 0.0f) continue;
-        // Aimed from the offset origin at the light point itself and stopped just short of it,
-        // so that the emitting triangle never shadows its own sample.
-        const vec3 to_point = ls.position - origin;
-        const float distance = glm::length(to_point);
-        if (!(distance > 0.0f)) continue;
-        s.shadow_rays.push_back(Ray{origin, 0.0f, to_point / distance, distance * (1.0f - 1e-5f)});
+        // Aimed at the light point itself and stopped just short of it, so that the emitting
+        // triangle never shadows its own sample.
+        s.shadow_rays.push_back(Ray{origin, 0.0f, ls.to_light, ls.distance * (1.0f - 1e-5f)});
         s.shadow_node.push_back(pixel);
         s.shadow_value.push_back(albedo * ls.emission * (cos_theta / ls.pdf * inv_samples));
       }
@@ -100,7 +99,7 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
   s.blocked.resize(s.shadow_rays.size());
   if (settings.shadows && !s.shadow_rays.empty()) {
     counts[RayKind::Shadow] += s.shadow_rays.size();
-    frame.tracer.occluded(s.shadow_rays, s.blocked);
+    frame.tracer.occluded_coherent(s.shadow_rays, s.blocked);
   } else {
     std::fill(s.blocked.begin(), s.blocked.end(), std::uint8_t{0});
   }

@@ -286,7 +286,7 @@ private:
     s_.blocked.resize(s_.shadow_rays.size());
     if (settings_.shadows) {
       counts_[RayKind::Shadow] += s_.shadow_rays.size();
-      frame_.tracer.occluded(s_.shadow_rays, s_.blocked);
+      frame_.tracer.occluded_coherent(s_.shadow_rays, s_.blocked);
       for (const std::uint32_t node : s_.shadow_node) ++s_.nodes[node].rays;
     } else {
       std::fill(s_.blocked.begin(), s_.blocked.end(), std::uint8_t{0});

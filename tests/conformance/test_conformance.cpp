@@ -4,7 +4,8 @@
 //   - analytic scenes: known hits, distances and normals, static and instanced;
 //   - watertightness: rays aimed exactly at the shared edges and vertices of closed meshes, from
 //     inside and from outside, never leak through;
-//   - any-hit (occluded) agrees with closest-hit (intersect) on the same rays;
+//   - any-hit (occluded) agrees with closest-hit (intersect) on the same rays, and coherent
+//     batches (occluded_coherent, packets where a backend has them) answer as occluded does;
 //   - primary packets of every width find the hits single rays find;
 //   - structure updates: only what the scene layer reports changed causes work, and the hits
 //     follow moved, deformed and destroyed entities;
@@ -262,6 +263,73 @@ TEST_P(Conformance, OccludedAgreesWithClosestHitOnTheSameRays) {
   EXPECT_EQ(agree, compared);
   EXPECT_GT(occluded, compared / 10) << "the scene must block a fair share of the rays";
   EXPECT_LT(occluded, compared * 9 / 10);
+}
+
+/// Shadow rays as the shadow caster and Whitted emit them: from a grid of points on the ground,
+/// each towards a light point above (a point light and four samples on a square panel), pixel by
+/// pixel; untraceable rays (NaN origin, zero direction, empty interval) mixed in; a count that is
+/// not a multiple of any packet width.
+std::vector<Ray> coherent_shadow_rays() {
+  std::mt19937 rng(29);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<Ray> rays;
+  for (int y = 0; y < 37; ++y)
+    for (int x = 0; x < 41; ++x) {
+      const vec3 p(-5.0f + 10.0f * float(x) / 40.0f, 1e-3f, -5.0f + 10.0f * float(y) / 36.0f);
+      std::vector<vec3> targets{vec3(0.5f, 6.0f, 0.0f)};
+      for (int k = 0; k < 4; ++k) targets.emplace_back(-1.0f + 2.0f * u(rng), 5.0f, -1.0f + 2.0f * u(rng));
+      for (const vec3& q : targets) {
+        const float d = glm::length(q - p);
+        rays.push_back(Ray{p, 0.0f, (q - p) / d, d * (1.0f - 1e-5f)});
+      }
+    }
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  rays.insert(rays.begin() + 7, Ray{vec3(nan, 0.0f, 0.0f), 0.0f, vec3(0, 1, 0), 1.0f});
+  rays.insert(rays.begin() + 100, Ray{vec3(0.0f, 0.5f, 0.0f), 0.0f, vec3(0.0f), 1.0f});
+  rays.insert(rays.begin() + 301, Ray{vec3(0.0f, 0.5f, 0.0f), 2.0f, vec3(0, 1, 0), 1.0f});
+  return rays;
+}
+
+TEST_P(Conformance, CoherentOcclusionAnswersAsOccludedDoes) {
+  // Static occluders only (Embree traces coherent batches in packets on its static scene), then
+  // with a free object too (the top level: a backend may fall back to occluded()).
+  for (const bool with_free : {false, true}) {
+    SCOPED_TRACE(with_free ? "static and free" : "static only");
+    ecs::Registry reg;
+    test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(20.0f)), test::at(vec3(0)));
+    test::add_mesh(reg, test::primitive("sphere", 1.0f), test::at(vec3(0.3f, 1.5f, 0.2f)));
+    test::add_mesh(reg, test::primitive("box", 1.0f, vec3(1, 3, 1)), test::at(vec3(-2, 1.5f, 1)));
+    if (with_free)
+      test::add_mesh(reg, test::primitive("sphere", 0.7f), test::at(vec3(2.0f, 2.0f, -1.5f)),
+                     Material{}, Kinematics::Type::Free);
+    const test::TracedWorld world(reg, backend());
+    const std::vector<Ray> rays = coherent_shadow_rays();
+    std::vector<Hit> hits(rays.size());
+    std::vector<std::uint8_t> blocked(rays.size()), coherent(rays.size(), 7);
+    world.tracer->intersect(rays, hits);
+    world.tracer->occluded(rays, blocked);
+    world.tracer->occluded_coherent(rays, coherent);
+    int compared = 0, same = 0, agree = 0, occluded = 0;
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      ASSERT_LE(coherent[i], 1) << "ray " << i << " got no answer";
+      if (!traceable(rays[i])) {
+        EXPECT_EQ(coherent[i], 0) << "untraceable ray " << i << " must not be occluded";
+        continue;
+      }
+      // A hit within float noise of tfar may fall either way.
+      if (hits[i].hit() && std::abs(hits[i].t - rays[i].tfar) < 1e-4f * rays[i].tfar) continue;
+      ++compared;
+      occluded += coherent[i];
+      same += coherent[i] == blocked[i] ? 1 : 0;
+      agree += (coherent[i] != 0) == hits[i].hit() ? 1 : 0;
+    }
+    EXPECT_EQ(same, compared);
+    EXPECT_EQ(agree, compared);
+    EXPECT_GT(occluded, compared / 20) << "the occluders must block a fair share of the rays";
+    EXPECT_LT(occluded, compared / 2);
+    // An empty batch is a no-op.
+    world.tracer->occluded_coherent(std::span<const Ray>(), std::span<std::uint8_t>());
+  }
 }
 
 // --- Primary packets -------------------------------------------------------------------------

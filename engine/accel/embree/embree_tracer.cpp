@@ -377,6 +377,47 @@ void EmbreeTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> o
   }
 }
 
+void EmbreeTracer::occluded_coherent(std::span<const Ray> rays,
+                                     std::span<std::uint8_t> occluded) const {
+  SPECULA_ASSERT(occluded.size() == rays.size());
+  if (static_scene_ == nullptr || last_.dynamic_instances != 0) {
+    this->occluded(rays, occluded);
+    return;
+  }
+  // The static scene's geometry ids are the top level's through its identity instance, and
+  // occlusion reports no ids: the answers are the top level's.
+  constexpr std::size_t kLanes = 16;
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  for (std::size_t first = 0; first < rays.size(); first += kLanes) {
+    const std::size_t count = std::min(kLanes, rays.size() - first);
+    alignas(64) RTCRay16 r;
+    alignas(64) int valid[kLanes];
+    for (std::size_t i = 0; i < kLanes; ++i) {
+      // Lanes past the end and untraceable rays (NaN, Inf) are inactive and get a harmless ray.
+      const bool on = i < count && traceable(rays[first + i]);
+      const Ray& ray = on ? rays[first + i] : Ray{vec3(0.0f), 1.0f, vec3(0.0f, 0.0f, 1.0f), 0.0f};
+      valid[i] = on ? -1 : 0;
+      r.org_x[i] = ray.origin.x;
+      r.org_y[i] = ray.origin.y;
+      r.org_z[i] = ray.origin.z;
+      r.dir_x[i] = ray.direction.x;
+      r.dir_y[i] = ray.direction.y;
+      r.dir_z[i] = ray.direction.z;
+      r.tnear[i] = ray.tnear;
+      r.tfar[i] = ray.tfar;
+      r.time[i] = 0.0f;
+      r.mask[i] = 0xFFFFFFFFu;
+      r.id[i] = 0;
+      r.flags[i] = 0;
+    }
+    rtcOccluded16(valid, static_scene_, &context, &r);
+    // Embree sets tfar to -inf on occlusion (an inactive lane keeps its tfar of 0).
+    for (std::size_t i = 0; i < count; ++i) occluded[first + i] = r.tfar[i] < 0.0f ? 1 : 0;
+  }
+}
+
 template <int N, typename RayHitN, typename IntersectN>
 void EmbreeTracer::intersect_camera_packets(const PacketTile& tile, PrimaryHits& hits,
                                             const vec3& origin, IntersectN intersect_n) const {
