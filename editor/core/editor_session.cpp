@@ -245,6 +245,11 @@ EntitySnapshot EditorSession::snapshot(ecs::Entity e) const {
   take(s.mesh);
   take(s.material);
   take(s.kinematics);
+  // An entity a drag made hierarchical for the gesture (unfreeze_for_drag) keeps its own class.
+  if (!drag_kinematics_.empty())
+    if (const EditorId id = id_of(e); id != kNoId)
+      for (const auto& [switched, own] : drag_kinematics_)
+        if (switched == id) s.kinematics = own;
   take(s.light);
   take(s.camera);
   take(s.camera_path);
@@ -322,6 +327,7 @@ void EditorSession::execute(Command command) {
 
 bool EditorSession::undo() {
   gesture_merges_ = false;
+  restore_drag_kinematics();
   if (undo_.empty()) return false;
   apply(undo_.back(), false);
   redo_.push_back(std::move(undo_.back()));
@@ -331,6 +337,7 @@ bool EditorSession::undo() {
 
 bool EditorSession::redo() {
   gesture_merges_ = false;
+  restore_drag_kinematics();
   if (redo_.empty()) return false;
   apply(redo_.back(), true);
   undo_.push_back(std::move(redo_.back()));
@@ -358,11 +365,41 @@ void EditorSession::edit(ecs::Entity e, const std::function<void(EntitySnapshot&
 }
 
 void EditorSession::begin_gesture() {
+  restore_drag_kinematics();
   gesture_ = true;
   gesture_merges_ = false;
 }
 
-void EditorSession::end_gesture() { gesture_ = gesture_merges_ = false; }
+void EditorSession::end_gesture() {
+  gesture_ = gesture_merges_ = false;
+  restore_drag_kinematics();
+}
+
+void EditorSession::unfreeze_for_drag(ecs::Entity e) {
+  ecs::Registry& r = scene_.registry;
+  for (const ecs::Entity x : subtree(e)) {
+    const Kinematics* k = r.try_get<Kinematics>(x);
+    if (k != nullptr && k->type != Kinematics::Type::Static) continue;
+    if (!r.has<Mesh>(x)) continue; // nothing to trace: no structure to spare
+    const EditorId id = id_of(x);
+    drag_kinematics_.emplace_back(id, k != nullptr ? std::optional<Kinematics>(*k) : std::nullopt);
+    r.emplace_or_replace<Kinematics>(x, Kinematics{Kinematics::Type::Hierarchical});
+  }
+}
+
+void EditorSession::restore_drag_kinematics() {
+  ecs::Registry& r = scene_.registry;
+  for (const auto& [id, own] : drag_kinematics_) {
+    const ecs::Entity x = entity(id);
+    if (x == ecs::null_entity) continue; // deleted meanwhile
+    if (own)
+      r.emplace_or_replace<Kinematics>(x, *own);
+    else
+      r.remove<Kinematics>(x);
+  }
+  drag_kinematics_.clear();
+  drag_checked_ = kNoId;
+}
 
 dvec2 EditorSession::screen_axis(ecs::Entity e, int axis) const {
   if (axis < 0 || axis > 2) throw Error("drag", "axis must be x, y or z");
@@ -388,6 +425,12 @@ void EditorSession::drag(GizmoMode mode, int axis, dvec2 screen_delta) {
   dvec3 unit(0.0);
   unit[axis] = 1.0;
   const dmat3 local_from_world = glm::inverse(parent_linear(scene_.registry, *e));
+  // Before the first move of a gesture, so that no frame sees a static entity move (the edit's
+  // snapshots still hold its own kinematics).
+  if (gesture_ && drag_checked_ != id_of(*e)) {
+    drag_checked_ = id_of(*e);
+    unfreeze_for_drag(*e);
+  }
   edit(*e, [&](EntitySnapshot& snap) {
     Transform& t = *snap.transform;
     if (mode == GizmoMode::Rotate) {
@@ -412,6 +455,7 @@ void EditorSession::drag(GizmoMode mode, int axis, dvec2 screen_delta) {
 }
 
 void EditorSession::set_field(ecs::Entity e, std::string_view path, std::string_view value) {
+  restore_drag_kinematics(); // a field edit sees (and may set) the entities' own kinematics
   edit(e, [&](EntitySnapshot& s) { editor::set_field(s, path, value); });
 }
 
@@ -462,6 +506,7 @@ std::vector<ecs::Entity> EditorSession::subtree(ecs::Entity root) {
 
 void EditorSession::remove(ecs::Entity e) {
   if (id_of(e) == kNoId) throw Error("delete", "not a live entity");
+  restore_drag_kinematics();
   const std::vector<ecs::Entity> doomed = subtree(e);
   std::size_t cameras = 0, doomed_cameras = 0;
   scene_.registry.view<Camera>().each([&](ecs::Entity c, const Camera&) {
@@ -544,7 +589,10 @@ void EditorSession::frame_selected() {
 // --- files
 // ----------------------------------------------------------------------------------------
 
-void EditorSession::save(const std::filesystem::path& path) { save_json_scene(scene_, path); }
+void EditorSession::save(const std::filesystem::path& path) {
+  restore_drag_kinematics(); // the file holds the entities' own kinematics
+  save_json_scene(scene_, path);
+}
 
 void EditorSession::screenshot(const std::filesystem::path& path) const {
   write_png(frame(), path);

@@ -132,6 +132,11 @@ public:
   /// Between begin_gesture and end_gesture (a mouse drag: button down to up), successive edits
   /// of one entity make one undo step: Ctrl+Z after a drag undoes the whole drag, not its last
   /// mouse move. An undo, a redo or an edit of another entity starts a new step.
+  /// A gesture that drags a static entity (or one with static descendants) makes those entities
+  /// hierarchical until it ends, so the drag moves instances instead of rebuilding the static
+  /// structure every frame: two rebuilds per drag (out of the static set, back in) instead of one
+  /// per mouse move. Snapshots, undo steps and saved files keep their own kinematics; an undo, a
+  /// redo, a field edit, a delete or a save ends the switch early.
   void begin_gesture();
   void end_gesture();
   [[nodiscard]] std::size_t undo_depth() const { return undo_.size(); }
@@ -166,6 +171,14 @@ private:
   float render_scale_ = 1.0f;
   bool gesture_ = false;        ///< inside begin_gesture / end_gesture
   bool gesture_merges_ = false; ///< undo_.back() is this gesture's step, edits merge into it
+  EditorId drag_checked_ = kNoId; ///< the entity this gesture last ran unfreeze_for_drag on
+  /// Entities this gesture's drags made hierarchical, with their own Kinematics (none: the
+  /// component was absent, which means static).
+  std::vector<std::pair<EditorId, std::optional<Kinematics>>> drag_kinematics_;
+  /// Makes e's static subtree hierarchical for the rest of the gesture (begin_gesture).
+  void unfreeze_for_drag(ecs::Entity e);
+  /// Gives the entities unfreeze_for_drag switched their own Kinematics back.
+  void restore_drag_kinematics();
   void apply(const Command& command, bool forward);
   /// One undoable edit of e: `change` edits a copy of its snapshot (and may throw: no change).
   void edit(ecs::Entity e, const std::function<void(EntitySnapshot&)>& change);
