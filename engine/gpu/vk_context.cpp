@@ -841,19 +841,26 @@ void bind(VkDevice device, VkCommandBuffer cmd, VkDescriptorSet set, VkPipeline 
 void transition(VkCommandBuffer cmd, const Image& image, VkImageLayout from, VkImageLayout to,
                 VkPipelineStageFlags src_stage, VkAccessFlags src_access,
                 VkPipelineStageFlags dst_stage, VkAccessFlags dst_access) {
+  image_barrier(cmd, image.handle(),
+                image.is_depth() ? VK_IMAGE_ASPECT_DEPTH_BIT : VK_IMAGE_ASPECT_COLOR_BIT, from, to,
+                src_stage, src_access, dst_stage, dst_access);
+}
+} // namespace
+
+void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageAspectFlags aspect,
+                   VkImageLayout from, VkImageLayout to, VkPipelineStageFlags src_stage,
+                   VkAccessFlags src_access, VkPipelineStageFlags dst_stage,
+                   VkAccessFlags dst_access) {
   VkImageMemoryBarrier b{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER};
   b.srcAccessMask = src_access;
   b.dstAccessMask = dst_access;
   b.oldLayout = from;
   b.newLayout = to;
   b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
-  b.image = image.handle();
-  b.subresourceRange = {
-      VkImageAspectFlags(image.is_depth() ? VK_IMAGE_ASPECT_DEPTH_BIT : VK_IMAGE_ASPECT_COLOR_BIT),
-      0, 1, 0, 1};
+  b.image = image;
+  b.subresourceRange = {aspect, 0, 1, 0, 1};
   vkCmdPipelineBarrier(cmd, src_stage, dst_stage, 0, 0, nullptr, 0, nullptr, 1, &b);
 }
-} // namespace
 
 void Commands::dispatch(const Pipeline& pipeline, std::span<const Buffer* const> buffers,
                         const void* push_constants, std::uint32_t gx, std::uint32_t gy,

@@ -40,6 +40,13 @@ private:
 void check(VkResult r, const char* call);
 [[nodiscard]] const char* result_name(VkResult r);
 
+/// Records a layout transition of an image's first mip level and layer (any image: Specula's own
+/// and swapchain images alike), with the stages and accesses it waits for and makes wait.
+void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageAspectFlags aspect,
+                   VkImageLayout from, VkImageLayout to, VkPipelineStageFlags src_stage,
+                   VkAccessFlags src_access, VkPipelineStageFlags dst_stage,
+                   VkAccessFlags dst_access);
+
 struct DeviceInfo {
   std::string name;
   VkPhysicalDeviceType type = VK_PHYSICAL_DEVICE_TYPE_OTHER;
