@@ -30,14 +30,18 @@ void section_editor(const Options& o) {
   std::printf(
       "| backend | frame ms (median) | frames/s | with panels: frame ms | frames/s | "
       "pick ms (median / max of 1000) | pick / frame |\n|---|---:|---:|---:|---:|---:|---:|\n");
-  for (const char* backend : {"native", "embree"}) {
-    if (!backend_info(backend).available) continue;
+  // The Cornell box in the editor at the section's size, on `backend`.
+  const auto cornell_session = [&](const char* backend) {
     editor::ViewSettings view;
     view.backend = backend;
     view.width = width;
     view.height = height;
     view.threads = o.threads;
-    editor::EditorSession session(fs::path(o.source_dir) / "samples/scenes/cornell_box.json", view);
+    return editor::EditorSession(fs::path(o.source_dir) / "samples/scenes/cornell_box.json", view);
+  };
+  for (const char* backend : {"native", "embree"}) {
+    if (!backend_info(backend).available) continue;
+    editor::EditorSession session = cornell_session(backend);
     editor::HeadlessUi ui{float(width), float(height)};
     for (int i = 0; i < 3; ++i) session.tick(); // first build, caches warm
     std::vector<double> bare, with_ui, pick;
@@ -67,12 +71,7 @@ void section_editor(const Options& o) {
               "each)\n\n| scale | rendered | frame ms (median) | speed-up | PSNR dB | FLIP mean "
               "|\n|---:|---|---:|---:|---:|---:|\n",
               backend, width, height, frames);
-  editor::ViewSettings view;
-  view.backend = backend;
-  view.width = width;
-  view.height = height;
-  view.threads = o.threads;
-  editor::EditorSession session(fs::path(o.source_dir) / "samples/scenes/cornell_box.json", view);
+  editor::EditorSession session = cornell_session(backend);
   double full_ms = 0.0;
   std::optional<Framebuffer> full;
   for (const float scale : {1.0f, 0.75f, 0.5f, 0.4375f, 0.34375f, 0.25f}) {
