@@ -119,8 +119,8 @@ public:
   virtual void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded) const = 0;
   /// occluded() for a coherent batch: rays of one tile in order, from nearby points towards the
   /// same lights (the shadow rays of a tile's primary hits). A backend may trace it in packets; the
-  /// answers are occluded()'s (up to the rounding of a ray that grazes an edge, tested in
-  /// tests/accel). Incoherent batches (path-traced bounces) must use occluded(): packets lose there.
+  /// answers are occluded()'s (Conformance.CoherentOcclusionAnswersAsOccludedDoes, every
+  /// backend). Incoherent batches (path-traced bounces) should use occluded(): packets lose there.
   virtual void occluded_coherent(std::span<const Ray> rays,
                                  std::span<std::uint8_t> occluded) const {
     this->occluded(rays, occluded);
