@@ -8,7 +8,10 @@
 ///   - the OBJ reader drops vertices it cannot parse ("nan", "banana", 1e39), shifting every
 ///     later index; the OFF and ASCII PLY readers desynchronise on them instead;
 ///   - the OFF reader reads '#' comment lines as data and nothing when the counts share the
-///     "OFF" line; binary PLY data is read from a fixed offset after the last header word, so
+///     "OFF" line; it reads three counts wherever they are (a missing edge count is taken from
+///     the first vertex) and a face colour only under a 'C' header (otherwise as the next face);
+///     either shifts every later number, and a -1 read as a face size asks for 4 G handles
+///     (found by fuzzing); binary PLY data is read from a fixed offset after the last header word, so
 ///     extra whitespace before "end_header" shifts every value;
 ///   - ImporterT drops faces with out-of-range indices or a repeated vertex (telling only omerr;
 ///     read_mesh still returns true), and moves non-manifold faces onto copied vertices whose
@@ -415,7 +418,13 @@ void note_face(const std::string& file, int line, std::vector<std::uint64_t>& co
 
   if (!next_line()) throw Error(file, "truncated: no vertex and face counts after the header");
   const int counts_line = line_number;
-  if (tokens.size() < 2) throw Error(file, counts_line, "expected vertex, face and edge counts");
+  // OpenMesh reads three numbers here whatever the line holds: without the edge count it takes
+  // the first vertex's x, and every later number lands one place off (a face size then read
+  // from a coordinate or a stray -1 asked it for 4 G vertex handles: fuzz-regressions/off/).
+  if (tokens.size() < 3)
+    throw Error(file, counts_line,
+                "expected vertex, face and edge counts, found " + std::to_string(tokens.size()) +
+                    " number(s) (the edge count may be 0, but it must be there)");
   const std::optional<std::int64_t> vertex_count = parse_integer(tokens[0]);
   const std::optional<std::int64_t> face_count = parse_integer(tokens[1]);
   if (!vertex_count || !face_count || *vertex_count < 0 || *face_count < 0)
@@ -463,6 +472,13 @@ void note_face(const std::string& file, int line, std::vector<std::uint64_t>& co
       throw Error(file, line_number,
                   "face declares " + std::to_string(*n) + " vertices but lists " +
                       std::to_string(tokens.size() - 1));
+    // OpenMesh reads what follows a face's indices (a face colour) only under a 'C' header;
+    // otherwise it reads those numbers as the next face (a -1 there asked it for 4 G handles).
+    if (!has_colors && static_cast<std::uint64_t>(*n) < tokens.size() - 1)
+      throw Error(file, line_number,
+                  "numbers after the face's " + std::to_string(*n) +
+                      " indices (a face colour?) need a 'COFF' header: without it they would be "
+                      "read as the next face");
     corners.clear();
     for (std::size_t k = 1; k <= static_cast<std::size_t>(*n); ++k) {
       const std::optional<std::int64_t> index = parse_integer(tokens[k]);

@@ -234,6 +234,8 @@ INSTANTIATE_TEST_SUITE_P(
         BadFile{"absurd_count_binary.off", "more than the limit"},
         BadFile{"no_faces.obj", "no faces"}, BadFile{"cube.xyz", "extension"},
         BadFile{"degenerate_only.obj", "degenerate"}, BadFile{"comment.off", "comment"},
+        BadFile{"missing_edge_count.off", "edge count"},
+        BadFile{"face_colour_without_coff.off", "need a 'COFF' header"},
         BadFile{"bad_version.ply", "format"}, BadFile{"negative_list_length.ply", "negative"},
         BadFile{"end_header_whitespace.ply", "whitespace"},
         BadFile{"float_overflow.obj", "float range"}, BadFile{"nan_vertex_binary.stl", "NaN"},
