@@ -16,7 +16,8 @@
 # function names, enough for backtraces; full -g made the test files ~70% slower to compile) and all
 # three link with lld; the asan preset's brute-force tests trace a quarter of the rays, and it
 # skips the install test (label "install": packaging, checked by the other two presets). Measured
-# on a clean clone here: 43.8 min with 30 s of fuzzing (2026-11-24).
+# on a clean clone here: 43.8 min with 30 s of fuzzing (2026-11-24); 26.2 min on 2026-11-25 (same
+# tree size, a faster machine that day: the time varies with the machine lent).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/deps.sh
