@@ -68,7 +68,6 @@ namespace {
 
 void check_imgui(VkResult r) { gpu::check(r, "Dear ImGui's Vulkan backend"); }
 
-
 } // namespace
 
 Canvas::Canvas(gpu::Context& context, bool ui, VkFormat format)

@@ -11,8 +11,8 @@
 ///     "OFF" line; it reads three counts wherever they are (a missing edge count is taken from
 ///     the first vertex) and a face colour only under a 'C' header (otherwise as the next face);
 ///     either shifts every later number, and a -1 read as a face size asks for 4 G handles
-///     (found by fuzzing); binary PLY data is read from a fixed offset after the last header word, so
-///     extra whitespace before "end_header" shifts every value;
+///     (found by fuzzing); binary PLY data is read from a fixed offset after the last header
+///     word, so extra whitespace before "end_header" shifts every value;
 ///   - ImporterT drops faces with out-of-range indices or a repeated vertex (telling only omerr;
 ///     read_mesh still returns true), and moves non-manifold faces onto copied vertices whose
 ///     normals and texture coordinates stay uninitialised;

@@ -277,7 +277,8 @@ std::vector<Ray> coherent_shadow_rays() {
     for (int x = 0; x < 41; ++x) {
       const vec3 p(-5.0f + 10.0f * float(x) / 40.0f, 1e-3f, -5.0f + 10.0f * float(y) / 36.0f);
       std::vector<vec3> targets{vec3(0.5f, 6.0f, 0.0f)};
-      for (int k = 0; k < 4; ++k) targets.emplace_back(-1.0f + 2.0f * u(rng), 5.0f, -1.0f + 2.0f * u(rng));
+      for (int k = 0; k < 4; ++k)
+        targets.emplace_back(-1.0f + 2.0f * u(rng), 5.0f, -1.0f + 2.0f * u(rng));
       for (const vec3& q : targets) {
         const float d = glm::length(q - p);
         rays.push_back(Ray{p, 0.0f, (q - p) / d, d * (1.0f - 1e-5f)});

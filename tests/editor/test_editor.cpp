@@ -317,10 +317,12 @@ TEST(EditorSession, DraggingAStaticEntityRebuildsTheStaticStructureTwicePerGestu
   EXPECT_EQ(s.undo_depth(), depth0 + 1);
   EXPECT_NEAR(s.registry().get<Transform>(block).translation.x - block0.x, 0.75, 1e-5);
 
-  // The frame is the one a session that set the same position in a single edit renders.
+  // The frame is the one a fresh session renders with the block placed there before its first
+  // frame (static all along).
   EditorSession fresh(kScenes / "cornell_box.json", small_view(32, 24));
   const ecs::Entity twin = named(fresh, "tall block");
-  fresh.registry().get<Transform>(twin).translation = s.registry().get<Transform>(block).translation;
+  const dvec3 moved = s.registry().get<Transform>(block).translation;
+  fresh.registry().get<Transform>(twin).translation = moved;
   fresh.tick();
   EXPECT_TRUE(s.frame() == fresh.frame());
 

@@ -40,7 +40,7 @@ public:
   [[nodiscard]] const TracerUpdateStats& last_update() const override { return last_; }
   void intersect(std::span<const Ray> rays, std::span<Hit> hits) const override;
   void occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded) const override;
-  /// Packets of 8 rays (rtcOccluded8, coherent context) against the static scene when it is the
+  /// Packets of 16 rays (rtcOccluded16, coherent context) against the static scene when it is the
   /// whole scene (no dynamic instance in the top level); occluded() otherwise. Embree 3.13.5's
   /// packet occlusion through an instance, the top level's static instance included, can loop
   /// forever on an ordinary ray (a Cornell-box shadow ray; rtcOccluded1M with the coherent flag
