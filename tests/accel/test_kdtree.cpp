@@ -356,9 +356,12 @@ TEST(KdTree, StructuralInvariants) {
       const gpu::KdNode n = tree.nodes()[node];
       max_depth = std::max(max_depth, depth);
       if ((n.bits & 3u) != gpu::kKdLeaf) {
+        // A split lies in the box; on one of its faces only to cut off the triangles lying in
+        // that face into a flat cell, which needs an axis the box has extent on.
         const int axis = int(n.bits & 3u);
-        EXPECT_GT(n.split, box.min[axis]) << mesh.name << " node " << node;
-        EXPECT_LT(n.split, box.max[axis]) << mesh.name << " node " << node;
+        EXPECT_GE(n.split, box.min[axis]) << mesh.name << " node " << node;
+        EXPECT_LE(n.split, box.max[axis]) << mesh.name << " node " << node;
+        EXPECT_LT(box.min[axis], box.max[axis]) << mesh.name << " node " << node;
         return;
       }
       ++leaves;
@@ -401,6 +404,37 @@ TEST(KdTree, StructuralInvariants) {
       }
     }
   }
+}
+
+// A floor that is the bottom face of the scene's box (a ground plane, a Cornell box's walls): the
+// only planes that cut it off from the space above lie in that face, so the sweep must consider
+// them. Without them every cell along the floor, however tall, keeps the floor's triangles and a
+// ray crossing those cells tests them again and again.
+TEST(KdTree, TrianglesLyingInAFaceOfTheBoxGetAFlatCell) {
+  Mesh scene = test::flat_grid(16, 16, -8.0f, 8.0f, 0.0f); // the floor: z = 0, 512 triangles
+  const auto floor_triangles = std::uint32_t(scene.triangles.size());
+  const Mesh ball = uv_sphere(12, 24, 1.0f, vec3(0.0f, 0.0f, 2.0f)); // z in [1, 3]
+  const auto base = std::uint32_t(scene.positions.size());
+  scene.positions.insert(scene.positions.end(), ball.positions.begin(), ball.positions.end());
+  for (const uvec3& t : ball.triangles) scene.triangles.push_back(t + uvec3(base));
+  scene.name = "floor and ball";
+  KdTree tree;
+  tree.build(scene.view());
+  ASSERT_EQ(tree.bounds().min.z, 0.0f);
+  std::uint32_t floor_references = 0, raised = 0;
+  walk(tree, [&](std::uint32_t node, const Aabb& box, std::uint32_t) {
+    const gpu::KdNode n = tree.nodes()[node];
+    if ((n.bits & 3u) != gpu::kKdLeaf) return;
+    for (std::uint32_t k = 0; k < (n.bits >> 2); ++k) {
+      if (tree.indices()[n.first + k] >= floor_triangles) continue;
+      ++floor_references;
+      if (box.max.z > 0.0f) ++raised;
+    }
+  });
+  EXPECT_GE(floor_references, floor_triangles);
+  EXPECT_EQ(raised, 0u) << "floor triangles referenced by cells that rise above the floor";
+  // And rays still find the floor and the ball as brute force does.
+  check_against_brute_force<TriangleTest::watertight>(scene, make_rays(scene.bounds(), 4000, 41));
 }
 
 TEST(KdTree, BuildIsDeterministicForAnyThreadCount) {

@@ -291,8 +291,9 @@ private:
     return (n_below == 0 || n_above == 0) ? options_.empty_bonus * cost : cost;
   }
 
-  /// The sweep of Wald & Havran §5.1 over one axis's sorted events: the best plane strictly inside
-  /// the box (a plane on the boundary cuts nothing off).
+  /// The sweep of Wald & Havran §5.1 over one axis's sorted events: the best plane inside the box,
+  /// or in one of its faces when triangles lie in that face (they go to a flat cell; a face plane
+  /// cuts nothing else off).
   [[nodiscard]] Split sweep(const NodeInput& in, int axis, std::size_t n) const {
     Split best;
     const vec3 extent = in.box.extent();
@@ -316,13 +317,20 @@ private:
       } while (i < m && e[i].pos == p);
       const std::int32_t ending = count[kEnd], planar = count[kPlanar], starting = count[kStart];
       n_above -= planar + ending;
+      const float p_below = (cap + (p - lo) * perimeter) * inv_area;
+      const float p_above = (cap + (hi - p) * perimeter) * inv_area;
       if (p > lo && p < hi) {
-        const float p_below = (cap + (p - lo) * perimeter) * inv_area;
-        const float p_above = (cap + (hi - p) * perimeter) * inv_area;
         const float cost_below = sah(p_below, p_above, n_below + planar, n_above);
         const float cost_above = sah(p_below, p_above, n_below, n_above + planar);
         if (cost_below < best.cost) best = {cost_below, axis, p, true};
         if (cost_above < best.cost) best = {cost_above, axis, p, false};
+      } else if (planar > 0) {
+        // Triangles lying in a face of the box (a floor, a wall) split off into a flat cell of
+        // their own; otherwise every cell along that face keeps them.
+        const bool at_lo = p == lo;
+        const float cost = at_lo ? sah(p_below, p_above, planar, n_above)
+                                 : sah(p_below, p_above, n_below, planar);
+        if (cost < best.cost) best = {cost, axis, p, at_lo};
       }
       n_below += starting + planar;
     }
