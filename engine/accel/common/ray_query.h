@@ -168,7 +168,7 @@ struct TriangleHit {
 }
 
 template <TriangleTest Test>
-[[nodiscard]] inline bool intersect_triangle(const PreparedRay& r, const vec3& p0, const vec3& p1,
+[[nodiscard, gnu::always_inline]] inline bool intersect_triangle(const PreparedRay& r, const vec3& p0, const vec3& p1,
                                              const vec3& p2, float tmax, float& t, float& u,
                                              float& v) {
   if constexpr (Test == TriangleTest::watertight)

@@ -44,23 +44,33 @@ constexpr std::size_t kParallelAxes = 16384;
 // Event types in sweep order at equal positions (Wald & Havran §5.1: end < planar < start).
 enum : std::uint32_t { kEnd = 0, kPlanar = 1, kStart = 2 };
 
-/// One event: a triangle's clipped extent starts, ends or lies flat at `pos` on the list's axis.
-/// `key` packs the type above the node-local triangle index, so (pos, key) is a total order that
-/// sorts by position, then type, then triangle: any sort gives the same list.
+/// A position as an unsigned key in the same order (IEEE bits with the sign folded in; -0 is made
+/// +0 first, so equal positions have equal keys).
+[[nodiscard]] inline std::uint32_t ordered_key(float pos) {
+  const auto u = std::bit_cast<std::uint32_t>(pos + 0.0f);
+  return u ^ ((u >> 31) != 0 ? 0xFFFFFFFFu : 0x80000000u);
+}
+[[nodiscard]] inline float from_ordered_key(std::uint32_t k) {
+  return std::bit_cast<float>(k ^ ((k >> 31) != 0 ? 0x80000000u : 0xFFFFFFFFu));
+}
+
+/// One event: a triangle's clipped extent starts, ends or lies flat at a position on the list's
+/// axis. One 64-bit word: the position's ordered key, then the type, then the node-local triangle
+/// index, so a plain integer comparison sorts by position, then type, then triangle (a total
+/// order: any sort gives the same list).
 struct Event {
-  float pos;
-  std::uint32_t key;
-  [[nodiscard]] std::uint32_t type() const { return key >> 30; }
-  [[nodiscard]] std::uint32_t local() const { return key & (kMaxTriangles - 1); }
+  std::uint64_t bits;
+  [[nodiscard]] std::uint32_t pos_key() const { return std::uint32_t(bits >> 32); }
+  [[nodiscard]] float pos() const { return from_ordered_key(pos_key()); }
+  [[nodiscard]] std::uint32_t type() const { return std::uint32_t(bits >> 30) & 3u; }
+  [[nodiscard]] std::uint32_t local() const { return std::uint32_t(bits) & (kMaxTriangles - 1); }
 };
 static_assert(sizeof(Event) == 8);
 
-[[nodiscard]] inline bool operator<(const Event& a, const Event& b) {
-  return a.pos < b.pos || (a.pos == b.pos && a.key < b.key);
-}
+[[nodiscard]] inline bool operator<(const Event& a, const Event& b) { return a.bits < b.bits; }
 
 [[nodiscard]] inline Event make_event(float pos, std::uint32_t type, std::uint32_t local) {
-  return Event{pos, (type << 30) | local};
+  return Event{(std::uint64_t(ordered_key(pos)) << 32) | (type << 30) | local};
 }
 
 /// A node's event list on one axis: a fixed buffer, sized once and never value-initialised (the
@@ -309,12 +319,13 @@ private:
     std::int32_t n_below = 0, n_above = std::int32_t(n);
     for (std::size_t i = 0; i < m;) {
       // The events at one position, counted by type (the list is sorted end < planar < start).
-      const float p = e[i].pos;
+      const std::uint32_t pk = e[i].pos_key();
+      const float p = from_ordered_key(pk);
       std::int32_t count[3] = {0, 0, 0};
       do {
         ++count[e[i].type()];
         ++i;
-      } while (i < m && e[i].pos == p);
+      } while (i < m && e[i].pos_key() == pk);
       const std::int32_t ending = count[kEnd], planar = count[kPlanar], starting = count[kStart];
       n_above -= planar + ending;
       const float p_below = (cap + (p - lo) * perimeter) * inv_area;
@@ -364,13 +375,14 @@ private:
     std::vector<std::uint8_t>& side = scratch.side;
     side.assign(n, kBoth);
     {
-      const float sp = split.pos;
+      const std::uint32_t sp = ordered_key(split.pos);
       const bool pb = split.planar_below;
       for (const Event& e : in.events[axis]) {
         const std::uint32_t type = e.type();
-        const bool planar_below = e.pos < sp || (e.pos == sp && pb);
-        const bool is_below = (type == kEnd && e.pos <= sp) || (type == kPlanar && planar_below);
-        const bool is_above = (type == kStart && e.pos >= sp) || (type == kPlanar && !planar_below);
+        const std::uint32_t ep = e.pos_key();
+        const bool planar_below = ep < sp || (ep == sp && pb);
+        const bool is_below = (type == kEnd && ep <= sp) || (type == kPlanar && planar_below);
+        const bool is_above = (type == kStart && ep >= sp) || (type == kPlanar && !planar_below);
         side[e.local()] |= std::uint8_t(std::uint32_t(is_below) | (std::uint32_t(is_above) << 1));
       }
     }
@@ -464,7 +476,7 @@ private:
       for (const Event& e : events) {
         const std::uint32_t l = e.local();
         const std::uint8_t s = sd[l];
-        const Event moved{e.pos, (e.key & ~(kMaxTriangles - 1)) | rm[l]};
+        const Event moved{(e.bits & ~std::uint64_t(kMaxTriangles - 1)) | rm[l]};
         ob[ib] = moved;
         oa[ia] = moved;
         ib += s == kBelowOnly;
@@ -590,23 +602,25 @@ bool KdTree::traverse(PreparedRay& r, TriangleHit* hit) const {
     const gpu::KdNode n = nodes[node];
     const std::uint32_t axis = n.bits & 3u;
     if (axis != gpu::kKdLeaf) {
-      const float o = r.org[int(axis)];
-      const float t_split = (n.split - o) * r.inv_dir[int(axis)];
-      // The child on the origin's side comes first; a ray in the plane goes below first, like
-      // its direction's sign would have it (pbrt).
-      const bool below_first = o < n.split || (o == n.split && r.dir[int(axis)] <= 0.0f);
-      const std::uint32_t first = below_first ? node + 1 : n.bits >> 2;
-      const std::uint32_t second = below_first ? n.bits >> 2 : node + 1;
-      if (std::isnan(t_split)) { // a ray in the plane, parallel to it: both, conservatively
-        stack[sp++] = {second, tmin, tmax};
-        node = first;
-      } else if (t_split <= 0.0f || t_split > tmax * kUp) {
-        node = first;
-      } else if (t_split < tmin * kDown) {
-        node = second;
+      const float t_split = (n.split - r.org[int(axis)]) * r.inv_dir[int(axis)];
+      // The near child is the one the direction comes from. A plane at or behind the origin
+      // leaves only the far child (the origin is past it, or on it and moving away); one beyond
+      // the interval only the near child. -0 and +0 directions give ∓inf here and fall in the
+      // right case; a ray lying in the plane, parallel to it (NaN), visits both over its whole
+      // interval.
+      const std::uint32_t above = n.bits >> 2;
+      const std::uint32_t near = r.neg[axis] != 0 ? above : node + 1;
+      const std::uint32_t far = r.neg[axis] != 0 ? node + 1 : above;
+      if (t_split > tmax * kUp) {
+        node = near;
+      } else if (t_split <= 0.0f || t_split < tmin * kDown) {
+        node = far;
+      } else if (std::isnan(t_split)) [[unlikely]] {
+        stack[sp++] = {far, tmin, tmax};
+        node = near;
       } else {
-        stack[sp++] = {second, t_split, tmax};
-        node = first;
+        stack[sp++] = {far, t_split, tmax};
+        node = near;
         tmax = t_split;
       }
       continue;
@@ -615,10 +629,11 @@ bool KdTree::traverse(PreparedRay& r, TriangleHit* hit) const {
     const std::uint32_t count = n.bits >> 2;
     const std::uint32_t* ids = indices_.data() + n.first;
     for (std::uint32_t k = 0; k < count; ++k) {
+      const std::uint32_t id = ids[k];
       if constexpr (AnyHit) {
-        if (intersect_any<Test>(r, tris_, ids[k])) return true;
+        if (intersect_any<Test>(r, tris_, id)) return true;
       } else {
-        if (intersect_closest<Test>(r, tris_, ids[k], *hit)) found = true;
+        if (intersect_closest<Test>(r, tris_, id, *hit)) found = true;
       }
     }
     // The nearest pending cell that the ray (shortened by its hits) still reaches. A hit found
