@@ -1,5 +1,6 @@
 #include "specula/accel/bvh/bvh.h"
 
+#include "specula/accel/common/simd_lanes.h"
 #include "specula/core/assert.h"
 
 #include <tbb/parallel_invoke.h>
@@ -327,6 +328,16 @@ struct ChildHits {
   float entry[2];
 };
 
+/// All ones in the lanes whose bit is set in `mask`.
+inline __m128i lane_bits_sse(std::uint32_t mask) {
+  const __m128i bit = _mm_setr_epi32(1, 2, 4, 8);
+  return _mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(int(mask)), bit), bit);
+}
+__attribute__((target("avx2"))) inline __m256i lane_bits_avx2(std::uint32_t mask) {
+  const __m256i bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+  return _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(int(mask)), bit), bit);
+}
+
 // The two children of a node against a packet: intersect_box lane by lane (the same operations,
 // max/min keep the current bound on NaN as the scalar test does).
 ChildHits box2_sse(const PacketData<4>& p, const BvhNode* c, std::uint32_t mask) {
@@ -346,14 +357,15 @@ ChildHits box2_sse(const PacketData<4>& p, const BvhNode* c, std::uint32_t mask)
       t0 = _mm_max_ps(tn, t0);
       t1 = _mm_min_ps(tf, t1);
     }
-    const std::uint32_t m = std::uint32_t(_mm_movemask_ps(_mm_cmple_ps(t0, t1))) & mask;
-    alignas(16) float e[4];
-    _mm_store_ps(e, t0);
-    float entry = kInf;
-    for (int i = 0; i < 4; ++i)
-      if (m & (1u << i)) entry = std::min(entry, e[i]);
+    const __m128 hit = _mm_cmple_ps(t0, t1);
+    const std::uint32_t m = std::uint32_t(_mm_movemask_ps(hit)) & mask;
+    // The nearest entry over the lanes that hit (+inf elsewhere), by two shuffles.
+    const __m128 live = _mm_and_ps(hit, _mm_castsi128_ps(lane_bits_sse(mask)));
+    __m128 e = _mm_or_ps(_mm_and_ps(live, t0), _mm_andnot_ps(live, _mm_set1_ps(kInf)));
+    e = _mm_min_ps(e, _mm_shuffle_ps(e, e, _MM_SHUFFLE(2, 3, 0, 1)));
+    e = _mm_min_ps(e, _mm_shuffle_ps(e, e, _MM_SHUFFLE(1, 0, 3, 2)));
     out.mask[k] = m;
-    out.entry[k] = entry;
+    out.entry[k] = m != 0 ? _mm_cvtss_f32(e) : kInf;
   }
   return out;
 }
@@ -377,27 +389,66 @@ __attribute__((target("avx2,fma"))) ChildHits box2_avx2(const PacketData<8>& p, 
       t0 = _mm256_max_ps(tn, t0);
       t1 = _mm256_min_ps(tf, t1);
     }
-    const std::uint32_t m =
-        std::uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(t0, t1, _CMP_LE_OQ))) & mask;
-    alignas(32) float e[8];
-    _mm256_store_ps(e, t0);
-    float entry = kInf;
-    for (int i = 0; i < 8; ++i)
-      if (m & (1u << i)) entry = std::min(entry, e[i]);
+    const __m256 hit = _mm256_cmp_ps(t0, t1, _CMP_LE_OQ);
+    const std::uint32_t m = std::uint32_t(_mm256_movemask_ps(hit)) & mask;
+    // The nearest entry over the lanes that hit (+inf elsewhere): halves, then two shuffles.
+    const __m256 live = _mm256_and_ps(hit, _mm256_castsi256_ps(lane_bits_avx2(mask)));
+    const __m256 e8 = _mm256_blendv_ps(_mm256_set1_ps(kInf), t0, live);
+    __m128 e = _mm_min_ps(_mm256_castps256_ps128(e8), _mm256_extractf128_ps(e8, 1));
+    e = _mm_min_ps(e, _mm_shuffle_ps(e, e, _MM_SHUFFLE(2, 3, 0, 1)));
+    e = _mm_min_ps(e, _mm_shuffle_ps(e, e, _MM_SHUFFLE(1, 0, 3, 2)));
     out.mask[k] = m;
-    out.entry[k] = entry;
+    out.entry[k] = m != 0 ? _mm_cvtss_f32(e) : kInf;
   }
   return out;
 }
 
+/// The farthest tfar over the lanes in `mask` (-inf for none).
+__attribute__((target("avx2"))) float reach_avx2(const PacketData<8>& p, std::uint32_t mask) {
+  const __m256 r8 = _mm256_blendv_ps(_mm256_set1_ps(-kInf), _mm256_load_ps(p.tfar),
+                                     _mm256_castsi256_ps(lane_bits_avx2(mask)));
+  __m128 r = _mm_max_ps(_mm256_castps256_ps128(r8), _mm256_extractf128_ps(r8, 1));
+  r = _mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(2, 3, 0, 1)));
+  r = _mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(1, 0, 3, 2)));
+  return _mm_cvtss_f32(r);
+}
+
+/// The vector operations of one packet width: the two children's boxes, and a leaf's triangles
+/// against the lanes (simd_lanes.h; used when the lanes share their ray space).
 struct BoxTestSse {
+  using Lanes = simd_sse::WatertightLanes;
   ChildHits operator()(const PacketData<4>& p, const BvhNode* c, std::uint32_t mask) const {
     return box2_sse(p, c, mask);
   }
+  /// The farthest tfar over the lanes in `mask` (-inf for none).
+  static float reach(const PacketData<4>& p, std::uint32_t mask) {
+    const __m128 live = _mm_castsi128_ps(lane_bits_sse(mask));
+    __m128 r = _mm_or_ps(_mm_and_ps(live, _mm_load_ps(p.tfar)),
+                         _mm_andnot_ps(live, _mm_set1_ps(-kInf)));
+    r = _mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(2, 3, 0, 1)));
+    r = _mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(1, 0, 3, 2)));
+    return _mm_cvtss_f32(r);
+  }
+  static bool make_lanes(const PreparedRay* rays, unsigned mask, Lanes& w) {
+    return simd_sse::make_watertight_lanes(rays, mask, w);
+  }
+  static void leaf(const Lanes& w, PreparedRay* rays, TriangleHit* hits, unsigned mask,
+                   const TriangleView& tris, const std::uint32_t* ids, std::uint32_t count) {
+    simd_sse::intersect_leaf_lanes(w, rays, hits, mask, tris, ids, count);
+  }
 };
 struct BoxTestAvx2 {
+  using Lanes = simd_avx2::WatertightLanes;
   ChildHits operator()(const PacketData<8>& p, const BvhNode* c, std::uint32_t mask) const {
     return box2_avx2(p, c, mask);
+  }
+  static float reach(const PacketData<8>& p, std::uint32_t mask) { return reach_avx2(p, mask); }
+  static bool make_lanes(const PreparedRay* rays, unsigned mask, Lanes& w) {
+    return simd_avx2::make_watertight_lanes(rays, mask, w);
+  }
+  static void leaf(const Lanes& w, PreparedRay* rays, TriangleHit* hits, unsigned mask,
+                   const TriangleView& tris, const std::uint32_t* ids, std::uint32_t count) {
+    simd_avx2::intersect_leaf_lanes(w, rays, hits, mask, tris, ids, count);
   }
 };
 
@@ -842,7 +893,7 @@ void Bvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool a
   PacketData<N> p;
   PreparedRay lane[N];
   TriangleHit lane_hit[N];
-  std::uint32_t mask = 0, found = 0;
+  std::uint32_t mask = 0;
   for (int i = 0; i < N; ++i) {
     lane[i] = PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
                                 vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i], rays.tfar[i]);
@@ -856,6 +907,10 @@ void Bvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool a
     p.tfar[i] = lane[i].tfar;
   }
   if (mask == 0) return;
+  // Leaves test a triangle against all lanes at once when the lanes share their ray space.
+  typename BoxTest::Lanes lanes;
+  const bool simd_leaves =
+      Test == TriangleTest::watertight && BoxTest::make_lanes(lane, mask, lanes);
 
   struct Entry {
     std::uint32_t node, mask;
@@ -866,9 +921,8 @@ void Bvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool a
   stack[top++] = {0, mask, -kInf};
   while (top > 0) {
     const Entry e = stack[--top];
-    float reach = -kInf; // the farthest any of its lanes can still go
-    for (std::uint32_t m = e.mask; m; m &= m - 1) reach = std::max(reach, p.tfar[__builtin_ctz(m)]);
-    if (e.t_enter > reach) continue;
+    // The farthest any of its lanes can still go.
+    if (e.t_enter > BoxTest::reach(p, e.mask)) continue;
     std::uint32_t node = e.node, m = e.mask;
     for (;;) {
       std::uint32_t count = load_count(node);
@@ -891,18 +945,22 @@ void Bvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool a
         }
         break;
       }
-      // Leaf: scalar triangle tests lane by lane.
+      if (simd_leaves) {
+        BoxTest::leaf(lanes, lane, lane_hit, m, tris_, &indices_[index], count);
+        for (; m; m &= m - 1) p.tfar[__builtin_ctz(m)] = lane[__builtin_ctz(m)].tfar;
+        break;
+      }
+      // Otherwise scalar triangle tests lane by lane.
       for (; m; m &= m - 1) {
         const int i = __builtin_ctz(m);
-        for (std::uint32_t k = index; k < index + count; ++k)
-          if (intersect_closest<Test>(lane[i], tris_, indices_[k], lane_hit[i])) found |= 1u << i;
+        intersect_leaf<Test>(lane[i], tris_, &indices_[index], count, lane_hit[i]);
         p.tfar[i] = lane[i].tfar;
       }
       break;
     }
   }
   for (int i = 0; i < N; ++i) {
-    if (!(found & (1u << i))) continue;
+    if (!lane_hit[i].hit()) continue;
     rays.tfar[i] = lane[i].tfar;
     hits.set(i, lane_hit[i]);
   }
