@@ -58,4 +58,22 @@ private:
 [[nodiscard]] Framebuffer resample_nearest(const Framebuffer& image, std::uint32_t width,
                                            std::uint32_t height);
 
+/// Linear resampling on one axis: destination index i's centre falls between source samples
+/// `lo` and `hi` (equal at the borders, which clamp), `weight` of the way to `hi`.
+struct LinearTaps {
+  std::uint32_t lo = 0, hi = 0;
+  float weight = 0.0f;
+};
+[[nodiscard]] LinearTaps linear_source(std::uint64_t i, std::uint64_t dst, std::uint64_t src);
+
+/// a + (b - a)·w with w = 0 giving a exactly (whatever b holds).
+[[nodiscard]] inline vec3 lerp_taps(const vec3& a, const vec3& b, float w) {
+  return w == 0.0f ? a : (1.0f - w) * a + w * b;
+}
+
+/// `image` resampled to width × height by linear_source on each axis (bilinear, in linear
+/// colour; the same size gives the image back bit for bit).
+[[nodiscard]] Framebuffer resample_bilinear(const Framebuffer& image, std::uint32_t width,
+                                            std::uint32_t height);
+
 } // namespace specula

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <stdexcept>
 #include <utility>
+#include <vector>
 
 namespace specula::present {
 
@@ -31,12 +32,21 @@ void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint3
   const std::uint64_t ox = (width - dw) / 2, oy = (height - dh) / 2;
   const auto pixels = frame.pixels();
   const std::size_t r = bgra ? 2 : 0, b = bgra ? 0 : 2;
+  // A frame drawn larger than it is (dynamic resolution) is scaled up bilinearly, in linear
+  // colour; one drawn at its size or smaller takes the source pixel under each destination
+  // pixel's centre (nearest neighbour, in integers: at the same size, the frame itself).
+  const bool bilinear = dw >= fw && dh >= fh && (dw > fw || dh > fh);
+  std::vector<LinearTaps> columns;
+  if (bilinear) {
+    columns.resize(dw);
+    for (std::uint64_t x = 0; x < dw; ++x) columns[x] = linear_source(x, dw, fw);
+  }
   tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, height), [&](const auto& rows) {
     for (std::uint32_t y = rows.begin(); y != rows.end(); ++y) {
       std::uint8_t* row = out.data() + std::size_t(y) * width * 4;
       const bool inside_y = y >= oy && y < oy + dh;
-      // Nearest neighbour: the source pixel under the destination pixel's centre, in integers.
-      const std::uint64_t sy = inside_y ? nearest_source(y - oy, dh, fh) : 0;
+      const std::uint64_t sy = inside_y && !bilinear ? nearest_source(y - oy, dh, fh) : 0;
+      const LinearTaps ty = inside_y && bilinear ? linear_source(y - oy, dh, fh) : LinearTaps{};
       for (std::uint32_t x = 0; x < width; ++x) {
         std::uint8_t* p = row + std::size_t(x) * 4;
         if (!inside_y || x < ox || x >= ox + dw) {
@@ -44,8 +54,16 @@ void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint3
           p[3] = 255;
           continue;
         }
-        const std::uint64_t sx = nearest_source(x - ox, dw, fw);
-        const vec3& c = pixels[std::size_t(sy * fw + sx)];
+        vec3 c;
+        if (bilinear) {
+          const LinearTaps& tx = columns[x - ox];
+          const vec3* lo = &pixels[std::size_t(ty.lo) * fw];
+          const vec3* hi = &pixels[std::size_t(ty.hi) * fw];
+          c = lerp_taps(lerp_taps(lo[tx.lo], lo[tx.hi], tx.weight),
+                        lerp_taps(hi[tx.lo], hi[tx.hi], tx.weight), ty.weight);
+        } else {
+          c = pixels[std::size_t(sy * fw + nearest_source(x - ox, dw, fw))];
+        }
         p[r] = specula::encode_srgb8(c.r);
         p[1] = specula::encode_srgb8(c.g);
         p[b] = specula::encode_srgb8(c.b);

@@ -108,7 +108,8 @@ public:
 };
 
 /// The CPU encoding present() applies, for comparing: clamp to [0, 1], sRGB, 8 bits, alpha 255;
-/// nearest-neighbour scaling with letterboxing into width × height (black bars).
+/// scaled to fit width × height with letterboxing (black bars): bilinear (in linear colour) when
+/// the frame is drawn larger than it is, nearest neighbour otherwise.
 Rgba8Image encode_srgb8(const Framebuffer& frame, std::uint32_t width, std::uint32_t height);
 
 } // namespace specula::present

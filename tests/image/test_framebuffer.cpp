@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include <cmath>
 #include <limits>
 
@@ -84,6 +86,31 @@ TEST(ResampleNearest, SameSizeIsTheImageDoublingMakesBlocksHalvingTakesCentres) 
   EXPECT_EQ(odd.at(6, 4), img.at(2, 1));
   EXPECT_EQ(odd.at(0, 0), img.at(0, 0));
   EXPECT_EQ(nearest_source(0, 1, 5), 2u) << "one sample takes the centre";
+}
+
+TEST(ResampleBilinear, SameSizeIsTheImageAndARampStaysARamp) {
+  Framebuffer img(3, 2);
+  for (std::uint32_t y = 0; y < 2; ++y)
+    for (std::uint32_t x = 0; x < 3; ++x) img.at(x, y) = vec3(float(x), float(y), 1.0f);
+  EXPECT_TRUE(resample_bilinear(img, 3, 2) == img);
+  // Doubling: destination centres at source x = (i + ½)/2 − ½, clamped to [0, 2]; the values of
+  // a linear ramp are those positions themselves.
+  const Framebuffer big = resample_bilinear(img, 6, 4);
+  const float want_x[6] = {0.0f, 0.25f, 0.75f, 1.25f, 1.75f, 2.0f};
+  const float want_y[4] = {0.0f, 0.25f, 0.75f, 1.0f};
+  for (std::uint32_t y = 0; y < 4; ++y)
+    for (std::uint32_t x = 0; x < 6; ++x) {
+      EXPECT_FLOAT_EQ(big.at(x, y).x, want_x[x]) << x << "," << y;
+      EXPECT_FLOAT_EQ(big.at(x, y).y, want_y[y]) << x << "," << y;
+      EXPECT_EQ(big.at(x, y).z, 1.0f) << "a constant channel stays constant";
+    }
+  // A weight of 0 takes its sample alone, even beside an infinite one.
+  Framebuffer spike(2, 1);
+  spike.at(1, 0) = vec3(std::numeric_limits<float>::infinity());
+  EXPECT_EQ(resample_bilinear(spike, 2, 1).at(0, 0), vec3(0.0f));
+  const LinearTaps t = linear_source(0, 1, 5);
+  EXPECT_EQ(t.lo, 2u);
+  EXPECT_EQ(t.weight, 0.0f) << "one sample takes the centre";
 }
 
 } // namespace

@@ -4,6 +4,7 @@
 #include "../gpu/device_scenes.h"
 #include "specula/core/error.h"
 #include "specula/image/image_io.h"
+#include "specula/image/srgb.h"
 #include "specula/present/input.h"
 #include "specula/present/window.h"
 
@@ -69,29 +70,38 @@ TEST(EncodeSrgb8, AgreesWithThePngWriter) {
   EXPECT_TRUE(same_image(encode_srgb8(frame, 29, 17), encode_srgb8(png, 29, 17)));
 }
 
-TEST(EncodeSrgb8, LetterboxesWithNearestNeighbour) {
+TEST(EncodeSrgb8, LetterboxesAndScalesUpBilinearly) {
   Framebuffer frame(2, 1);
   frame.at(0, 0) = vec3(1.0f, 0.0f, 0.0f);
   frame.at(1, 0) = vec3(0.0f, 0.0f, 1.0f);
-  // 2:1 into 4×4: drawn 4×2 in rows 1 and 2, black bars above and below, each source pixel
-  // twice across.
+  // 2:1 into 4×4: drawn 4×2 in rows 1 and 2, black bars above and below. Scaled up bilinearly in
+  // linear colour: destination centres fall at source x = -0.25 (clamped to 0), 0.25, 0.75 and
+  // 1.25 (clamped to 1), so red, ¾ red + ¼ blue, ¼ red + ¾ blue, blue.
   const Rgba8Image image = encode_srgb8(frame, 4, 4);
   ASSERT_EQ(image.rgba.size(), 4u * 4u * 4u);
+  const float red_share[4] = {1.0f, 0.75f, 0.25f, 0.0f};
   for (std::uint32_t y = 0; y < 4; ++y)
     for (std::uint32_t x = 0; x < 4; ++x) {
       const std::uint8_t* p = &image.rgba[(y * 4 + x) * 4];
       const bool bar = y == 0 || y == 3;
-      const bool red = !bar && x < 2;
-      const bool blue = !bar && x >= 2;
-      EXPECT_EQ(p[0], red ? 255 : 0) << x << "," << y;
+      EXPECT_EQ(p[0], bar ? 0 : specula::encode_srgb8(red_share[x])) << x << "," << y;
       EXPECT_EQ(p[1], 0) << x << "," << y;
-      EXPECT_EQ(p[2], blue ? 255 : 0) << x << "," << y;
+      EXPECT_EQ(p[2], bar ? 0 : specula::encode_srgb8(1.0f - red_share[x])) << x << "," << y;
       EXPECT_EQ(p[3], 255) << x << "," << y;
     }
   // Taller than wide: bars left and right.
   const Rgba8Image tall = encode_srgb8(Framebuffer(1, 2, vec3(1.0f)), 4, 4);
   for (std::uint32_t x = 0; x < 4; ++x)
     EXPECT_EQ(tall.rgba[x * 4], (x == 1 || x == 2) ? 255 : 0) << x;
+}
+
+TEST(EncodeSrgb8, ScalesDownWithNearestNeighbour) {
+  // 4×1 into 2×1: each destination pixel takes the source pixel under its centre (x = 1 and 3).
+  Framebuffer frame(4, 1);
+  for (std::uint32_t x = 0; x < 4; ++x) frame.at(x, 0) = vec3(0.25f * float(x));
+  const Rgba8Image image = encode_srgb8(frame, 2, 1);
+  EXPECT_EQ(image.rgba[0], specula::encode_srgb8(0.25f));
+  EXPECT_EQ(image.rgba[4], specula::encode_srgb8(0.75f));
 }
 
 TEST(Offscreen, WithoutUiReturnsTheEncodedFrame) {
