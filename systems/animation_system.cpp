@@ -34,6 +34,7 @@ void animation_system(ecs::Registry& registry, const FrameContext& ctx) {
     const CameraPath::Key key = sample(path, path.time);
     camera.position = key.position;
     camera.look_at = key.look_at;
+    camera.up = key.up;
   });
 }
 

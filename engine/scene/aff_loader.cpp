@@ -736,8 +736,9 @@ void AffReader::transform(Lexer& lex, bool is_static, int line) {
 }
 
 /// The camera along BART's `k camera`: the translation track moves the eye, the rotation track
-/// turns the view (looking down its -Z with +Y up). Sampled exactly at every frame of `a` (or
-/// 60 per second over the keys when the file gives no frames), linear in between.
+/// turns the view and rolls it (the camera looks down its -Z, its +Y up). Sampled exactly at
+/// every frame of `a` (or 60 per second over the keys when the file gives no frames), linear in
+/// between.
 CameraPath camera_path(const Animation& a, const Camera& cam, const RenderSettings& s) {
   double t0 = 0.0, t1 = 0.0;
   std::uint64_t n = 0;
@@ -763,7 +764,12 @@ CameraPath camera_path(const Animation& a, const Camera& cam, const RenderSettin
     if (!path.keys.empty() && !(key.time > path.keys.back().time)) continue;
     key.position = a.translation.empty() ? cam.position : sample(a.translation, key.time);
     dvec3 dir = cam.look_at - cam.position;
-    if (!a.rotation.empty()) dir = distance * dvec3(sample(a.rotation, key.time) * vec3(0, 0, -1));
+    key.up = glm::normalize(cam.up);
+    if (!a.rotation.empty()) {
+      const quat q = sample(a.rotation, key.time);
+      dir = distance * dvec3(q * vec3(0, 0, -1));
+      key.up = glm::normalize(q * vec3(0, 1, 0));
+    }
     key.look_at = key.position + dir;
     path.keys.push_back(key);
   }

@@ -192,8 +192,12 @@ CameraPath::Key sample(const CameraPath& path, float t) {
                                    [](float v, const CameraPath::Key& k) { return v < k.time; });
   const auto i = static_cast<std::size_t>(std::distance(keys.begin(), it)) - 1;
   const float f = (t - keys[i].time) / (keys[i + 1].time - keys[i].time);
+  // The up vector turns from key to key (normalised linear blend: a roll of under 180° between
+  // two keys; exactly opposite ups keep the earlier one).
+  const vec3 up = glm::mix(glm::normalize(keys[i].up), glm::normalize(keys[i + 1].up), f);
   return CameraPath::Key{t, glm::mix(keys[i].position, keys[i + 1].position, double(f)),
-                         glm::mix(keys[i].look_at, keys[i + 1].look_at, double(f))};
+                         glm::mix(keys[i].look_at, keys[i + 1].look_at, double(f)),
+                         glm::length(up) > 1e-6f ? glm::normalize(up) : keys[i].up};
 }
 
 void validate_animation(const Animation& a, std::size_t vertex_count, const std::string& context,
@@ -249,6 +253,11 @@ void validate_camera_path(const CameraPath& path, const std::string& context,
       throw Error(context, at, "key times must be strictly increasing");
     if (glm::length(k.position - k.look_at) <= 0.0f)
       throw Error(context, at, "position and look_at must differ");
+    if (!is_finite(k.up) || !(glm::length(k.up) > 0.0f))
+      throw Error(context, at, "up must be finite and not zero");
+    const vec3 forward(glm::normalize(k.look_at - k.position));
+    if (glm::length(glm::cross(forward, glm::normalize(k.up))) <= 1e-4f)
+      throw Error(context, at, "up is parallel to the view direction, so the camera roll is undefined");
   }
 }
 

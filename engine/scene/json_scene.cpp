@@ -460,7 +460,9 @@ Camera read_camera(const Reader& r, const json& j, const std::string& path,
   return c;
 }
 
-CameraPath read_camera_path(const Reader& r, const json& j, const std::string& path) {
+/// `default_up`: the camera's own up, for keys that give none.
+CameraPath read_camera_path(const Reader& r, const json& j, const std::string& path,
+                            const vec3& default_up) {
   CameraPath p;
   const Object o(r, j, path, {"loop", "time", "keys"}, "camera path");
   if (const json* v = o.find("loop")) p.loop = read_bool(r, *v, o.path("loop"));
@@ -468,11 +470,16 @@ CameraPath read_camera_path(const Reader& r, const json& j, const std::string& p
   const json& keys = read_array(r, o.require("keys"), o.path("keys"), "camera path keys");
   for (std::size_t i = 0; i < keys.size(); ++i) {
     const std::string at = element_path(o.path("keys"), i);
-    const Object k(r, keys[i], at, {"time", "position", "look_at"}, "camera path key");
+    const Object k(r, keys[i], at, {"time", "position", "look_at", "up"}, "camera path key");
     CameraPath::Key key;
     key.time = read_float(r, k.require("time"), k.path("time"));
     key.position = read_position(r, k.require("position"), k.path("position"));
     key.look_at = read_position(r, k.require("look_at"), k.path("look_at"));
+    key.up = default_up;
+    if (const json* v = k.find("up")) {
+      key.up = read_vec<3>(r, *v, k.path("up"));
+      r.check(glm::length(key.up) > 0.0f, k.path("up"), "up vector has zero length");
+    }
     p.keys.push_back(key);
   }
   validate_camera_path(p, r.file(), path);
@@ -638,7 +645,8 @@ void read_entity(const Reader& r, Scene& scene, const json& j, const std::string
   if (const json* v = o.find("camera_path")) {
     r.check(o.has("camera"), o.path("camera_path"),
             "a camera path moves a camera: add \"camera\" to this entity");
-    reg.emplace<CameraPath>(e, read_camera_path(r, *v, o.path("camera_path")));
+    reg.emplace<CameraPath>(
+        e, read_camera_path(r, *v, o.path("camera_path"), reg.get<Camera>(e).up));
   }
   if (const json* v = o.find("animation"))
     reg.emplace<Animation>(e, read_animation(r, *v, o.path("animation"), mesh));
@@ -980,6 +988,7 @@ Out write_camera_path(const Writer& w, const CameraPath& p) {
     key.add("time", w.number(k.time));
     key.add("position", w.position(k.position));
     key.add("look_at", w.position(k.look_at));
+    key.add("up", w.vec<3>(k.up));
   }
   return o;
 }

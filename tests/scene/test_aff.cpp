@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -198,6 +199,28 @@ TEST(Aff, MorphingTrianglesAreFreeAndTheCameraMoves) {
   const dvec3 dir = glm::normalize(path.keys[2].look_at - path.keys[2].position);
   EXPECT_NEAR(dir.x, -std::sin(glm::radians(30.0)), 1e-5);
   EXPECT_NEAR(dir.z, -std::cos(glm::radians(30.0)), 1e-5);
+}
+
+TEST(Aff, CameraRotationKeysRollTheView) {
+  Scene scene = load_scene(kData / "roll.aff");
+  ecs::Registry& reg = scene.registry;
+  const ecs::Entity cam = find_named(reg, "camera");
+  const CameraPath& path = reg.get<CameraPath>(cam);
+  ASSERT_EQ(path.keys.size(), 3u); // one per frame of `a 0 1 3`
+  // 0° at t = 0, 90° about the view axis (+Z, the camera looking down -Z) at t = 1: +Y turns to
+  // -X; the view direction stays.
+  EXPECT_NEAR(path.keys[0].up.y, 1.0f, 1e-5f);
+  EXPECT_NEAR(path.keys[2].up.x, -1.0f, 1e-5f);
+  EXPECT_NEAR(path.keys[2].up.y, 0.0f, 1e-5f);
+  const dvec3 dir = glm::normalize(path.keys[2].look_at - path.keys[2].position);
+  EXPECT_NEAR(dir.z, -1.0, 1e-6);
+  // Halfway, the up has turned halfway (45°), still a unit vector.
+  const CameraPath::Key half = sample(path, 0.5f);
+  EXPECT_NEAR(half.up.x, -std::sqrt(0.5f), 1e-5f);
+  EXPECT_NEAR(half.up.y, std::sqrt(0.5f), 1e-5f);
+  // And it survives a save and a load.
+  Scene back = parse_json_scene(write_json_scene(scene), "round trip", kData);
+  EXPECT_EQ(back.registry.get<CameraPath>(find_named(back.registry, "camera")).keys, path.keys);
 }
 
 TEST(Aff, SavesToJsonAndLoadsBackEqual) {

@@ -387,6 +387,7 @@ const BadCase kBadCases[] = {
     {"up_along_view.json", "entities[0].camera.up", "parallel"},
     {"camera_path_without_camera.json", "entities[0].camera_path", "camera"},
     {"camera_path_key_at_target.json", "entities[0].camera_path.keys[1]", "differ"},
+    {"camera_path_key_up_along_view.json", "entities[0].camera_path.keys[0]", "parallel"},
     {"unknown_light_type.json", "entities[0].light.type", "area"},
     {"cone_on_point_light.json", "entities[0].light.outer_cone_deg", "spot"},
     {"inner_cone_over_outer.json", "entities[0].light.inner_cone_deg", "outer"},

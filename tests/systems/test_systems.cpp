@@ -306,12 +306,20 @@ TEST(Systems, CameraFollowsItsPath) {
   reg.emplace<Camera>(e);
   CameraPath path;
   path.loop = false;
-  path.keys = {{0.0f, vec3(0, 0, 10), vec3(0)}, {2.0f, vec3(10, 0, 10), vec3(10, 0, 0)}};
+  // The second key rolls the camera 90° about its view axis.
+  path.keys = {{0.0f, vec3(0, 0, 10), vec3(0), vec3(0, 1, 0)},
+               {2.0f, vec3(10, 0, 10), vec3(10, 0, 0), vec3(-1, 0, 0)}};
   reg.emplace<CameraPath>(e, path);
   Schedule schedule;
   schedule.tick(reg, 0.5);
   EXPECT_NEAR(reg.get<Camera>(e).position.x, 2.5f, 1e-5f);
   EXPECT_NEAR(reg.get<Camera>(e).look_at.x, 2.5f, 1e-5f);
+  // A quarter of the way: the up turned a quarter-ish of the roll (normalised blend), a unit
+  // vector between the two keys'.
+  const vec3 up = reg.get<Camera>(e).up;
+  EXPECT_NEAR(glm::length(up), 1.0f, 1e-6f);
+  EXPECT_LT(up.x, 0.0f);
+  EXPECT_GT(up.y, 0.0f);
   schedule.tick(reg, 10.0);
   EXPECT_NEAR(reg.get<Camera>(e).position.x, 10.0f, 1e-5f);
 }

@@ -19,12 +19,13 @@ struct Camera {
 };
 
 /// An optional camera path for benchmarks: animation_system moves the entity's Camera along it
-/// (linear position and look-at), looping.
+/// (linear position and look-at, the up vector turned between keys: the camera's roll), looping.
 struct CameraPath {
   struct Key {
     float time = 0.0f;
     dvec3 position{0.0};
     dvec3 look_at{0.0};
+    vec3 up{0.0f, 1.0f, 0.0f}; ///< any length but 0; never along the view direction
     friend bool operator==(const Key&, const Key&) = default;
   };
   std::vector<Key> keys;
