@@ -587,11 +587,12 @@ private:
   static std::size_t merge_back(Event* out, std::size_t kept, const std::vector<Event>& extra) {
     std::size_t i = kept, j = extra.size(), k = kept + extra.size();
     // Without branches on the comparison (its outcome is data): a kept event is taken while it
-    // is the larger; once none is left, `from_out` stays false.
+    // is the larger; once none is left, the sentinel (all bits 0, below every event) is never
+    // taken.
     while (j > 0) {
       const Event x = extra[j - 1];
-      const Event o = out[i > 0 ? i - 1 : 0];
-      const bool from_out = i > 0 && x < o;
+      const Event o = i > 0 ? out[i - 1] : Event{0};
+      const bool from_out = x < o;
       out[--k] = from_out ? o : x;
       i -= std::size_t(from_out);
       j -= std::size_t(!from_out);
@@ -720,11 +721,10 @@ bool KdTree::traverse(PreparedRay& r, TriangleHit* hit) const {
     const std::uint32_t count = n.bits >> 2;
     const std::uint32_t* ids = indices_.data() + n.first;
     for (std::uint32_t k = 0; k < count; ++k) {
-      const std::uint32_t id = ids[k];
       if constexpr (AnyHit) {
-        if (intersect_any<Test>(r, tris_, id)) return true;
+        if (intersect_any<Test>(r, tris_, ids[k])) return true;
       } else {
-        if (intersect_closest<Test>(r, tris_, id, *hit)) found = true;
+        if (intersect_closest<Test>(r, tris_, ids[k], *hit)) found = true;
       }
     }
     // The nearest pending cell that the ray (shortened by its hits) still reaches. A hit found
