@@ -72,10 +72,16 @@ TEST(Srgb, TransferFunctionsInvertEachOtherAndClamp) {
   EXPECT_NEAR(linear_to_srgb(std::numeric_limits<float>::infinity()), 1.0f, 1e-6f);
 }
 
-TEST(ResampleNearest, SameSizeIsTheImageDoublingMakesBlocksHalvingTakesCentres) {
+/// 3 × 2 pixels holding (x, y, 1): a ramp on each axis and a constant channel.
+Framebuffer ramp_image() {
   Framebuffer img(3, 2);
   for (std::uint32_t y = 0; y < 2; ++y)
     for (std::uint32_t x = 0; x < 3; ++x) img.at(x, y) = vec3(float(x), float(y), 1.0f);
+  return img;
+}
+
+TEST(ResampleNearest, SameSizeIsTheImageDoublingMakesBlocksHalvingTakesCentres) {
+  const Framebuffer img = ramp_image();
   EXPECT_TRUE(resample_nearest(img, 3, 2) == img);
   const Framebuffer big = resample_nearest(img, 6, 4);
   for (std::uint32_t y = 0; y < 4; ++y)
@@ -89,9 +95,7 @@ TEST(ResampleNearest, SameSizeIsTheImageDoublingMakesBlocksHalvingTakesCentres) 
 }
 
 TEST(ResampleBilinear, SameSizeIsTheImageAndARampStaysARamp) {
-  Framebuffer img(3, 2);
-  for (std::uint32_t y = 0; y < 2; ++y)
-    for (std::uint32_t x = 0; x < 3; ++x) img.at(x, y) = vec3(float(x), float(y), 1.0f);
+  const Framebuffer img = ramp_image();
   EXPECT_TRUE(resample_bilinear(img, 3, 2) == img);
   // Doubling: destination centres at source x = (i + ½)/2 − ½, clamped to [0, 2]; the values of
   // a linear ramp are those positions themselves.
