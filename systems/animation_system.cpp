@@ -17,6 +17,11 @@ void animation_system(ecs::Registry& registry, const FrameContext& ctx) {
       if (!anim.rotation.empty()) t->rotation = sample(anim.rotation, anim.time);
       if (!anim.scale.empty()) t->scale = sample(anim.scale, anim.time);
     }
+    if (!anim.visibility.empty()) {
+      const bool visible = visible_at(anim.visibility, anim.time);
+      if (visible && registry.has<Hidden>(e)) registry.remove<Hidden>(e);
+      if (!visible && !registry.has<Hidden>(e)) registry.emplace<Hidden>(e);
+    }
     if (!anim.vertices.empty()) {
       Mesh* mesh = registry.try_get<Mesh>(e);
       // Vertices already sampled at this time (a paused or finished animation) are left alone,

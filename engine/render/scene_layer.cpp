@@ -293,6 +293,8 @@ void SceneLayer::refresh_lights(ecs::Registry& registry) {
   std::vector<gpu::GpuLight> lights;
   lights.reserve(tables_.lights.size());
   registry.view<Light, WorldTransform>().each([&](const Light& l, const WorldTransform& wt) {
+    // A light in a Hidden subtree (its world transform collapsed to its origin) is off.
+    if (dmat3(wt.world_from_object) == dmat3(0.0)) return;
     lights.push_back(to_gpu(l, wt.world_from_object, render_origin_));
   });
   if (lights.size() != tables_.lights.size() ||

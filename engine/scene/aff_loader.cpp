@@ -681,9 +681,9 @@ void AffReader::keyframes(Lexer& lex, int line) {
       if (!times.empty() && !(time > times.back()))
         lex.fail(at, "key times must be strictly increasing");
       times.push_back(time);
-      if (kind == 3) {
-        // Visibility switches are read but not applied (docs: not supported).
-        (void)lex.count("visibility flag", 1, 0);
+      if (kind == 3) { // a switch from this time on: 1 shown, 0 hidden
+        pk.animation.visibility.visible.push_back(
+            std::uint8_t(lex.count("visibility flag (0 or 1)", 1, 0)));
         continue;
       }
       const vec3 v = lex.vector("key value");
@@ -705,6 +705,7 @@ void AffReader::keyframes(Lexer& lex, int line) {
     if (kind == 0) a.translation.times = times;
     if (kind == 1) a.rotation.times = times;
     if (kind == 2) a.scale.times = times;
+    if (kind == 3) a.visibility.times = times;
   }
   Animation& a = pk.animation;
   if (!a.translation.empty()) a.translation.interpolation = Interpolation::KochanekBartels;

@@ -184,6 +184,12 @@ float advance_time(float time, float speed, float dt, float duration, bool loop)
   return t < 0.0f ? t + duration : t;
 }
 
+bool visible_at(const VisibilityKeys& keys, float t) {
+  const auto it = std::upper_bound(keys.times.begin(), keys.times.end(), t);
+  const std::size_t i = it == keys.times.begin() ? 0 : std::size_t(it - keys.times.begin()) - 1;
+  return keys.visible[i] != 0;
+}
+
 CameraPath::Key sample(const CameraPath& path, float t) {
   const auto& keys = path.keys;
   if (t <= keys.front().time) return keys.front();
@@ -206,6 +212,19 @@ void validate_animation(const Animation& a, std::size_t vertex_count, const std:
   check_times(a.rotation, context, field + ".rotation");
   check_times(a.scale, context, field + ".scale");
   check_times(a.vertices, context, field + ".vertices");
+  if (a.visibility.times.size() != a.visibility.visible.size())
+    throw Error(context, field + ".visibility",
+                std::to_string(a.visibility.times.size()) + " key times but " +
+                    std::to_string(a.visibility.visible.size()) + " values");
+  for (std::size_t i = 0; i < a.visibility.times.size(); ++i) {
+    const std::string at = field + ".visibility.times[" + std::to_string(i) + "]";
+    if (!std::isfinite(a.visibility.times[i])) throw Error(context, at, "time is not finite");
+    if (i > 0 && !(a.visibility.times[i] > a.visibility.times[i - 1]))
+      throw Error(context, at, "key times must be strictly increasing");
+    if (a.visibility.visible[i] > 1)
+      throw Error(context, field + ".visibility.values[" + std::to_string(i) + "]",
+                  "a visibility key is 0 (hidden) or 1 (shown)");
+  }
   if (a.vertices.interpolation == Interpolation::KochanekBartels)
     throw Error(context, field + ".vertices",
                 "vertex tracks interpolate linearly or by step, not Kochanek-Bartels");

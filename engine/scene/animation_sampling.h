@@ -28,6 +28,9 @@ void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3
 
 /// Camera position and look-at on the path at time t (linear between keys, clamped).
 [[nodiscard]] CameraPath::Key sample(const CameraPath& path, float t);
+/// Whether visibility keys show their entity at time t (the last key at or before t; the first
+/// key before it).
+[[nodiscard]] bool visible_at(const VisibilityKeys& keys, float t);
 
 /// Throws specula::Error(context, field, ...) for: times not finite or not strictly increasing,
 /// a Kochanek-Bartels track with fewer than 4 keys or without one tcb triple in [-1, 1] per key, tcb

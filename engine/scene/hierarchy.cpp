@@ -97,7 +97,9 @@ std::size_t update_world_transforms(ecs::Registry& registry, std::uint64_t tick,
   std::size_t moved = 0;
   for (const auto& level : by_depth) {
     for (const ecs::Entity e : level) {
-      const dmat4 local = registry.get<Transform>(e).parent_from_local();
+      dmat4 local = registry.get<Transform>(e).parent_from_local();
+      if (registry.has<Hidden>(e)) // collapsed to its origin: hidden, and its subtree with it
+        local = dmat4(dvec4(0.0), dvec4(0.0), dvec4(0.0), local[3]);
       dmat4 world = local;
       bool parent_moved = false;
       if (const Parent* parent = registry.try_get<Parent>(e);

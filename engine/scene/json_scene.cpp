@@ -532,7 +532,8 @@ Animation read_animation(const Reader& r, const json& j, const std::string& path
                          const Mesh* mesh) {
   Animation a;
   const Object o(r, j, path,
-                 {"loop", "speed", "time", "translation", "rotation", "scale", "vertices"},
+                 {"loop", "speed", "time", "translation", "rotation", "scale", "vertices",
+                  "visibility"},
                  "animation");
   if (const json* v = o.find("loop")) a.loop = read_bool(r, *v, o.path("loop"));
   if (const json* v = o.find("speed")) a.speed = read_float(r, *v, o.path("speed"));
@@ -562,6 +563,23 @@ Animation read_animation(const Reader& r, const json& j, const std::string& path
           return key;
         },
         false);
+  }
+  if (const json* v = o.find("visibility")) {
+    // Switches, not a curve: no interpolation, the values booleans.
+    const Object k(r, *v, o.path("visibility"), {"times", "values"}, "visibility keys");
+    const json& times =
+        read_array(r, k.require("times"), k.path("times"), "key times in seconds");
+    const json& values = read_array(r, k.require("values"), k.path("values"),
+                                    "one true (shown) or false (hidden) per key time");
+    r.check(!times.empty(), k.path("times"), "visibility needs at least one key");
+    r.check(times.size() == values.size(), k.path("values"),
+            std::to_string(times.size()) + " key times but " + std::to_string(values.size()) +
+                " values");
+    for (std::size_t i = 0; i < times.size(); ++i) {
+      a.visibility.times.push_back(read_float(r, times[i], element_path(k.path("times"), i)));
+      a.visibility.visible.push_back(
+          read_bool(r, values[i], element_path(k.path("values"), i)) ? 1 : 0);
+    }
   }
   validate_animation(a, mesh && mesh->geometry ? mesh->geometry->vertex_count() : 0, r.file(),
                      path);
@@ -1029,6 +1047,13 @@ Out write_animation(const Writer& w, const Animation& a) {
             for (const vec3& p : key) positions.push(w.vec<3>(p));
             return positions;
           }));
+  if (!a.visibility.empty()) {
+    Out& keys = o.add("visibility", Out::object());
+    Out& times = keys.add("times", Out::array());
+    for (const float t : a.visibility.times) times.push(w.number(t));
+    Out& values = keys.add("values", Out::array());
+    for (const std::uint8_t v : a.visibility.visible) values.push(Writer::boolean(v != 0));
+  }
   return o;
 }
 

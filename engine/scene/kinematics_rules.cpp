@@ -14,10 +14,12 @@
 namespace specula {
 namespace {
 
-/// Whether e's own Animation moves it: any translation, rotation or scale track.
+/// Whether e's own Animation moves it: any translation, rotation or scale track, or visibility
+/// switches (hiding collapses its world transform).
 bool animates_transform(const ecs::Registry& registry, ecs::Entity e) {
   const Animation* a = registry.try_get<Animation>(e);
-  return a != nullptr && (!a->translation.empty() || !a->rotation.empty() || !a->scale.empty());
+  return a != nullptr && (!a->translation.empty() || !a->rotation.empty() || !a->scale.empty() ||
+                          !a->visibility.empty());
 }
 
 bool deforms(const ecs::Registry& registry, ecs::Entity e) {

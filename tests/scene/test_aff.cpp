@@ -231,6 +231,11 @@ TEST(Aff, SavesToJsonAndLoadsBackEqual) {
   const ecs::Entity b = find_named(back.registry, "car");
   ASSERT_NE(b, ecs::null_entity);
   EXPECT_EQ(scene.registry.get<Animation>(a), back.registry.get<Animation>(b));
+  // The lamp's visibility keys (off from 0.5 s, on again from 1.5 s) survive the round trip.
+  const Animation& lamp = scene.registry.get<Animation>(find_named(scene.registry, "lamp"));
+  EXPECT_EQ(lamp.visibility.times, (std::vector<float>{0.5f, 1.5f}));
+  EXPECT_EQ(lamp.visibility.visible, (std::vector<std::uint8_t>{0, 1}));
+  EXPECT_EQ(back.registry.get<Animation>(find_named(back.registry, "lamp")), lamp);
   EXPECT_EQ(back.registry.get<Animation>(b).rotation.tcb.size(), 4u);
   EXPECT_EQ(back.settings, scene.settings); // `a` included
   EXPECT_EQ(back.settings.anim_frames, 5u);
@@ -343,7 +348,9 @@ TEST(KochanekBartels, RotationStaysUnitAndHitsTheKeys) {
               -glm::angleAxis(2.5f, glm::normalize(vec3(1, 1, 0))), // other hemisphere
               glm::angleAxis(-1.0f, vec3(0, 0, 1)), glm::angleAxis(0.5f, vec3(0, 1, 0))};
   k.tcb = {vec3(0), vec3(0.2f, 0.1f, -0.3f), vec3(0), vec3(-0.4f, 0.5f, 0.2f), vec3(0)};
-  validate_animation(Animation{{}, k, {}, {}, 0.0f, 1.0f, true}, 0, "test", "a");
+  Animation a;
+  a.rotation = k;
+  validate_animation(a, 0, "test", "a");
   for (float t = 1.0f; t <= 3.0f; t += 0.01f)
     EXPECT_NEAR(glm::length(sample(k, t)), 1.0f, 1e-5f) << t;
   for (std::size_t i = 1; i <= 3; ++i)

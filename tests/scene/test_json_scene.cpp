@@ -392,6 +392,7 @@ const BadCase kBadCases[] = {
     {"cone_on_point_light.json", "entities[0].light.outer_cone_deg", "spot"},
     {"inner_cone_over_outer.json", "entities[0].light.inner_cone_deg", "outer"},
     {"non_increasing_times.json", "entities[0].animation.translation.times[2]", "increasing"},
+    {"visibility_not_increasing.json", "entities[0].animation.visibility.times[2]", "increasing"},
     {"values_count_mismatch.json", "entities[0].animation.translation.values", "2 key times"},
     {"vertex_count_mismatch.json", "entities[0].animation.vertices.values[0]", "3"},
     {"vertex_animation_without_mesh.json", "entities[0].animation.vertices", "needs a mesh"},

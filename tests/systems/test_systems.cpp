@@ -1,6 +1,8 @@
 // Headless system tests: build a world, tick the schedule, assert on components.
 
 #include "specula/core/error.h"
+#include "specula/render/scene_layer.h"
+#include "specula/scene/kinematics_rules.h"
 #include "specula/scene/components.h"
 #include "specula/systems/animation_system.h"
 #include "specula/systems/schedule.h"
@@ -322,6 +324,46 @@ TEST(Systems, CameraFollowsItsPath) {
   EXPECT_GT(up.y, 0.0f);
   schedule.tick(reg, 10.0);
   EXPECT_NEAR(reg.get<Camera>(e).position.x, 10.0f, 1e-5f);
+}
+
+TEST(Systems, VisibilityKeysHideAnEntityAndItsSubtreeLightsIncluded) {
+  ecs::Registry reg;
+  const ecs::Entity parent = reg.create();
+  Transform t;
+  t.translation = dvec3(1, 2, 3);
+  t.scale = vec3(2.0f);
+  reg.emplace<Transform>(parent, t);
+  Animation a;
+  a.loop = false;
+  a.visibility.times = {0.5f, 1.5f}; // hidden from 0.5 s (and before: the first key's state)
+  a.visibility.visible = {0, 1};     // shown again from 1.5 s
+  reg.emplace<Animation>(parent, a);
+  const ecs::Entity child = reg.create();
+  Transform ct;
+  ct.translation = dvec3(0, 1, 0);
+  reg.emplace<Transform>(child, ct);
+  reg.emplace<Parent>(child, Parent{parent});
+  reg.emplace<Light>(child);
+  // Switching visibility moves the subtree (its world transforms collapse): not static.
+  EXPECT_EQ(inferred_kinematics(reg, child), Kinematics::Type::Hierarchical);
+  SceneLayer& layer = reg.set_resource<SceneLayer>();
+  Schedule schedule;
+
+  schedule.tick(reg, 0.75);
+  EXPECT_TRUE(reg.has<Hidden>(parent));
+  for (const ecs::Entity e : {parent, child}) {
+    const dmat4& w = reg.get<WorldTransform>(e).world_from_object;
+    EXPECT_EQ(dmat3(w), dmat3(0.0)) << "collapsed while hidden";
+    EXPECT_EQ(dvec3(w[3]), dvec3(1, 2, 3)) << "at the hidden entity's origin";
+  }
+  EXPECT_TRUE(layer.tables().lights.empty()) << "a light under a hidden entity is off";
+
+  schedule.tick(reg, 1.0); // t = 1.75
+  EXPECT_FALSE(reg.has<Hidden>(parent));
+  EXPECT_EQ(reg.get<WorldTransform>(parent).world_from_object, t.parent_from_local());
+  EXPECT_EQ(reg.get<WorldTransform>(child).world_from_object,
+            t.parent_from_local() * ct.parent_from_local());
+  EXPECT_EQ(layer.tables().lights.size(), 1u);
 }
 
 TEST(Systems, ScheduleRunsAnimationTransformSceneLayerAccelerationCachesRenderInThatOrder) {

@@ -1,6 +1,7 @@
 #pragma once
 #include "specula/core/math.h"
 
+#include <cstdint>
 #include <vector>
 
 namespace specula {
@@ -34,11 +35,21 @@ struct Keyframes {
 /// a full set of positions, as many as the mesh's vertices). animation_system samples at
 /// `time + speed * t`; with `loop`, time wraps to the track's duration.
 /// Translation keys are double (world positions far from the origin keep their precision).
+/// Visibility switches (BART's `visibility` keys): from each key's time on, the entity and its
+/// subtree are shown (1) or hidden (0); before the first key, the first key's state.
+struct VisibilityKeys {
+  std::vector<float> times;          ///< seconds, strictly increasing
+  std::vector<std::uint8_t> visible; ///< 0 or 1, one per time
+  [[nodiscard]] bool empty() const { return times.empty(); }
+  friend bool operator==(const VisibilityKeys&, const VisibilityKeys&) = default;
+};
+
 struct Animation {
   Keyframes<dvec3> translation;
   Keyframes<quat> rotation;
   Keyframes<vec3> scale;
   Keyframes<std::vector<vec3>> vertices;
+  VisibilityKeys visibility;
   float time = 0.0f;
   float speed = 1.0f;
   bool loop = true;
@@ -55,6 +66,7 @@ inline float Animation::duration() const {
   if (!rotation.empty()) d = glm::max(d, rotation.end_time());
   if (!scale.empty()) d = glm::max(d, scale.end_time());
   if (!vertices.empty()) d = glm::max(d, vertices.end_time());
+  if (!visibility.empty()) d = glm::max(d, visibility.times.back());
   return d;
 }
 

@@ -17,4 +17,12 @@ struct Transform {
   friend bool operator==(const Transform&, const Transform&) = default;
 };
 
+/// While present, the entity and its subtree are left out of the frame: the transform system
+/// collapses their world transforms to their origins (a zero linear part), which the scene layer
+/// and every tracer treat as hidden (`accel.hidden_instances`). animation_system sets it from an
+/// Animation's visibility keys; it is state, not part of the scene file.
+struct Hidden {
+  friend bool operator==(const Hidden&, const Hidden&) = default;
+};
+
 } // namespace specula
