@@ -6,6 +6,8 @@
 #include "specula/scene/components/mesh.h"
 #include "specula/scene/components/transform.h"
 
+#include <vector>
+
 namespace specula {
 
 void animation_system(ecs::Registry& registry, const FrameContext& ctx) {
@@ -34,6 +36,14 @@ void animation_system(ecs::Registry& registry, const FrameContext& ctx) {
       }
     }
   });
+  // Hidden is the visibility switches' state: an entity whose switches are gone (its Animation
+  // removed or replaced) is shown again.
+  std::vector<ecs::Entity> shown;
+  registry.view<Hidden>().each([&](ecs::Entity e, Hidden&) {
+    const Animation* a = registry.try_get<Animation>(e);
+    if (a == nullptr || a->visibility.empty()) shown.push_back(e);
+  });
+  for (const ecs::Entity e : shown) registry.remove<Hidden>(e);
   registry.view<CameraPath, Camera>().each([&](CameraPath& path, Camera& camera) {
     path.time = advance_time(path.time, 1.0f, dt, path.keys.back().time, path.loop);
     const CameraPath::Key key = sample(path, path.time);

@@ -364,6 +364,15 @@ TEST(Systems, VisibilityKeysHideAnEntityAndItsSubtreeLightsIncluded) {
   EXPECT_EQ(reg.get<WorldTransform>(child).world_from_object,
             t.parent_from_local() * ct.parent_from_local());
   EXPECT_EQ(layer.tables().lights.size(), 1u);
+
+  // Hidden again, then the switches removed (an editor deleting the animation): shown.
+  reg.get<Animation>(parent).time = 0.0f;
+  schedule.tick(reg, 0.1);
+  EXPECT_TRUE(reg.has<Hidden>(parent));
+  reg.get<Animation>(parent).visibility = {};
+  schedule.tick(reg, 0.1);
+  EXPECT_FALSE(reg.has<Hidden>(parent));
+  EXPECT_EQ(layer.tables().lights.size(), 1u);
 }
 
 TEST(Systems, ScheduleRunsAnimationTransformSceneLayerAccelerationCachesRenderInThatOrder) {
