@@ -167,6 +167,34 @@ TEST_P(DegenerateInstances, ScaleAnimatedToZeroAndBackHidesAndShowsTheObject) {
   EXPECT_NEAR(world.intersect(down).t, 2.0f, 1e-3f);
 }
 
+// Visibility keys hide an entity through the Hidden tag (the transform system collapses it and
+// its subtree): every backend leaves it out and shows it again, as it does a zero scale.
+TEST_P(DegenerateInstances, HiddenTagHidesTheSubtreeAndShowsItAgain) {
+  ecs::Registry reg;
+  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(6.0f)), test::at(vec3(0)));
+  const ecs::Entity ball =
+      test::add_mesh(reg, test::primitive("sphere", 0.5f), test::at(vec3(0, 0.5f, 0)), Material{},
+                     Kinematics::Type::Hierarchical);
+  const ecs::Entity moon =
+      test::add_mesh(reg, test::primitive("sphere", 0.25f), test::at(vec3(0, 1.0f, 0)),
+                     Material{}, Kinematics::Type::Hierarchical);
+  reg.emplace<Parent>(moon, Parent{ball}); // 1.5 above the floor, on top of the ball
+  test::TracedWorld world(reg, GetParam());
+  const Ray down{vec3(0, 3, 0), 0.0f, vec3(0, -1, 0), std::numeric_limits<float>::infinity()};
+  EXPECT_NEAR(world.intersect(down).t, 1.25f, 1e-3f); // the moon's top
+
+  reg.emplace<Hidden>(ball);
+  world.update(reg);
+  EXPECT_EQ(world.tracer->last_update().hidden_instances, 2u) << "the ball and the moon on it";
+  EXPECT_NEAR(world.intersect(down).t, 3.0f, 1e-5f) << "the floor, through both";
+  EXPECT_FALSE(world.occluded(Ray{vec3(0, 3, 0), 0.0f, vec3(0, -1, 0), 2.9f}));
+
+  reg.remove<Hidden>(ball);
+  world.update(reg);
+  EXPECT_EQ(world.tracer->last_update().hidden_instances, 0u);
+  EXPECT_NEAR(world.intersect(down).t, 1.25f, 1e-3f);
+}
+
 // ---- Radiance bounds ---------------------------------------------------------------------------
 
 /// A path in the temporary folder that no other test process uses at the same time: ctest runs
