@@ -141,14 +141,21 @@ TEST_P(DegenerateInstances, AreLeftOutCountedAndInvisible) {
   EXPECT_EQ(different, 0);
 }
 
+/// A floor at y = 0 and a hierarchical ball of radius 0.5 resting on it (returned).
+ecs::Entity floor_and_ball(ecs::Registry& reg) {
+  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(6.0f)), test::at(vec3(0)));
+  return test::add_mesh(reg, test::primitive("sphere", 0.5f), test::at(vec3(0, 0.5f, 0)),
+                        Material{}, Kinematics::Type::Hierarchical);
+}
+
+/// Straight down onto the ball's centre from y = 3.
+const Ray kDown{vec3(0, 3, 0), 0.0f, vec3(0, -1, 0), std::numeric_limits<float>::infinity()};
+
 TEST_P(DegenerateInstances, ScaleAnimatedToZeroAndBackHidesAndShowsTheObject) {
   ecs::Registry reg;
-  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(6.0f)), test::at(vec3(0)));
-  const ecs::Entity ball =
-      test::add_mesh(reg, test::primitive("sphere", 0.5f), test::at(vec3(0, 0.5f, 0)), Material{},
-                     Kinematics::Type::Hierarchical);
+  const ecs::Entity ball = floor_and_ball(reg);
   test::TracedWorld world(reg, GetParam());
-  const Ray down{vec3(0, 3, 0), 0.0f, vec3(0, -1, 0), std::numeric_limits<float>::infinity()};
+  const Ray& down = kDown;
   const std::uint32_t ball_slot = world.intersect(down).instance;
   ASSERT_NE(ball_slot, kNoInstance);
   EXPECT_NEAR(world.intersect(down).t, 2.0f, 1e-3f); // the ball's top
@@ -171,16 +178,13 @@ TEST_P(DegenerateInstances, ScaleAnimatedToZeroAndBackHidesAndShowsTheObject) {
 // its subtree): every backend leaves it out and shows it again, as it does a zero scale.
 TEST_P(DegenerateInstances, HiddenTagHidesTheSubtreeAndShowsItAgain) {
   ecs::Registry reg;
-  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(6.0f)), test::at(vec3(0)));
-  const ecs::Entity ball =
-      test::add_mesh(reg, test::primitive("sphere", 0.5f), test::at(vec3(0, 0.5f, 0)), Material{},
-                     Kinematics::Type::Hierarchical);
+  const ecs::Entity ball = floor_and_ball(reg);
   const ecs::Entity moon =
       test::add_mesh(reg, test::primitive("sphere", 0.25f), test::at(vec3(0, 1.0f, 0)),
                      Material{}, Kinematics::Type::Hierarchical);
   reg.emplace<Parent>(moon, Parent{ball}); // 1.5 above the floor, on top of the ball
   test::TracedWorld world(reg, GetParam());
-  const Ray down{vec3(0, 3, 0), 0.0f, vec3(0, -1, 0), std::numeric_limits<float>::infinity()};
+  const Ray& down = kDown;
   EXPECT_NEAR(world.intersect(down).t, 1.25f, 1e-3f); // the moon's top
 
   reg.emplace<Hidden>(ball);
