@@ -76,8 +76,8 @@ fs::path scene_path(const Options& o, const std::string& name) {
 class RecordingHook final : public RadianceHook {
 public:
   explicit RecordingHook(std::shared_ptr<cache::RayCacheStore> store) : store_(std::move(store)) {}
-  void begin_frame(std::uint32_t w, std::uint32_t h) override {
-    store_->begin_frame(w, h);
+  void begin_frame(std::uint32_t w, std::uint32_t h, TraceMode mode) override {
+    store_->begin_frame(w, h, mode);
     instance_ = ~0u;
     if (store_->cube_count() == 0) return;
     const cache::CubeView c = store_->cube(0);

@@ -103,6 +103,9 @@ cache::CacheSettings parse_cache(const RenderOptions& o) {
   }
   c.fill_budget = o.cache_fill;
   c.prefill = o.cache_prefill;
+  if (o.cache_samples < 1 || o.cache_samples > 65536)
+    throw Error("--cache-samples", "must lie in 1 … 65536, got " + std::to_string(o.cache_samples));
+  c.path_samples = o.cache_samples;
   if (!(o.max_error_db > 0.0 && o.max_error_db < 200.0))
     throw Error("--max-error-db", "must lie in (0, 200)");
   c.max_error_db = o.max_error_db;
@@ -254,6 +257,9 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   if (!options.time.empty()) time_range = parse_time_range(options.time);
   const std::optional<TraceMode> mode = parse_trace_mode(options.mode);
   if (!mode) throw Error("--mode", "unknown mode '" + printable(options.mode) + "'");
+  if (cache_settings.prefill && *mode == TraceMode::Path)
+    throw Error("--cache-prefill", "path mode's cubes average path samples; prefill traces "
+                                   "Whitted radiance from the centre and cannot fill them");
   if (options.spp < 1 || options.spp > kMaxSpp)
     throw Error("--spp", "expected a whole number in [1 - " + std::to_string(kMaxSpp) + "], got " +
                              std::to_string(options.spp));
@@ -365,6 +371,7 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   stats.settings.cache_tau_deg = cache_settings.tau_deg;
   stats.settings.cache_fill_budget = cache_settings.fill_budget;
   stats.settings.cache_prefill = cache_settings.prefill;
+  stats.settings.cache_samples = cache_settings.path_samples;
   stats.settings.max_error_db = cache_settings.max_error_db;
   stats.settings.spp = options.spp;
   stats.settings.shadow_samples = options.shadow_samples;

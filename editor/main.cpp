@@ -227,6 +227,11 @@ int main(int argc, char** argv) {
                    "At most this many texels written per frame (0: no limit)")
       ->transform(whole_number(0, UINT32_MAX))
       ->capture_default_str();
+  render_cmd
+      ->add_option("--cache-samples", render.cache_samples,
+                   "Path mode: path samples a texel averages before it serves lookups")
+      ->transform(whole_number(1, 65536))
+      ->capture_default_str();
   render_cmd->add_flag("--cache-prefill", render.cache_prefill,
                        "Trace every outdated texel from its cube's centre before each frame");
   render_cmd

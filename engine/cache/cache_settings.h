@@ -31,6 +31,9 @@ struct CacheSettings {
   bool prefill = false;           ///< trace every outdated texel from the cube centre each frame
   double max_error_db = 40.0;     ///< Auto: the PSNR against uncached tracing it must keep
   std::uint32_t verify_every = 32; ///< Auto: one accepted lookup in this many is traced to check
+                                   ///< (path mode, any policy: to add a sample to the texel)
+  /// Path mode: samples a texel averages before it serves lookups.
+  std::uint32_t path_samples = 16;
   friend bool operator==(const CacheSettings&, const CacheSettings&) = default;
 };
 

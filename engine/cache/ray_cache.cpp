@@ -168,6 +168,7 @@ struct RayCacheStore::Cube {
   vec3 centre{0.0f};
   float radius = 0.0f; ///< the owner's bounding sphere: where leaving rays start
   std::vector<Texel> texels;
+  std::vector<ProbeTexel> probe; ///< path mode (sized on its first sample)
   std::uint64_t generation = next_generation();
   std::vector<std::uint32_t> edges; ///< by entity index: valid texels whose first hit it is
   std::uint64_t valid = 0;
@@ -205,8 +206,17 @@ struct RayCacheStore::Cube {
     tau_deg = tau;
     cos_tau = std::cos(glm::radians(tau));
   }
+  /// Whether texel i holds anything an invalidation must consider: a valid value, or path
+  /// samples still being averaged.
+  [[nodiscard]] bool holds(std::uint32_t i) const {
+    return texels[i].valid() || (!probe.empty() && probe[i].count > 0);
+  }
   void outdate(std::uint32_t i) {
     Texel& t = texels[i];
+    if (!probe.empty() && probe[i].count > 0) {
+      probe[i] = ProbeTexel{};
+      generation = next_generation();
+    }
     if (!t.valid()) return;
     t.state &= std::uint8_t(~kValid);
     --valid;
@@ -223,8 +233,40 @@ struct RayCacheStore::Cube {
       ++edges[value.hit];
     }
   }
+  /// Path mode: adds n samples summing to `sum` to texel i's probe. Its first samples set the
+  /// texel's hit, distance and cost (`first`); it serves lookups once it averages `serve_at`.
+  void accumulate(std::uint32_t i, const vec3& sum, std::uint32_t n, const Texel& first,
+                  std::uint16_t seen, std::uint32_t serve_at) {
+    if (probe.empty()) probe.assign(texels.size(), ProbeTexel{});
+    ProbeTexel& p = probe[i];
+    Texel& t = texels[i];
+    if (p.count == 0) {
+      outdate(i);
+      t = first;
+      t.state = kOutdated;
+      t.seen = 0;
+    }
+    const std::uint32_t room = 0xffffffffu - p.count;
+    if (n > room) return; // saturated: the mean stays as it is
+    for (int c = 0; c < 3; ++c) p.sum[c] += sum[c];
+    p.count += n;
+    const vec3 mean = vec3(p.sum[0], p.sum[1], p.sum[2]) / float(p.count);
+    const Texel m = make_texel(mean, 0.0f, kNoInstance, 0, 0);
+    std::copy(std::begin(m.rgb), std::end(m.rgb), std::begin(t.rgb));
+    t.seen |= seen;
+    generation = next_generation();
+    if (!t.valid() && p.count >= serve_at) {
+      t.state |= kValid;
+      ++valid;
+      if (t.hit != kNoInstance) {
+        if (t.hit >= edges.size()) edges.resize(t.hit + 1, 0);
+        ++edges[t.hit];
+      }
+    }
+  }
   std::uint64_t flush() {
     const std::uint64_t was = valid;
+    if (!probe.empty()) std::fill(probe.begin(), probe.end(), ProbeTexel{});
     for (Texel& t : texels) t.state &= std::uint8_t(~kValid);
     std::fill(edges.begin(), edges.end(), 0u);
     valid = 0;
@@ -240,6 +282,8 @@ struct RayCacheStore::Candidate {
   std::uint32_t order; ///< depth, kind
   std::uint64_t tie;   ///< direction bits: a total order among a pixel's rays
   Texel value;
+  vec3 radiance; ///< path mode: the sample, at full precision
+  std::uint32_t group = 0; ///< path mode: its texel's entry in apply_writes' sums
 };
 
 RayCacheStore::RayCacheStore(CacheSettings settings) : settings_(settings) {
@@ -252,7 +296,7 @@ std::size_t RayCacheStore::cube_count() const { return cubes_.size(); }
 
 CubeView RayCacheStore::cube(std::size_t i) const {
   const Cube& c = *cubes_.at(i);
-  return CubeView{c.owner,   c.instance, c.resolution, c.centre,    c.texels,
+  return CubeView{c.owner,   c.instance, c.resolution, c.centre,     c.texels, c.probe,
                   c.mode,    c.enabled,  c.cos_tau,    c.generation};
 }
 
@@ -449,7 +493,7 @@ InvalidationStats RayCacheStore::invalidate(ecs::Registry& registry, const Scene
           std::vector<std::uint32_t>& out = hits_found.local();
           for (std::uint32_t i = range.begin(); i != range.end(); ++i) {
             const Texel& tx = c.texels[i];
-            if (!tx.valid()) continue;
+            if (!c.holds(i)) continue;
             const float d = texel_distance(tx);
             const bool finite = std::isfinite(d);
             if (flush_surfaces && finite) {
@@ -510,6 +554,8 @@ InvalidationStats RayCacheStore::invalidate(ecs::Registry& registry, const Scene
 std::uint64_t RayCacheStore::prefill(const Tracer& tracer, const SceneLayer& layer,
                                      const TraceSettings& trace) {
   std::uint64_t filled = 0;
+  // Prefill traces Whitted radiance from the centre; path mode's probes fill from path samples.
+  if (trace.mode == TraceMode::Path) return 0;
   for (auto& cp : cubes_) {
     Cube& c = *cp;
     if (!c.enabled) continue;
@@ -537,9 +583,20 @@ std::uint64_t RayCacheStore::prefill(const Tracer& tracer, const SceneLayer& lay
 // ---------------------------------------------------------------------------------------------
 // The hook
 
-void RayCacheStore::begin_frame(std::uint32_t width, std::uint32_t height) {
+void RayCacheStore::begin_frame(std::uint32_t width, std::uint32_t height, TraceMode mode) {
   width_ = std::max(1u, width);
   height_ = std::max(1u, height);
+  const bool averaging = mode == TraceMode::Path;
+  if (averaging != averaging_) {
+    // Whitted's texels hold exact radiance without indirect light, path mode's the mean of
+    // samples that include it: one must not serve the other.
+    for (auto& c : cubes_) {
+      c->flush();
+      c->probe.clear();
+      c->probe.shrink_to_fit();
+    }
+    averaging_ = averaging;
+  }
   ++frame_;
   lookups_ = false;
   for (auto& c : cubes_) {
@@ -672,7 +729,9 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
   };
   thread_local std::vector<Local> local;
   local.assign(cubes_.size(), Local{});
-  const bool verify = settings_.policy == CachePolicy::Auto;
+  // Path mode traces one accepted lookup in verify_every under any policy: the sample goes into
+  // the texel's mean, which keeps improving while it serves.
+  const bool verify = settings_.policy == CachePolicy::Auto || averaging_;
   for (std::size_t k = 0; k < queries.size(); ++k) {
     const LeavingQuery& q = queries[k];
     CachedRadiance& out = answers[k];
@@ -715,9 +774,11 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
     out.seen = tx.seen | (tx.hit != kNoInstance ? entity_bit(tx.hit) : 0u);
     const std::uint64_t cost = tx.rays;
     if (verify) {
-      const std::uint32_t every = c.evaluating ? kEvaluationVerifyEvery : settings_.verify_every;
+      const std::uint32_t every =
+          c.evaluating && !averaging_ ? kEvaluationVerifyEvery : settings_.verify_every;
       const std::uint64_t key = (std::uint64_t(q.pixel) << 8) ^ (std::uint64_t(q.depth) << 2) ^
-                                (frame_ << 40) ^ std::uint64_t(ci);
+                                (frame_ << 40) ^ (std::uint64_t(q.sample) << 24) ^
+                                std::uint64_t(ci);
       if (mix_hash(key) % every == 0) out.answer = CacheAnswer::Verify;
     }
     if (out.answer != CacheAnswer::Verify) l.offered_rays += cost;
@@ -751,30 +812,33 @@ void RayCacheStore::leaving(std::span<const LeavingRadiance> rays) {
       ++c.verified;
       ++c.traced;
       c.traced_rays += r.rays;
+      if (averaging_) break; // a path sample: its error is mostly noise; it refines the texel
       const vec3 e = r.throughput * (r.cached - r.radiance);
       c.err_sum += double(glm::dot(e, e));
       ++c.err_samples;
       continue;
     }
     case CacheAnswer::Trace:
+      ++c.traced;
+      c.traced_rays += r.rays;
       break;
     }
-    ++c.traced;
-    c.traced_rays += r.rays;
     const std::uint32_t ti = texel_of(r.direction, c.resolution);
-    if (c.texels[ti].valid()) continue; // only outdated texels are written (the paper)
+    // Only outdated texels are written (the paper); path mode's average every sample.
+    if (!averaging_ && c.texels[ti].valid()) continue;
     const float distance =
         std::isinf(r.hit_t) ? r.hit_t : glm::length(r.origin + r.direction * r.hit_t - c.centre);
     Candidate cand;
     cand.cube = std::uint32_t(ci);
     cand.texel = ti;
     cand.pixel = r.pixel;
-    cand.order = (r.depth << 4) | std::uint32_t(r.kind);
+    cand.order = (r.sample << 12) | (r.depth << 4) | std::uint32_t(r.kind);
     std::uint32_t bx, by;
     std::memcpy(&bx, &r.direction.x, 4);
     std::memcpy(&by, &r.direction.y, 4);
     cand.tie = (std::uint64_t(bx) << 32) | by;
     cand.value = make_texel(r.radiance, distance, r.hit_entity, r.seen, r.rays);
+    cand.radiance = r.radiance;
     candidates_.push_back(cand);
   }
 }
@@ -790,10 +854,27 @@ std::uint64_t RayCacheStore::apply_writes() {
     return a.tie < b.tie;
   };
   std::sort(candidates_.begin(), candidates_.end(), key_less);
+  // Path mode: each texel's samples summed in that order, into its first candidate.
+  struct Sum {
+    vec3 radiance{0.0f};
+    std::uint32_t n = 0;
+    std::uint16_t seen = 0;
+  };
   std::vector<Candidate> unique;
-  for (const Candidate& c : candidates_)
-    if (unique.empty() || unique.back().cube != c.cube || unique.back().texel != c.texel)
+  std::vector<Sum> sums;
+  for (const Candidate& c : candidates_) {
+    if (unique.empty() || unique.back().cube != c.cube || unique.back().texel != c.texel) {
       unique.push_back(c);
+      sums.push_back(Sum{});
+    }
+    if (averaging_) {
+      Sum& s = sums.back();
+      s.radiance += c.radiance;
+      ++s.n;
+      s.seen |= c.value.seen | (c.value.hit != kNoInstance ? seen_bit16(c.value.hit) : 0);
+    }
+  }
+  for (std::size_t k = 0; k < unique.size(); ++k) unique[k].group = std::uint32_t(k);
   if (settings_.fill_budget != 0 && unique.size() > settings_.fill_budget) {
     // Spread the budget over the cubes' faces rather than filling from one corner.
     std::stable_sort(unique.begin(), unique.end(), [&](const Candidate& a, const Candidate& b) {
@@ -802,7 +883,15 @@ std::uint64_t RayCacheStore::apply_writes() {
     });
     unique.resize(settings_.fill_budget);
   }
-  for (const Candidate& c : unique) cubes_[c.cube]->store(c.texel, c.value);
+  for (const Candidate& c : unique) {
+    if (averaging_) {
+      const Sum& s = sums[c.group];
+      cubes_[c.cube]->accumulate(c.texel, s.radiance, s.n, c.value, s.seen,
+                                 std::max(1u, settings_.path_samples));
+    } else {
+      cubes_[c.cube]->store(c.texel, c.value);
+    }
+  }
   return unique.size();
 }
 
@@ -823,14 +912,21 @@ void RayCacheStore::decide(Cube& c, double ns_per_ray, double frame_rays) {
   // the image's 3·N values; the bound is shared by the enabled cubes.
   const double pixels = double(width_) * double(height_);
   const std::uint64_t accepted = c.used + c.verified;
-  if (c.err_samples > 0) {
+  if (c.err_samples > 0 && !averaging_) {
     const double mse = c.err_sum / double(c.err_samples) * double(accepted) / (3.0 * pixels);
     c.estimated_psnr = mse > 0.0 ? -10.0 * std::log10(mse) : 200.0;
   }
   std::size_t enabled = 0;
   for (const auto& other : cubes_) enabled += other->enabled ? 1 : 0;
   const double bound = settings_.max_error_db + 10.0 * std::log10(double(std::max<std::size_t>(1, enabled)));
-  if (c.err_samples >= kMinErrorSamples) {
+  if (averaging_ && c.evaluating) {
+    // A traced path sample differs from the texel's mean mostly by its own noise, so verified
+    // samples cannot estimate the cache's error: path mode decides on speed only.
+    c.evaluating = false;
+    c.reason = std::string("path mode: ") + lookup_mode_name(c.mode) +
+               " mode, decided on speed only (the error bound is not checked)";
+  }
+  if (c.err_samples >= kMinErrorSamples && !averaging_) {
     if (c.estimated_psnr < bound) {
       const std::string was = lookup_mode_name(c.mode);
       const double psnr = c.estimated_psnr;
@@ -901,7 +997,8 @@ void RayCacheStore::end_frame(double trace_ms, std::uint64_t rays) {
     n.verified += c.verified;
     n.texels += c.texels.size();
     n.valid += c.valid;
-    n.memory_bytes += c.texels.size() * sizeof(Texel) + c.edges.size() * sizeof(std::uint32_t);
+    n.memory_bytes += c.texels.size() * sizeof(Texel) + c.probe.size() * sizeof(ProbeTexel) +
+                      c.edges.size() * sizeof(std::uint32_t);
     CubeReport r;
     r.entity = c.owner.index;
     r.resolution = c.resolution;

@@ -60,6 +60,14 @@ inline constexpr std::uint8_t kTexelPrefilled = 2;
   return std::uint16_t(1u << (entity_index & 15u));
 }
 
+/// Path mode's per-texel radiance probe: the sum and count of the path samples that left the
+/// owner through the texel (a texel serves lookups once it averages CacheSettings::path_samples).
+struct ProbeTexel {
+  float sum[3] = {0.0f, 0.0f, 0.0f};
+  std::uint32_t count = 0;
+};
+static_assert(sizeof(ProbeTexel) == 16);
+
 /// A world-space bounding sphere.
 struct Sphere {
   vec3 centre{0.0f};
@@ -73,6 +81,7 @@ struct CubeView {
   std::uint32_t resolution;
   vec3 centre;
   std::span<const Texel> texels;
+  std::span<const ProbeTexel> probe; ///< path mode: per texel (empty in other modes)
   LookupMode mode;
   bool enabled;
   float cos_tau;
@@ -104,12 +113,15 @@ public:
   InvalidationStats invalidate(ecs::Registry& registry, const SceneLayer& layer);
 
   /// Traces every outdated texel of every enabled cube from the cube's centre (passing through
-  /// its owner) and stores the result: the ideal, fully filled cache (--cache-prefill).
+  /// its owner) and stores the result: the ideal, fully filled cache (--cache-prefill). Nothing
+  /// in path mode (its texels average path samples, not one traced value).
   std::uint64_t prefill(const Tracer& tracer, const SceneLayer& layer,
                         const TraceSettings& trace);
 
   // RadianceHook
-  void begin_frame(std::uint32_t width, std::uint32_t height) override;
+  /// A frame in a different estimator than the last (Whitted's exact radiance, path mode's
+  /// one-sample estimates, which include indirect light) starts every cube afresh.
+  void begin_frame(std::uint32_t width, std::uint32_t height, TraceMode mode) override;
   [[nodiscard]] bool wants_lookups() const override;
   void lookup(std::span<const LeavingQuery> queries,
               std::span<CachedRadiance> answers) const override;
@@ -144,6 +156,7 @@ private:
   std::uint32_t width_ = 1, height_ = 1;
   std::uint64_t frame_ = 0;
   bool lookups_ = false;
+  bool averaging_ = false; ///< path mode: texels average samples (the probes)
   CacheCounts counts_;
   InvalidationStats last_invalidation_;
   std::uint64_t pending_prefilled_ = 0;

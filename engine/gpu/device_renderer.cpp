@@ -345,7 +345,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
   const auto start = std::chrono::steady_clock::now();
   const std::uint32_t width = out.width(), height = out.height();
   const std::uint32_t pixels = width * height;
-  if (store != nullptr) store->begin_frame(width, height);
+  if (store != nullptr) store->begin_frame(width, height, settings.mode);
   try {
     upload_tables(layer);
     const SceneFeatures& scene = layer.emitters().features();

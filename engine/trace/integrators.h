@@ -85,6 +85,26 @@ struct Path {
   std::uint32_t slot;   ///< its sample's radiance entry (PathWave::radiance)
   std::uint32_t pixel;  ///< image index: the sampler's stream
   std::uint32_t sample; ///< index in the pixel's sequence
+  /// With a radiance hook: the innermost open leaving record of the path (PathWave::records;
+  /// kNoInstance: none), whose `parent` links lead to the enclosing ones.
+  std::uint32_t leaving;
+};
+
+/// A ray that left an object on a path (with a radiance hook), from the wave that spawned it to
+/// the end of its batch: every later contribution to its path's sample is added to `sum` (and
+/// to its enclosing records'), so its radiance is sum / throughput at the end.
+struct PathLeaving {
+  LeavingRadiance ray; ///< radiance, hit_t, hit_entity, seen and rays filled as the path goes on
+  vec3 sum;            ///< contributions to the sample since the ray left (throughput-weighted)
+  std::uint32_t parent; ///< the enclosing record of the same path (kNoInstance: none)
+};
+
+/// A path of the next wave whose ray leaves an object outwards (offered to the hook).
+struct PathExit {
+  std::uint32_t path;     ///< index in PathWave::paths
+  std::uint32_t instance; ///< the instance it leaves
+  RayKind kind;
+  vec3 weight; ///< the factor the bounce put on the throughput
 };
 
 /// Path mode's waves: the live paths and their rays (compacted every wave), the hits, one
@@ -100,6 +120,17 @@ struct PathWave {
   std::vector<std::uint32_t> shadow_slot;
   std::vector<vec3> shadow_value;
   std::vector<std::uint8_t> blocked;
+  // With a radiance hook: leaving records of the batch, each shadow ray's record chain, the
+  // paths of the next wave that leave an object (index in `paths`), the wave's lookups.
+  std::vector<PathLeaving> records;
+  std::vector<std::uint32_t> shadow_chain;
+  std::vector<PathExit> exits, wave_exits;
+  std::vector<LeavingQuery> queries;
+  std::vector<CachedRadiance> answers;
+  std::vector<Ray> confirm_rays;
+  std::vector<std::uint32_t> confirm_index;
+  std::vector<std::uint8_t> confirm_blocked, served;
+  std::vector<LeavingRadiance> delivered;
 };
 
 /// A worker's scratch, reused from tile to tile.

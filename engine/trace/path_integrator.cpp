@@ -4,6 +4,12 @@
 // compacts the survivors into the next wave. Direct lighting mixes light and BSDF sampling with
 // the power heuristic (Veach & Guibas 1995); paths end by Russian roulette or at the depth limit.
 // docs/design/path-tracing.md describes the estimator.
+//
+// With a radiance hook (ray-cache cubes), a ray that leaves an object outwards is first offered to
+// the hook, which may serve it from its cache: the path then ends with the cached radiance. A
+// traced one opens a leaving record that collects every later contribution to its sample, so at
+// the end of the batch its radiance — the rest of the path divided by its throughput, a
+// one-sample estimate — goes to the hook (docs/design/ray-cache.md, "Path mode").
 
 #include "specula/trace/area_lights.h"
 #include "specula/trace/integrators.h"
@@ -61,7 +67,7 @@ class PathTile {
 public:
   PathTile(const FrameInputs& frame, TileScratch& s, RayCounts& counts)
       : frame_(frame), tables_(frame.tables), settings_(frame.settings), w_(s.path),
-        primary_(s.primary), counts_(counts), emitters_(*frame.emitters) {}
+        primary_(s.primary), counts_(counts), emitters_(*frame.emitters), hook_(frame.hook) {}
 
   void run(const PacketTile& tile) {
     const std::size_t n = primary_.size();
@@ -90,6 +96,8 @@ private:
     w_.radiance.assign(n * count, vec3(0.0f));
     w_.paths.clear();
     w_.rays.clear();
+    w_.records.clear();
+    w_.exits.clear();
     // Wave 0: the primary hits, shaded once per pixel and continued by each of its samples.
     for (std::uint32_t i = 0; i < n; ++i) {
       const Hit hit = primary_.hit(i);
@@ -102,6 +110,7 @@ private:
         p.slot = i * count + s;
         p.pixel = w_.pixel[i];
         p.sample = settings_.sample_offset + first + s;
+        p.leaving = kNoInstance;
         w_.hit_paths.push_back(p);
       }
       shade_pixel(hit, d, count);
@@ -110,14 +119,23 @@ private:
     for (std::uint32_t depth = 1; !w_.paths.empty(); ++depth) {
       w_.wave_paths.swap(w_.paths);
       w_.wave_rays.swap(w_.rays);
+      w_.wave_exits.swap(w_.exits);
       w_.paths.clear();
       w_.rays.clear();
+      w_.exits.clear();
+      if (hook_ != nullptr) {
+        open_leaving(depth);
+        for (const Path& p : w_.wave_paths) count_ray(p.leaving);
+      }
       w_.hits.resize(w_.wave_rays.size());
       frame_.tracer.intersect(w_.wave_rays, w_.hits);
-      for (std::size_t k = 0; k < w_.wave_paths.size(); ++k)
+      for (std::size_t k = 0; k < w_.wave_paths.size(); ++k) {
+        if (hook_ != nullptr) note_hit(w_.wave_paths[k].leaving, w_.hits[k]);
         shade(w_.wave_paths[k], w_.hits[k], w_.wave_rays[k].direction, depth);
+      }
       trace_shadows();
     }
+    if (hook_ != nullptr) deliver_leaving();
     for (std::uint32_t i = 0; i < n; ++i)
       for (std::uint32_t s = 0; s < count; ++s)
         w_.sum[i] += finite_or_counted(w_.radiance[i * count + s], counts_);
@@ -144,7 +162,8 @@ private:
   /// The primary hit of one pixel for the `count` paths last pushed to w_.hit_paths.
   void shade_pixel(const Hit& hit, const vec3& d, std::uint32_t count) {
     if (!hit.hit()) {
-      for (const Path& p : w_.hit_paths) w_.radiance[p.slot] += p.throughput * settings_.background;
+      for (const Path& p : w_.hit_paths)
+        contribute(p.slot, p.leaving, p.throughput * settings_.background);
       w_.hit_paths.clear();
       return;
     }
@@ -155,7 +174,7 @@ private:
 
   void shade(const Path& p, const Hit& hit, const vec3& d, std::uint32_t depth) {
     if (!hit.hit()) {
-      w_.radiance[p.slot] += p.throughput * settings_.background;
+      contribute(p.slot, p.leaving, p.throughput * settings_.background);
       return;
     }
     shade_vertex(p, vertex(hit, d), d, depth);
@@ -179,7 +198,6 @@ private:
   void shade_vertex(const Path& p, const Vertex& v, const vec3& d, std::uint32_t depth) {
     const gpu::GpuMaterial& m = *v.m;
     const ShadingPoint& sp = v.sp;
-    vec3& radiance = w_.radiance[p.slot];
     if constexpr (kArea) {
       if (m.emission != vec3(0.0f)) {
         float weight = 1.0f;
@@ -195,7 +213,7 @@ private:
                   p.bsdf_pdf, area_light_pdf(emitters_.triangles()[e], p.previous, sp.position));
           }
         }
-        if (weight > 0.0f) radiance += p.throughput * m.emission * weight;
+        if (weight > 0.0f) contribute(p.slot, p.leaving, p.throughput * m.emission * weight);
       }
     }
 
@@ -217,7 +235,7 @@ private:
         // Whitted's own shadow rays (shading.h), so that with nothing else the images agree.
         for (const gpu::GpuLight& light : tables_.lights)
           if (const auto shadow = punctual_shadow_ray(light, sp, origin, f))
-            add_shadow(shadow->ray, p.slot, p.throughput * shadow->value);
+            add_shadow(shadow->ray, p, p.throughput * shadow->value);
       }
       // Area lights are sampled towards the next vertex, which the last one does not have (the
       // BSDF strategy would need a ray beyond the depth limit).
@@ -233,7 +251,7 @@ private:
                                      ? power_heuristic(ls.pdf, p_diffuse * cos_theta * kInvPi)
                                      : 1.0f;
             // Stop short of the light point, relatively: its own triangle must not block it.
-            add_shadow(Ray{origin, 0.0f, ls.to_light, ls.distance * (1.0f - 1e-4f)}, p.slot,
+            add_shadow(Ray{origin, 0.0f, ls.to_light, ls.distance * (1.0f - 1e-4f)}, p,
                        p.throughput * f * ls.emission * (cos_theta * weight / ls.pdf));
           }
         }
@@ -247,6 +265,7 @@ private:
     Path next = p;
     Ray ray;
     RayKind kind = RayKind::Reflection;
+    bool exits = false; // a specular ray leaving the object outwards
     if (!(kMirror || kDielectric) || u.dim(0) * total < diffuse) {
       const vec3 wi = cosine_direction(sp.shading_normal, u.dim(2), u.dim(3));
       const float cos_theta = glm::dot(wi, sp.shading_normal);
@@ -271,6 +290,7 @@ private:
         direction = glm::normalize(r);
       }
       kind = reflect ? RayKind::Reflection : RayKind::Refraction;
+      exits = reflect == sp.front_face;
       ray = Ray{offset_ray_origin(sp.spawn_point, sp.spawn_error,
                                   reflect ? sp.geometric_normal : -sp.geometric_normal),
                 0.0f, direction, std::numeric_limits<float>::infinity()};
@@ -283,14 +303,151 @@ private:
     if (!(max_component(next.throughput) > 0.0f)) return; // a black surface ends it
     next.previous = sp.position;
     ++counts_[kind];
+    if (hook_ != nullptr && exits)
+      w_.exits.push_back(PathExit{std::uint32_t(w_.paths.size()), v.instance, kind,
+                                  next.throughput / glm::max(p.throughput, vec3(1e-30f))});
     w_.paths.push_back(next);
     w_.rays.push_back(ray);
   }
 
-  void add_shadow(const Ray& ray, std::uint32_t slot, const vec3& value) {
+  void add_shadow(const Ray& ray, const Path& p, const vec3& value) {
     w_.shadow_rays.push_back(ray);
-    w_.shadow_slot.push_back(slot);
+    w_.shadow_slot.push_back(p.slot);
+    w_.shadow_chain.push_back(p.leaving);
     w_.shadow_value.push_back(value);
+    if (settings_.shadows) count_ray(p.leaving);
+  }
+
+  /// Adds to a sample's radiance, and to every leaving record open on its path.
+  void contribute(std::uint32_t slot, std::uint32_t chain, const vec3& value) {
+    w_.radiance[slot] += value;
+    for (; chain != kNoInstance; chain = w_.records[chain].parent) w_.records[chain].sum += value;
+  }
+
+  void count_ray(std::uint32_t chain) {
+    for (; chain != kNoInstance; chain = w_.records[chain].parent) ++w_.records[chain].ray.rays;
+  }
+
+  /// The first hit of a record's ray, and what every open record of the path saw.
+  void note_hit(std::uint32_t chain, const Hit& hit) {
+    if (chain == kNoInstance) return;
+    LeavingRadiance& inner = w_.records[chain].ray;
+    const std::uint32_t entity =
+        hit.hit() ? tables_.instances[hit.instance].entity_index : kNoInstance;
+    if (std::isnan(inner.hit_t)) {
+      inner.hit_t = hit.hit() ? hit.t : std::numeric_limits<float>::infinity();
+      inner.hit_entity = entity;
+    }
+    if (entity == kNoInstance) return;
+    const std::uint32_t bit = entity_bit(entity);
+    for (; chain != kNoInstance; chain = w_.records[chain].parent) w_.records[chain].ray.seen |= bit;
+  }
+
+  /// The wave's rays that leave an object: offered to the hook (when it wants lookups); those it
+  /// serves end their path with the cached radiance (UseIfClear after an occlusion ray confirms
+  /// nothing is in the way) and leave the wave; the others open a leaving record.
+  void open_leaving(std::uint32_t depth) {
+    if (w_.wave_exits.empty()) return;
+    const std::size_t m = w_.wave_exits.size();
+    w_.answers.assign(m, CachedRadiance{});
+    if (frame_.lookups) {
+      w_.queries.clear();
+      for (const PathExit& e : w_.wave_exits) {
+        const Path& p = w_.wave_paths[e.path];
+        const Ray& r = w_.wave_rays[e.path];
+        w_.queries.push_back(
+            LeavingQuery{e.instance, p.pixel, depth, r.origin, r.direction, p.sample});
+      }
+      hook_->lookup(w_.queries, w_.answers);
+      w_.confirm_rays.clear();
+      w_.confirm_index.clear();
+      for (std::size_t q = 0; q < m; ++q)
+        if (w_.answers[q].answer == CacheAnswer::UseIfClear) {
+          const Ray& r = w_.wave_rays[w_.wave_exits[q].path];
+          w_.confirm_rays.push_back(Ray{r.origin, 0.0f, r.direction, w_.answers[q].clear_distance});
+          w_.confirm_index.push_back(std::uint32_t(q));
+        }
+      if (!w_.confirm_rays.empty()) {
+        w_.confirm_blocked.resize(w_.confirm_rays.size());
+        counts_[RayKind::Shadow] += w_.confirm_rays.size();
+        frame_.tracer.occluded(w_.confirm_rays, w_.confirm_blocked);
+      }
+    }
+    w_.served.assign(w_.wave_paths.size(), 0);
+    std::size_t confirm = 0;
+    for (std::size_t q = 0; q < m; ++q) {
+      const PathExit& e = w_.wave_exits[q];
+      Path& p = w_.wave_paths[e.path];
+      const Ray& r = w_.wave_rays[e.path];
+      const CachedRadiance& a = w_.answers[q];
+      PathLeaving rec;
+      LeavingRadiance& l = rec.ray;
+      l.from = tables_.entity(e.instance);
+      l.instance = e.instance;
+      l.kind = e.kind;
+      l.exits = true;
+      l.answer = a.answer;
+      l.depth = depth;
+      l.pixel = p.pixel;
+      l.sample = p.sample;
+      l.origin = r.origin;
+      l.direction = r.direction;
+      l.weight = e.weight;
+      l.throughput = p.throughput;
+      l.radiance = vec3(0.0f);
+      l.cached = a.radiance;
+      l.hit_t = std::numeric_limits<float>::quiet_NaN();
+      l.hit_entity = kNoInstance;
+      l.seen = 0;
+      l.rays = 0;
+      rec.sum = vec3(0.0f);
+      rec.parent = p.leaving;
+      if (a.answer == CacheAnswer::UseIfClear) {
+        l.rays = 1; // the confirming ray
+        l.answer = w_.confirm_blocked[confirm++] != 0 ? CacheAnswer::Trace : CacheAnswer::Use;
+      }
+      if (l.answer == CacheAnswer::Use) {
+        // Served: the path ends here with the cached radiance (its record only counts).
+        l.radiance = a.radiance;
+        l.seen = a.seen;
+        l.hit_t = std::numeric_limits<float>::infinity();
+        contribute(p.slot, p.leaving, p.throughput * a.radiance);
+        w_.served[e.path] = 1;
+        rec.parent = kNoInstance;
+        w_.records.push_back(rec);
+        --counts_[e.kind];
+        continue;
+      }
+      p.leaving = std::uint32_t(w_.records.size());
+      w_.records.push_back(rec);
+    }
+    // The wave keeps what must still be traced, in order.
+    std::size_t kept = 0;
+    for (std::size_t k = 0; k < w_.wave_paths.size(); ++k) {
+      if (w_.served[k] != 0) continue;
+      w_.wave_paths[kept] = w_.wave_paths[k];
+      w_.wave_rays[kept] = w_.wave_rays[k];
+      ++kept;
+    }
+    w_.wave_paths.resize(kept);
+    w_.wave_rays.resize(kept);
+  }
+
+  /// The batch's leaving records to the hook, in the order they were opened (deterministic): a
+  /// traced ray's radiance is what its path gathered after it left, over its throughput.
+  void deliver_leaving() {
+    if (w_.records.empty()) return;
+    w_.delivered.clear();
+    for (PathLeaving& rec : w_.records) {
+      LeavingRadiance& l = rec.ray;
+      if (l.answer != CacheAnswer::Use) {
+        for (int c = 0; c < 3; ++c)
+          l.radiance[c] = l.throughput[c] > 0.0f ? rec.sum[c] / l.throughput[c] : 0.0f;
+        if (!std::isfinite(l.radiance.x + l.radiance.y + l.radiance.z)) continue;
+      }
+      w_.delivered.push_back(l);
+    }
+    hook_->leaving(w_.delivered);
   }
 
   /// The wave's shadow rays in one batch; each unblocked one adds its value to its sample, in
@@ -305,9 +462,10 @@ private:
       std::fill(w_.blocked.begin(), w_.blocked.end(), std::uint8_t{0});
     }
     for (std::size_t k = 0; k < w_.shadow_rays.size(); ++k)
-      if (w_.blocked[k] == 0) w_.radiance[w_.shadow_slot[k]] += w_.shadow_value[k];
+      if (w_.blocked[k] == 0) contribute(w_.shadow_slot[k], w_.shadow_chain[k], w_.shadow_value[k]);
     w_.shadow_rays.clear();
     w_.shadow_slot.clear();
+    w_.shadow_chain.clear();
     w_.shadow_value.clear();
   }
 
@@ -318,6 +476,7 @@ private:
   const PrimaryHits& primary_;
   RayCounts& counts_;
   const EmitterTable& emitters_;
+  RadianceHook* hook_;
 };
 
 template <bool kArea, bool kPunctual, bool kMirror, bool kDielectric>

@@ -10,10 +10,15 @@
 /// seen in a sphere: the inner ray is delivered to the inner sphere, and its contribution is part
 /// of the outer ray's radiance delivered to the outer one). A pixel is its primary hit's local
 /// shading plus the sum over the rays leaving that hit of weight × radiance.
+///
+/// In path mode a leaving ray's radiance is a one-sample Monte Carlo estimate (the rest of its
+/// path: emission, next-event estimates and bounces it met, divided by its throughput): a hook
+/// that caches it averages the samples (RadianceHook::begin_frame says which mode the frame is).
 
 #include "specula/core/math.h"
 #include "specula/ecs/entity.h"
 #include "specula/trace/stats.h"
+#include "specula/trace/trace_mode.h"
 
 #include <cstdint>
 #include <span>
@@ -35,6 +40,7 @@ struct LeavingQuery {
   std::uint32_t depth;
   vec3 origin;
   vec3 direction; ///< unit
+  std::uint32_t sample = 0; ///< path mode: the sample's index in the pixel's sequence
 };
 
 struct CachedRadiance {
@@ -60,6 +66,7 @@ struct LeavingRadiance {
   CacheAnswer answer;     ///< how it was served (Trace when no lookup was made)
   std::uint32_t depth;    ///< 1 for rays leaving a primary hit
   std::uint32_t pixel;    ///< y · width + x of the pixel it serves
+  std::uint32_t sample;   ///< path mode: the sample's index in the pixel's sequence (else 0)
   vec3 origin;            ///< world space
   vec3 direction;         ///< unit, world space
   vec3 weight;     ///< relative to the ray it was spawned by (its share of that ray's radiance)
@@ -75,8 +82,10 @@ struct LeavingRadiance {
 class RadianceHook {
 public:
   virtual ~RadianceHook() = default;
-  /// Called by render_frame before the first tile, with the image size.
-  virtual void begin_frame(std::uint32_t /*width*/, std::uint32_t /*height*/) {}
+  /// Called by render_frame before the first tile, with the image size and the integrator
+  /// (Whitted delivers exact radiance, Path one-sample estimates; Cast and Shadow deliver none).
+  virtual void begin_frame(std::uint32_t /*width*/, std::uint32_t /*height*/,
+                           TraceMode /*mode*/) {}
   /// Whether the integrators should ask lookup() about leaving rays this frame (read once per
   /// frame, after begin_frame).
   [[nodiscard]] virtual bool wants_lookups() const { return false; }

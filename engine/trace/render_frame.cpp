@@ -141,8 +141,10 @@ FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Cam
   if (guides != nullptr) guides->resize(std::size_t(out.width()) * out.height());
   const auto start = std::chrono::steady_clock::now();
   const CameraRays camera_rays(camera, out.width(), out.height(), layer.render_origin());
-  if (hook != nullptr) hook->begin_frame(out.width(), out.height());
-  const bool lookups = hook != nullptr && settings.mode == TraceMode::Whitted && hook->wants_lookups();
+  if (hook != nullptr) hook->begin_frame(out.width(), out.height(), settings.mode);
+  const bool lookups = hook != nullptr &&
+                       (settings.mode == TraceMode::Whitted || settings.mode == TraceMode::Path) &&
+                       hook->wants_lookups();
   const detail::FrameInputs frame{tracer,
                                   layer.tables(),
                                   settings,

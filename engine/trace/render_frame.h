@@ -15,6 +15,7 @@
 #include "specula/scene/components/camera.h"
 #include "specula/trace/radiance_hook.h"
 #include "specula/trace/stats.h"
+#include "specula/trace/trace_mode.h"
 #include "specula/trace/tracer.h"
 
 #include <cstdint>
@@ -23,10 +24,6 @@
 #include <string_view>
 
 namespace specula {
-
-enum class TraceMode { Cast, Whitted, Path, Shadow };
-[[nodiscard]] std::optional<TraceMode> parse_trace_mode(std::string_view name);
-[[nodiscard]] const char* trace_mode_name(TraceMode mode);
 
 /// How path mode reaches area lights: multiple importance sampling of both strategies (power
 /// heuristic), BSDF sampling only (emitters found by chance), or light sampling only (next-event

@@ -107,6 +107,7 @@ std::string stats_to_json(const RunStats& stats) {
                                         {"resolution", s.cache_resolution},
                                         {"fill_budget", s.cache_fill_budget},
                                         {"prefill", s.cache_prefill},
+                                        {"samples", s.cache_samples},
                                         {"max_error_db", s.max_error_db}}},
                    {"spp", s.spp},
                    {"shadow_samples", s.shadow_samples},
@@ -229,6 +230,7 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
     s.cache_resolution = read<std::uint32_t>(cache, "resolution", name, at);
     s.cache_fill_budget = read<std::uint32_t>(cache, "fill_budget", name, at);
     s.cache_prefill = read<bool>(cache, "prefill", name, at);
+    read_optional(cache, "samples", s.cache_samples, name, at);
     s.max_error_db = read<double>(cache, "max_error_db", name, at);
   } else if (!cache.is_string()) {
     // Files from before the cubes landed gave a bare resolution.

@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <mutex>
 #include <filesystem>
 #include <numbers>
 
@@ -464,6 +465,182 @@ TEST(RayCachePolicy, AutoOnTheMirrorSpheresKeepsTheBoundOrStopsCaching) {
                  reference.registry.resource<RenderJob>().image),
             40.0)
       << r.mode << ": " << r.reason;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Path mode: texels average the path samples that leave through them (a radiance probe).
+
+/// Forwards everything to the store and keeps the leaving rays it was handed.
+class Tap final : public RadianceHook {
+public:
+  explicit Tap(std::shared_ptr<RayCacheStore> store) : store_(std::move(store)) {}
+  void begin_frame(std::uint32_t w, std::uint32_t h, TraceMode mode) override {
+    store_->begin_frame(w, h, mode);
+  }
+  [[nodiscard]] bool wants_lookups() const override { return store_->wants_lookups(); }
+  void lookup(std::span<const LeavingQuery> q, std::span<CachedRadiance> a) const override {
+    store_->lookup(q, a);
+  }
+  void leaving(std::span<const LeavingRadiance> rays) override {
+    {
+      const std::lock_guard lock(mutex_);
+      rays_.insert(rays_.end(), rays.begin(), rays.end());
+    }
+    store_->leaving(rays);
+  }
+  void end_frame(double ms, std::uint64_t rays) override { store_->end_frame(ms, rays); }
+  void report(CacheCounts& out) const override { store_->report(out); }
+  std::vector<LeavingRadiance> rays_;
+
+private:
+  std::shared_ptr<RayCacheStore> store_;
+  std::mutex mutex_;
+};
+
+/// The world's job switched to path mode (1 sample per pixel per frame, accumulated).
+void path_mode(World& w, std::uint32_t seed = 0) {
+  RenderJob& job = w.reg.resource<RenderJob>();
+  job.settings.mode = TraceMode::Path;
+  job.settings.spp = 1;
+  job.settings.seed = seed;
+}
+
+CacheSettings path_cache(std::uint32_t samples) {
+  CacheSettings s = on(LookupMode::Direction);
+  s.path_samples = samples;
+  return s;
+}
+
+TEST(RayCachePathMode, TexelsAverageTheSamplesThatLeftThroughThem) {
+  World w;
+  make_world(w, path_cache(3), 16, distant_surroundings, 64);
+  path_mode(w);
+  auto tap = std::make_shared<Tap>(w.reg.resource<cache::RayCaches>().store);
+  w.reg.resource<RenderJob>().hook = tap;
+  for (int k = 0; k < 4; ++k) (void)frame(w);
+  const cache::CubeView cube = store_of(w.reg).cube(0);
+  ASSERT_EQ(cube.probe.size(), cube.texels.size());
+  // Every traced (or refining) sample that left the mirror, by the texel its direction picks.
+  std::vector<glm::dvec3> sum(cube.texels.size(), glm::dvec3(0.0));
+  std::vector<std::uint32_t> count(cube.texels.size(), 0);
+  std::size_t served = 0;
+  for (const LeavingRadiance& r : tap->rays_) {
+    ASSERT_TRUE(r.exits);
+    ASSERT_EQ(r.instance, cube.instance);
+    if (r.answer == CacheAnswer::Use) {
+      ++served;
+      continue;
+    }
+    const std::uint32_t t = cache::texel_of(r.direction, cube.resolution);
+    sum[t] += glm::dvec3(r.radiance);
+    ++count[t];
+  }
+  std::size_t sampled = 0, valid = 0;
+  for (std::size_t i = 0; i < cube.texels.size(); ++i) {
+    ASSERT_EQ(cube.probe[i].count, count[i]) << "texel " << i;
+    EXPECT_EQ(cube.texels[i].valid(), count[i] >= 3) << "texel " << i;
+    if (count[i] == 0) continue;
+    ++sampled;
+    valid += cube.texels[i].valid() ? 1 : 0;
+    const glm::dvec3 mean = sum[i] / double(count[i]);
+    const glm::dvec3 probe =
+        glm::dvec3(cube.probe[i].sum[0], cube.probe[i].sum[1], cube.probe[i].sum[2]) /
+        double(cube.probe[i].count);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(probe[c], mean[c], 1e-4 * (1.0 + mean[c]));
+    // The texel's colour is the mean (in half precision).
+    const vec3 colour = cache::texel_radiance(cube.texels[i]);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(colour[c], mean[c], 2e-3 * (1.0 + mean[c]));
+  }
+  EXPECT_GT(sampled, 200u);
+  EXPECT_GT(valid, 20u);
+  EXPECT_GT(served, 0u) << "valid texels serve the later frames' paths";
+}
+
+TEST(RayCachePathMode, ServedPathsEndAtTheCacheAndTheImageConvergesToUncached) {
+  // Surroundings at infinity: a texel's mean is what every path leaving in its direction would
+  // bring back, so the cached image converges to the uncached one; served paths end there.
+  World cached, uncached, other_seed;
+  make_world(cached, path_cache(4), 32, distant_surroundings, 48);
+  make_world(uncached, CacheSettings{}, 32, distant_surroundings, 48);
+  make_world(other_seed, CacheSettings{}, 32, distant_surroundings, 48);
+  path_mode(cached);
+  path_mode(uncached);
+  path_mode(other_seed, 7);
+  Framebuffer a{1, 1}, b{1, 1}, c{1, 1};
+  for (int k = 0; k < 64; ++k) {
+    a = frame(cached);
+    b = frame(uncached);
+    c = frame(other_seed);
+  }
+  const FrameStats& last = cached.reg.resource<RenderJob>().last;
+  const FrameStats& plain = uncached.reg.resource<RenderJob>().last;
+  EXPECT_GT(last.cache.hits, last.cache.lookups / 2);
+  EXPECT_LT(last.rays[RayKind::Reflection], plain.rays[RayKind::Reflection]);
+  EXPECT_LT(last.rays.total(), plain.rays.total());
+  // The cache's error against uncached is of the order of the noise between two uncached runs.
+  const double noise = psnr(b, c);
+  EXPECT_GE(psnr(a, b), noise - 3.0) << "two uncached seeds: " << noise << " dB";
+  double mean_a = 0.0, mean_b = 0.0;
+  for (std::size_t i = 0; i < a.pixel_count(); ++i) {
+    mean_a += double(a.pixels()[i].x + a.pixels()[i].y + a.pixels()[i].z);
+    mean_b += double(b.pixels()[i].x + b.pixels()[i].y + b.pixels()[i].z);
+  }
+  EXPECT_NEAR(mean_a / mean_b, 1.0, 0.02);
+}
+
+TEST(RayCachePathMode, FramesAndProbesAreTheSameWhateverTheThreadCount) {
+  World one, two;
+  make_world(one, path_cache(2), 16, distant_surroundings, 48, vec3(0.0f, 0.3f, 4.0f), 1);
+  make_world(two, path_cache(2), 16, distant_surroundings, 48, vec3(0.0f, 0.3f, 4.0f), 2);
+  path_mode(one);
+  path_mode(two);
+  one.reg.resource<RenderJob>().settings.tile_size = 8;
+  for (int k = 0; k < 4; ++k) {
+    ASSERT_EQ(rmse(frame(one), frame(two)), 0.0) << "frame " << k;
+    orbit(one, 2.0f);
+    orbit(two, 2.0f);
+  }
+  const cache::CubeView a = store_of(one.reg).cube(0), b = store_of(two.reg).cube(0);
+  ASSERT_EQ(a.probe.size(), b.probe.size());
+  EXPECT_EQ(std::memcmp(a.probe.data(), b.probe.data(), a.probe.size_bytes()), 0);
+  EXPECT_EQ(std::memcmp(a.texels.data(), b.texels.data(), a.texels.size_bytes()), 0);
+}
+
+TEST(RayCachePathMode, SwitchingBetweenWhittedAndPathStartsTheCubesAfresh) {
+  World w;
+  make_world(w, path_cache(2), 16, distant_surroundings, 48);
+  for (int k = 0; k < 2; ++k) (void)frame(w); // Whitted: exact values, no indirect light
+  ASSERT_GT(store_of(w.reg).counts().valid, 0u);
+  path_mode(w);
+  (void)frame(w);
+  const cache::CubeView cube = store_of(w.reg).cube(0);
+  ASSERT_EQ(cube.probe.size(), cube.texels.size());
+  for (std::size_t i = 0; i < cube.texels.size(); ++i) {
+    if (cube.texels[i].valid()) {
+      ASSERT_GE(cube.probe[i].count, 2u) << "a Whitted value survived";
+    }
+  }
+  w.reg.resource<RenderJob>().settings.mode = TraceMode::Whitted;
+  (void)frame(w);
+  EXPECT_TRUE(store_of(w.reg).cube(0).probe.empty());
+}
+
+TEST(RayCachePathMode, AMoveOutdatesSamplesStillBeingAveraged) {
+  // Texels that have samples but not yet enough to serve must lose them too when what they saw
+  // moves: otherwise their mean would mix the old scene into the new one.
+  MovingIntoView build;
+  World w;
+  make_world(w, path_cache(1000), 16, [&](ecs::Registry& r) { build(r); }, 48);
+  path_mode(w);
+  for (int k = 0; k < 3; ++k) (void)frame(w);
+  ASSERT_EQ(store_of(w.reg).counts().valid, 0u);
+  const cache::CubeView before = store_of(w.reg).cube(0);
+  std::uint64_t pending = 0;
+  for (const cache::ProbeTexel& p : before.probe) pending += p.count > 0 ? 1 : 0;
+  ASSERT_GT(pending, 100u);
+  move(w.reg, build.c, vec3(1.2f, 0.0f, 2.5f));
+  (void)frame(w);
+  EXPECT_GT(store_of(w.reg).counts().invalidated, 0u);
 }
 
 } // namespace

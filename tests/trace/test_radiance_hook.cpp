@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <cmath>
 #include <map>
 #include <mutex>
 #include <set>
@@ -38,12 +39,12 @@ struct Rendered {
 };
 
 Rendered render(std::uint32_t max_depth, bool record, std::uint32_t tile = 16,
-                std::uint32_t threads = 2) {
+                std::uint32_t threads = 2, TraceMode mode = TraceMode::Whitted) {
   Rendered run;
   run.scene = load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) /
                          "samples/scenes/mirror_spheres_8.json");
   RenderJob job;
-  job.settings.mode = TraceMode::Whitted;
+  job.settings.mode = mode;
   job.settings.max_depth = max_depth;
   job.settings.background = run.scene.settings.background;
   job.settings.tile_size = tile;
@@ -150,6 +151,48 @@ TEST(RadianceHook, DeliveriesAreTheSameWhateverTheTilesAndThreads) {
   for (const LeavingRadiance& r : b.rays) in_b.emplace(key(r), r.radiance);
   EXPECT_TRUE(in_a == in_b);
   EXPECT_TRUE(a.image == b.image);
+}
+
+TEST(RadianceHook, InPathModeALeavingRayBringsBackTheRestOfItsPath) {
+  // One sample per pixel: a pixel is its primary vertex's own part (emission and next-event
+  // estimates, which the same sample gives with nothing beyond it: max_depth 0) plus, when its
+  // path left the front sphere by a specular bounce, throughput × what that ray brought back.
+  const Rendered full = render(5, true, 16, 2, TraceMode::Path);
+  const Rendered local = render(0, false, 16, 2, TraceMode::Path);
+  const std::size_t n = full.image.pixel_count();
+  std::vector<int> leaving(n, 0);
+  std::vector<vec3> outer(n, vec3(0.0f)), inner(n, vec3(0.0f));
+  for (const LeavingRadiance& r : full.rays) {
+    ASSERT_TRUE(r.exits);
+    ASSERT_EQ(r.answer, CacheAnswer::Trace) << "nothing is cached: every ray is traced";
+    ASSERT_TRUE(std::isfinite(r.radiance.x + r.radiance.y + r.radiance.z));
+    if (r.depth == 1) {
+      ++leaving[r.pixel];
+      outer[r.pixel] = r.throughput * r.radiance;
+    } else if (r.depth == 2) {
+      inner[r.pixel] = r.throughput * r.radiance;
+    }
+  }
+  int checked = 0, mismatched = 0, nested = 0, nested_larger = 0;
+  for (std::size_t p = 0; p < n; ++p) {
+    ASSERT_LE(leaving[p], 1) << "one sample, one path: at most one ray leaves its primary hit";
+    if (leaving[p] == 0) continue;
+    ++checked;
+    const vec3 sum = local.image.pixels()[p] + outer[p];
+    const vec3 got = full.image.pixels()[p];
+    if (glm::any(glm::greaterThan(glm::abs(sum - got), 1e-5f * glm::abs(got) + vec3(1e-6f))))
+      ++mismatched;
+    // A nested leaving ray's contribution is part of the outer one's.
+    if (glm::length(inner[p]) > 0.0f) {
+      ++nested;
+      if (glm::any(glm::lessThan(outer[p], inner[p] * (1.0f - 1e-5f)))) ++nested_larger;
+    }
+  }
+  EXPECT_GT(checked, 500);
+  EXPECT_EQ(mismatched, 0);
+  // (A hidden sphere's path takes its specular lobe about half the time.)
+  EXPECT_GT(nested, 5) << "hidden spheres must be seen in the front sphere";
+  EXPECT_EQ(nested_larger, 0);
 }
 
 } // namespace
