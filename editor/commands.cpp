@@ -106,6 +106,9 @@ cache::CacheSettings parse_cache(const RenderOptions& o) {
   if (o.cache_samples < 1 || o.cache_samples > 65536)
     throw Error("--cache-samples", "must lie in 1 … 65536, got " + std::to_string(o.cache_samples));
   c.path_samples = o.cache_samples;
+  if (o.cache_refresh < 1 || o.cache_refresh > 65536)
+    throw Error("--cache-refresh", "must lie in 1 … 65536, got " + std::to_string(o.cache_refresh));
+  c.path_refresh = o.cache_refresh;
   if (!(o.max_error_db > 0.0 && o.max_error_db < 200.0))
     throw Error("--max-error-db", "must lie in (0, 200)");
   c.max_error_db = o.max_error_db;
@@ -372,6 +375,7 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   stats.settings.cache_fill_budget = cache_settings.fill_budget;
   stats.settings.cache_prefill = cache_settings.prefill;
   stats.settings.cache_samples = cache_settings.path_samples;
+  stats.settings.cache_refresh = cache_settings.path_refresh;
   stats.settings.max_error_db = cache_settings.max_error_db;
   stats.settings.spp = options.spp;
   stats.settings.shadow_samples = options.shadow_samples;

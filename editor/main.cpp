@@ -229,7 +229,14 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   render_cmd
       ->add_option("--cache-samples", render.cache_samples,
-                   "Path mode: path samples a texel averages before it serves lookups")
+                   "Path mode: the (moving-average) sample weight a texel needs before it "
+                   "serves lookups")
+      ->transform(whole_number(1, 65536))
+      ->capture_default_str();
+  render_cmd
+      ->add_option("--cache-refresh", render.cache_refresh,
+                   "Path mode: about this many lookups of a serving texel are traced a frame, "
+                   "for its probe alone (the pixels take its mean)")
       ->transform(whole_number(1, 65536))
       ->capture_default_str();
   render_cmd->add_flag("--cache-prefill", render.cache_prefill,

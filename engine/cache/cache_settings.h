@@ -31,9 +31,11 @@ struct CacheSettings {
   bool prefill = false;           ///< trace every outdated texel from the cube centre each frame
   double max_error_db = 40.0;     ///< Auto: the PSNR against uncached tracing it must keep
   std::uint32_t verify_every = 32; ///< Auto: one accepted lookup in this many is traced to check
-                                   ///< (path mode, any policy: to add a sample to the texel)
-  /// Path mode: samples a texel averages before it serves lookups.
-  std::uint32_t path_samples = 16;
+  /// Path mode: the (moving-average) sample weight a texel needs before it serves lookups.
+  std::uint32_t path_samples = 4;
+  /// Path mode: while a texel serves, about this many of its lookups a frame are traced anyway
+  /// (for the probe alone: the pixels take the texel's mean), so it keeps fresh samples.
+  std::uint32_t path_refresh = 2;
   friend bool operator==(const CacheSettings&, const CacheSettings&) = default;
 };
 

@@ -10,6 +10,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cmath>
@@ -209,11 +210,11 @@ struct RayCacheStore::Cube {
   /// Whether texel i holds anything an invalidation must consider: a valid value, or path
   /// samples still being averaged.
   [[nodiscard]] bool holds(std::uint32_t i) const {
-    return texels[i].valid() || (!probe.empty() && probe[i].count > 0);
+    return texels[i].valid() || (!probe.empty() && probe[i].samples > 0);
   }
   void outdate(std::uint32_t i) {
     Texel& t = texels[i];
-    if (!probe.empty() && probe[i].count > 0) {
+    if (!probe.empty() && probe[i].samples > 0) {
       probe[i] = ProbeTexel{};
       generation = next_generation();
     }
@@ -233,35 +234,46 @@ struct RayCacheStore::Cube {
       ++edges[value.hit];
     }
   }
-  /// Path mode: adds n samples summing to `sum` to texel i's probe. Its first samples set the
-  /// texel's hit, distance and cost (`first`); it serves lookups once it averages `serve_at`.
-  void accumulate(std::uint32_t i, const vec3& sum, std::uint32_t n, const Texel& first,
-                  std::uint16_t seen, std::uint32_t serve_at) {
+  /// Path mode: one frame's batch for texel i — n samples summing to `sum` (n may be 0) and
+  /// the lookups its direction had (`asked`). The batch joins the moving average (ProbeTexel); the
+  /// first samples after an outdate set the texel's hit, distance and cost (`first`); the texel
+  /// serves while the average's weight is at least `serve_at`.
+  void accumulate(std::uint32_t i, const vec3& sum, std::uint32_t n, std::uint32_t asked,
+                  const Texel& first, std::uint16_t seen, std::uint32_t serve_at) {
     if (probe.empty()) probe.assign(texels.size(), ProbeTexel{});
     ProbeTexel& p = probe[i];
+    if (asked > 0) p.lookups = asked;
+    if (n == 0) return;
     Texel& t = texels[i];
-    if (p.count == 0) {
+    if (p.samples == 0) {
       outdate(i);
       t = first;
       t.state = kOutdated;
       t.seen = 0;
     }
-    const std::uint32_t room = 0xffffffffu - p.count;
-    if (n > room) return; // saturated: the mean stays as it is
-    for (int c = 0; c < 3; ++c) p.sum[c] += sum[c];
-    p.count += n;
-    const vec3 mean = vec3(p.sum[0], p.sum[1], p.sum[2]) / float(p.count);
-    const Texel m = make_texel(mean, 0.0f, kNoInstance, 0, 0);
+    for (int c = 0; c < 3; ++c) p.sum[c] = p.sum[c] * (1.0f - kProbeDecay) + sum[c];
+    p.weight = p.weight * (1.0f - kProbeDecay) + float(n);
+    p.samples = n > 0xffffffffu - p.samples ? 0xffffffffu : p.samples + n;
+    const Texel m =
+        make_texel(vec3(p.sum[0], p.sum[1], p.sum[2]) / p.weight, 0.0f, kNoInstance, 0, 0);
     std::copy(std::begin(m.rgb), std::end(m.rgb), std::begin(t.rgb));
     t.seen |= seen;
     generation = next_generation();
-    if (!t.valid() && p.count >= serve_at) {
+    const bool serves = p.weight >= float(serve_at);
+    if (serves == t.valid()) return;
+    if (serves) {
       t.state |= kValid;
       ++valid;
       if (t.hit != kNoInstance) {
         if (t.hit >= edges.size()) edges.resize(t.hit + 1, 0);
         ++edges[t.hit];
       }
+    } else {
+      // Its weight fell below the bound (fewer refreshing samples than the bound needs): it
+      // keeps its samples but stops serving until it has enough again.
+      t.state &= std::uint8_t(~kValid);
+      --valid;
+      if (t.hit < edges.size()) --edges[t.hit];
     }
   }
   std::uint64_t flush() {
@@ -284,6 +296,7 @@ struct RayCacheStore::Candidate {
   Texel value;
   vec3 radiance; ///< path mode: the sample, at full precision
   std::uint32_t group = 0; ///< path mode: its texel's entry in apply_writes' sums
+  bool sample = true;      ///< path mode: false for a served lookup (it only counts)
 };
 
 RayCacheStore::RayCacheStore(CacheSettings settings) : settings_(settings) {
@@ -349,14 +362,7 @@ InvalidationStats RayCacheStore::invalidate(ecs::Registry& registry, const Scene
       cube->resolution = resolution;
       cube->texels.assign(std::size_t(kFaceCount) * resolution * resolution, Texel{});
       if (settings_.policy == CachePolicy::Auto) {
-        int start = 0;
-        for (int r = 0; r < kLadderSize; ++r)
-          if (kLadder[r].mode == settings_.lookup) {
-            start = r;
-            break;
-          }
-        cube->set_rung(start);
-        cube->reason = std::string("starting in ") + lookup_mode_name(cube->mode) + " mode";
+        start_auto(*cube);
       } else {
         cube->set_mode(settings_.lookup, settings_.tau_deg);
         cube->evaluating = false;
@@ -590,12 +596,13 @@ void RayCacheStore::begin_frame(std::uint32_t width, std::uint32_t height, Trace
   if (averaging != averaging_) {
     // Whitted's texels hold exact radiance without indirect light, path mode's the mean of
     // samples that include it: one must not serve the other.
+    averaging_ = averaging;
     for (auto& c : cubes_) {
       c->flush();
       c->probe.clear();
       c->probe.shrink_to_fit();
+      if (settings_.policy == CachePolicy::Auto) start_auto(*c);
     }
-    averaging_ = averaging;
   }
   ++frame_;
   lookups_ = false;
@@ -612,6 +619,8 @@ void RayCacheStore::begin_frame(std::uint32_t width, std::uint32_t height, Trace
 }
 
 bool RayCacheStore::wants_lookups() const { return lookups_; }
+
+bool RayCacheStore::wants_leaving() const { return lookups_; }
 
 namespace {
 
@@ -729,9 +738,9 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
   };
   thread_local std::vector<Local> local;
   local.assign(cubes_.size(), Local{});
-  // Path mode traces one accepted lookup in verify_every under any policy: the sample goes into
-  // the texel's mean, which keeps improving while it serves.
-  const bool verify = settings_.policy == CachePolicy::Auto || averaging_;
+  // Whitted frames under auto trace one accepted lookup in verify_every to measure the error
+  // (path mode refreshes its probes instead).
+  const bool verify = settings_.policy == CachePolicy::Auto;
   for (std::size_t k = 0; k < queries.size(); ++k) {
     const LeavingQuery& q = queries[k];
     CachedRadiance& out = answers[k];
@@ -743,6 +752,36 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
     if (!c.enabled) continue;
     Local& l = local[std::size_t(ci)];
     ++l.lookups;
+    if (averaging_) {
+      // Path mode asks once the leaving ray is traced: the texel of its direction serves if
+      // its probe belongs to the surface the ray hit (which stands in for the parallax tests),
+      // with the radiance scattered there towards the ray.
+      const std::uint32_t ti = texel_of(q.direction, c.resolution);
+      const Texel& tx = c.texels[ti];
+      if (!tx.valid()) {
+        ++l.outdated;
+        continue;
+      }
+      if (tx.hit != q.hit_entity) {
+        ++l.rejected;
+        continue;
+      }
+      out.answer = CacheAnswer::Use;
+      out.radiance = texel_radiance(tx);
+      out.seen = tx.seen | entity_bit(tx.hit);
+      // The probe stays fresh: about path_refresh of the lookups its direction had last frame
+      // are traced on anyway, for the probe alone (the sample takes the mean either way).
+      // Chosen by a hash of the sample, so frames do not depend on the thread count.
+      const std::uint32_t asked = std::max(1u, c.probe[ti].lookups);
+      const std::uint64_t key = (std::uint64_t(q.pixel) << 8) ^ (std::uint64_t(q.depth) << 2) ^
+                                (frame_ << 40) ^ (std::uint64_t(q.sample) << 24) ^
+                                std::uint64_t(ci);
+      if (std::uint64_t(mix_hash(key)) * asked < std::uint64_t(settings_.path_refresh) << 32)
+        out.answer = CacheAnswer::Refresh;
+      else
+        l.offered_rays += tx.rays;
+      continue;
+    }
     Answer a;
     if (c.mode == LookupMode::March) {
       a = march(c.texels, c.resolution, c.centre, q.origin, q.direction, c.cos_tau);
@@ -774,14 +813,14 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
     out.seen = tx.seen | (tx.hit != kNoInstance ? entity_bit(tx.hit) : 0u);
     const std::uint64_t cost = tx.rays;
     if (verify) {
-      const std::uint32_t every =
-          c.evaluating && !averaging_ ? kEvaluationVerifyEvery : settings_.verify_every;
+      const std::uint32_t every = c.evaluating ? kEvaluationVerifyEvery : settings_.verify_every;
       const std::uint64_t key = (std::uint64_t(q.pixel) << 8) ^ (std::uint64_t(q.depth) << 2) ^
                                 (frame_ << 40) ^ (std::uint64_t(q.sample) << 24) ^
                                 std::uint64_t(ci);
       if (mix_hash(key) % every == 0) out.answer = CacheAnswer::Verify;
     }
-    if (out.answer != CacheAnswer::Verify) l.offered_rays += cost;
+    if (out.answer == CacheAnswer::Use || out.answer == CacheAnswer::UseIfClear)
+      l.offered_rays += cost;
   }
   for (std::size_t i = 0; i < local.size(); ++i) {
     if (local[i].lookups == 0) continue;
@@ -795,24 +834,30 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
 }
 
 void RayCacheStore::leaving(std::span<const LeavingRadiance> rays) {
-  std::vector<Candidate> mine;
   const std::lock_guard lock(mutex_);
   for (const LeavingRadiance& r : rays) {
     if (!r.exits || r.instance >= cube_of_instance_.size()) continue;
     const std::int32_t ci = cube_of_instance_[r.instance];
     if (ci < 0) continue;
     Cube& c = *cubes_[std::size_t(ci)];
+    bool sample = true;
     switch (r.answer) {
     case CacheAnswer::Use:
     case CacheAnswer::UseIfClear:
       ++c.used;
       c.used_rays += r.rays;
-      continue;
+      if (!averaging_) continue;
+      sample = false; // path mode counts the lookup (the probe's refresh rate)
+      break;
+    case CacheAnswer::Refresh:
+      ++c.used;
+      ++c.traced;
+      c.traced_rays += r.rays;
+      break;
     case CacheAnswer::Verify: {
       ++c.verified;
       ++c.traced;
       c.traced_rays += r.rays;
-      if (averaging_) break; // a path sample: its error is mostly noise; it refines the texel
       const vec3 e = r.throughput * (r.cached - r.radiance);
       c.err_sum += double(glm::dot(e, e));
       ++c.err_samples;
@@ -837,38 +882,63 @@ void RayCacheStore::leaving(std::span<const LeavingRadiance> rays) {
     std::memcpy(&bx, &r.direction.x, 4);
     std::memcpy(&by, &r.direction.y, 4);
     cand.tie = (std::uint64_t(bx) << 32) | by;
-    cand.value = make_texel(r.radiance, distance, r.hit_entity, r.seen, r.rays);
-    cand.radiance = r.radiance;
+    cand.sample = sample;
+    if (sample) {
+      cand.value = make_texel(r.radiance, distance, r.hit_entity, r.seen, r.rays);
+      cand.radiance = r.radiance;
+    }
     candidates_.push_back(cand);
   }
 }
 
 std::uint64_t RayCacheStore::apply_writes() {
-  // The first candidate of each texel in a fixed order: the result does not depend on which
-  // thread traced which tile.
-  auto key_less = [](const Candidate& a, const Candidate& b) {
-    if (a.cube != b.cube) return a.cube < b.cube;
+  // The first candidate of each texel in a fixed order (path mode: all of them, summed in that
+  // order): the result does not depend on which thread traced which tile. Sorted as compact keys
+  // (cube and texel, pixel and order, direction bits; unique) rather than as candidates.
+  struct Key {
+    std::uint64_t texel, pixel, tie;
+    std::uint32_t index;
+  };
+  std::vector<Key> keys(candidates_.size());
+  for (std::size_t i = 0; i < candidates_.size(); ++i) {
+    const Candidate& c = candidates_[i];
+    keys[i] = Key{(std::uint64_t(c.cube) << 32) | c.texel, (std::uint64_t(c.pixel) << 32) | c.order,
+                  c.tie, std::uint32_t(i)};
+  }
+  tbb::parallel_sort(keys.begin(), keys.end(), [](const Key& a, const Key& b) {
     if (a.texel != b.texel) return a.texel < b.texel;
     if (a.pixel != b.pixel) return a.pixel < b.pixel;
-    if (a.order != b.order) return a.order < b.order;
     return a.tie < b.tie;
-  };
-  std::sort(candidates_.begin(), candidates_.end(), key_less);
-  // Path mode: each texel's samples summed in that order, into its first candidate.
+  });
+  // Path mode: each texel's samples summed in that order, and its lookups counted; a texel's
+  // probe belongs to one surface (the entity its first sample hit), so samples that hit another
+  // are left out; its first sample stands for the group (hit, distance, cost).
   struct Sum {
     vec3 radiance{0.0f};
-    std::uint32_t n = 0;
+    std::uint32_t n = 0, lookups = 0;
     std::uint16_t seen = 0;
+    std::uint32_t surface = kNoInstance - 1; ///< unset
   };
   std::vector<Candidate> unique;
   std::vector<Sum> sums;
-  for (const Candidate& c : candidates_) {
-    if (unique.empty() || unique.back().cube != c.cube || unique.back().texel != c.texel) {
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    const Candidate& c = candidates_[keys[k].index];
+    if (k == 0 || keys[k].texel != keys[k - 1].texel) {
       unique.push_back(c);
       sums.push_back(Sum{});
+      if (averaging_) {
+        const Cube& cube = *cubes_[c.cube];
+        if (!cube.probe.empty() && cube.probe[c.texel].samples > 0)
+          sums.back().surface = cube.texels[c.texel].hit;
+      }
     }
     if (averaging_) {
       Sum& s = sums.back();
+      ++s.lookups;
+      if (!c.sample) continue;
+      if (s.surface == kNoInstance - 1) s.surface = c.value.hit;
+      if (c.value.hit != s.surface) continue;
+      if (s.n == 0) unique.back() = c;
       s.radiance += c.radiance;
       ++s.n;
       s.seen |= c.value.seen | (c.value.hit != kNoInstance ? seen_bit16(c.value.hit) : 0);
@@ -883,19 +953,44 @@ std::uint64_t RayCacheStore::apply_writes() {
     });
     unique.resize(settings_.fill_budget);
   }
+  std::uint64_t written = 0;
   for (const Candidate& c : unique) {
     if (averaging_) {
       const Sum& s = sums[c.group];
-      cubes_[c.cube]->accumulate(c.texel, s.radiance, s.n, c.value, s.seen,
+      cubes_[c.cube]->accumulate(c.texel, s.radiance, s.n, s.lookups, c.value, s.seen,
                                  std::max(1u, settings_.path_samples));
+      written += s.n > 0 ? 1 : 0;
     } else {
       cubes_[c.cube]->store(c.texel, c.value);
+      ++written;
     }
   }
-  return unique.size();
+  return written;
 }
 
 void RayCacheStore::report(CacheCounts& out) const { out = counts_; }
+
+void RayCacheStore::start_auto(Cube& c) const {
+  if (averaging_) {
+    // Measured (docs/cache-report/path-cache.md): on every scene and setting there, cached path
+    // tracing reached uncached path tracing's error later, not sooner — a probe's blur and its
+    // shared noise, on the texel's pixels at once, cost more than the paths it saves. Auto keeps
+    // path mode uncached; --cache on uses the probes anyway.
+    c.enabled = false;
+    c.reason = "path mode: off (measured to reach uncached path tracing's error later, not "
+               "sooner: --cache on forces the probes)";
+    return;
+  }
+  int start = 0;
+  for (int r = 0; r < kLadderSize; ++r)
+    if (kLadder[r].mode == settings_.lookup) {
+      start = r;
+      break;
+    }
+  c.enabled = true;
+  c.set_rung(start);
+  c.reason = std::string("starting in ") + lookup_mode_name(c.mode) + " mode";
+}
 
 void RayCacheStore::decide(Cube& c, double ns_per_ray, double frame_rays) {
   const std::uint64_t lookups = c.lookups.load();
@@ -912,21 +1007,14 @@ void RayCacheStore::decide(Cube& c, double ns_per_ray, double frame_rays) {
   // the image's 3·N values; the bound is shared by the enabled cubes.
   const double pixels = double(width_) * double(height_);
   const std::uint64_t accepted = c.used + c.verified;
-  if (c.err_samples > 0 && !averaging_) {
+  if (c.err_samples > 0) {
     const double mse = c.err_sum / double(c.err_samples) * double(accepted) / (3.0 * pixels);
     c.estimated_psnr = mse > 0.0 ? -10.0 * std::log10(mse) : 200.0;
   }
   std::size_t enabled = 0;
   for (const auto& other : cubes_) enabled += other->enabled ? 1 : 0;
   const double bound = settings_.max_error_db + 10.0 * std::log10(double(std::max<std::size_t>(1, enabled)));
-  if (averaging_ && c.evaluating) {
-    // A traced path sample differs from the texel's mean mostly by its own noise, so verified
-    // samples cannot estimate the cache's error: path mode decides on speed only.
-    c.evaluating = false;
-    c.reason = std::string("path mode: ") + lookup_mode_name(c.mode) +
-               " mode, decided on speed only (the error bound is not checked)";
-  }
-  if (c.err_samples >= kMinErrorSamples && !averaging_) {
+  if (c.err_samples >= kMinErrorSamples) {
     if (c.estimated_psnr < bound) {
       const std::string was = lookup_mode_name(c.mode);
       const double psnr = c.estimated_psnr;

@@ -60,13 +60,21 @@ inline constexpr std::uint8_t kTexelPrefilled = 2;
   return std::uint16_t(1u << (entity_index & 15u));
 }
 
-/// Path mode's per-texel radiance probe: the sum and count of the path samples that left the
-/// owner through the texel (a texel serves lookups once it averages CacheSettings::path_samples).
+/// Path mode's per-texel radiance probe (docs/design/ray-cache.md, "Path mode"): an exponential
+/// moving average of the path samples that left the owner through the texel, batch by batch
+/// (one batch a frame): at each batch sum ← (1 − α)·sum + the batch's sum, weight likewise with
+/// its count, so the mean weighs every batch alike once it has been served for a few frames. A
+/// texel serves lookups while its weight is at least CacheSettings::path_samples.
 struct ProbeTexel {
   float sum[3] = {0.0f, 0.0f, 0.0f};
-  std::uint32_t count = 0;
+  float weight = 0.0f;       ///< the samples' count, averaged like the sum
+  std::uint32_t lookups = 0; ///< lookups of its direction in the latest frame that had any
+  std::uint32_t samples = 0; ///< samples it has taken since it was last outdated
+  std::uint32_t reserved[2] = {0, 0};
 };
-static_assert(sizeof(ProbeTexel) == 16);
+static_assert(sizeof(ProbeTexel) == 32);
+/// α of the probes' moving average: a batch's weight halves in about five frames.
+inline constexpr float kProbeDecay = 0.125f;
 
 /// A world-space bounding sphere.
 struct Sphere {
@@ -123,6 +131,8 @@ public:
   /// one-sample estimates, which include indirect light) starts every cube afresh.
   void begin_frame(std::uint32_t width, std::uint32_t height, TraceMode mode) override;
   [[nodiscard]] bool wants_lookups() const override;
+  /// True unless every cube is off.
+  [[nodiscard]] bool wants_leaving() const override;
   void lookup(std::span<const LeavingQuery> queries,
               std::span<CachedRadiance> answers) const override;
   void leaving(std::span<const LeavingRadiance> rays) override;
@@ -146,6 +156,8 @@ public:
 private:
   std::uint64_t apply_writes();
   void decide(Cube& c, double ns_per_ray, double frame_rays);
+  /// Auto: where a cube starts (its ladder's first rung; in path mode, off).
+  void start_auto(Cube& c) const;
 
   CacheSettings settings_;
   std::vector<std::unique_ptr<Cube>> cubes_;

@@ -31,6 +31,7 @@ struct FrameInputs {
   std::span<vec3> pixels; ///< the image, row-major
   std::uint32_t width;
   bool lookups = false; ///< hook->wants_lookups() at frame start
+  bool leaving = false; ///< hook->wants_leaving() at frame start (path mode records them)
   const EmitterTable* emitters = nullptr; ///< the layer's area lights and scene features
   GuideBuffers* guides = nullptr;         ///< path, shadow: primary-hit guides (sized), or none
 };
@@ -96,6 +97,7 @@ struct Path {
 struct PathLeaving {
   LeavingRadiance ray; ///< radiance, hit_t, hit_entity, seen and rays filled as the path goes on
   vec3 sum;            ///< contributions to the sample since the ray left (throughput-weighted)
+  vec3 emitted;        ///< of which the emission at its first hit
   std::uint32_t parent; ///< the enclosing record of the same path (kNoInstance: none)
 };
 
@@ -125,11 +127,10 @@ struct PathWave {
   std::vector<PathLeaving> records;
   std::vector<std::uint32_t> shadow_chain;
   std::vector<PathExit> exits, wave_exits;
+  std::vector<std::uint32_t> exit_of; ///< per wave path: its index in wave_exits, or kNoInstance
   std::vector<LeavingQuery> queries;
+  std::vector<std::uint32_t> query_path; ///< per query: its wave path
   std::vector<CachedRadiance> answers;
-  std::vector<Ray> confirm_rays;
-  std::vector<std::uint32_t> confirm_index;
-  std::vector<std::uint8_t> confirm_blocked, served;
   std::vector<LeavingRadiance> delivered;
 };
 

@@ -67,7 +67,8 @@ class PathTile {
 public:
   PathTile(const FrameInputs& frame, TileScratch& s, RayCounts& counts)
       : frame_(frame), tables_(frame.tables), settings_(frame.settings), w_(s.path),
-        primary_(s.primary), counts_(counts), emitters_(*frame.emitters), hook_(frame.hook) {}
+        primary_(s.primary), counts_(counts), emitters_(*frame.emitters),
+        hook_(frame.leaving ? frame.hook : nullptr) {}
 
   void run(const PacketTile& tile) {
     const std::size_t n = primary_.size();
@@ -129,9 +130,17 @@ private:
       }
       w_.hits.resize(w_.wave_rays.size());
       frame_.tracer.intersect(w_.wave_rays, w_.hits);
+      if (hook_ != nullptr) {
+        for (std::size_t k = 0; k < w_.wave_paths.size(); ++k)
+          note_hit(w_.wave_paths[k].leaving, w_.hits[k]);
+        look_up_leaving(depth);
+      }
       for (std::size_t k = 0; k < w_.wave_paths.size(); ++k) {
-        if (hook_ != nullptr) note_hit(w_.wave_paths[k].leaving, w_.hits[k]);
-        shade(w_.wave_paths[k], w_.hits[k], w_.wave_rays[k].direction, depth);
+        const std::uint32_t e = hook_ != nullptr ? w_.exit_of[k] : kNoInstance;
+        if (e == kNoInstance)
+          shade(w_.wave_paths[k], w_.hits[k], w_.wave_rays[k].direction, depth);
+        else
+          shade_leaving(w_.wave_paths[k], w_.hits[k], w_.wave_rays[k].direction, depth);
       }
       trace_shadows();
     }
@@ -180,6 +189,38 @@ private:
     shade_vertex(p, vertex(hit, d), d, depth);
   }
 
+  /// The first hit of a ray that left a cached object (its record is p.leaving), as the hook
+  /// answered for it: traced on (its emission noted, so the record's radiance can leave it out);
+  /// served (the sample takes emission + the cached radiance, the path ends); or refreshed (the
+  /// sample takes the same, and the path goes on for the record alone).
+  void shade_leaving(Path& p, const Hit& hit, const vec3& d, std::uint32_t depth) {
+    PathLeaving& rec = w_.records[p.leaving];
+    const CacheAnswer answer = rec.ray.answer;
+    if (!hit.hit() || answer == CacheAnswer::Trace) {
+      if (!hit.hit()) {
+        contribute(p.slot, p.leaving, p.throughput * settings_.background);
+        return;
+      }
+      shade_vertex(p, vertex(hit, d), d, depth, p.leaving);
+      return;
+    }
+    const Vertex v = vertex(hit, d);
+    // The leaving ray is specular (no light-sampling strategy reaches its hit): its emission
+    // counts fully.
+    vec3 emitted(0.0f);
+    if constexpr (kArea) emitted = v.m->emission;
+    const std::uint32_t parent = rec.parent;
+    contribute(p.slot, parent, p.throughput * (emitted + rec.ray.cached));
+    // The enclosing records saw what the cached value saw (invalidation follows it).
+    for (std::uint32_t c = parent; c != kNoInstance; c = w_.records[c].parent)
+      w_.records[c].ray.seen |= rec.ray.seen;
+    if (answer != CacheAnswer::Refresh) return; // served: the path ends here
+    // Refreshed: what the path gathers from here on is the record's alone.
+    rec.parent = kNoInstance;
+    p.slot = kDetached;
+    shade_vertex(p, v, d, depth, kNoInstance, false);
+  }
+
   /// What a hit's shading needs, computed once per hit.
   struct Vertex {
     ShadingPoint sp;
@@ -194,12 +235,14 @@ private:
 
   /// Emission (weighted against light sampling where the ray was BSDF-sampled at a diffuse
   /// vertex), next-event estimation of every light at the diffuse part, then, below the depth
-  /// limit, the sampled continuation.
-  void shade_vertex(const Path& p, const Vertex& v, const vec3& d, std::uint32_t depth) {
+  /// limit, the sampled continuation. `first_of`: the leaving record whose first hit this is
+  /// (its emission is noted apart); `emission` false when the caller has counted it.
+  void shade_vertex(const Path& p, const Vertex& v, const vec3& d, std::uint32_t depth,
+                    std::uint32_t first_of = kNoInstance, bool emission = true) {
     const gpu::GpuMaterial& m = *v.m;
     const ShadingPoint& sp = v.sp;
     if constexpr (kArea) {
-      if (m.emission != vec3(0.0f)) {
+      if (emission && m.emission != vec3(0.0f)) {
         float weight = 1.0f;
         // bsdf_pdf 0: seen by the camera or through a specular bounce, which light sampling
         // cannot reach.
@@ -213,7 +256,11 @@ private:
                   p.bsdf_pdf, area_light_pdf(emitters_.triangles()[e], p.previous, sp.position));
           }
         }
-        if (weight > 0.0f) contribute(p.slot, p.leaving, p.throughput * m.emission * weight);
+        if (weight > 0.0f) {
+          contribute(p.slot, p.leaving, p.throughput * m.emission * weight);
+          if (first_of != kNoInstance)
+            w_.records[first_of].emitted += p.throughput * m.emission * weight;
+        }
       }
     }
 
@@ -318,9 +365,14 @@ private:
     if (settings_.shadows) count_ray(p.leaving);
   }
 
-  /// Adds to a sample's radiance, and to every leaving record open on its path.
+  /// The slot of a path traced for the cache alone (CacheAnswer::Refresh): its sample already
+  /// holds the cached value, so what it gathers goes to its leaving record only.
+  static constexpr std::uint32_t kDetached = 0xffffffffu;
+
+  /// Adds to a sample's radiance (unless the path is detached from it), and to every leaving
+  /// record open on its path.
   void contribute(std::uint32_t slot, std::uint32_t chain, const vec3& value) {
-    w_.radiance[slot] += value;
+    if (slot != kDetached) w_.radiance[slot] += value;
     for (; chain != kNoInstance; chain = w_.records[chain].parent) w_.records[chain].sum += value;
   }
 
@@ -343,50 +395,21 @@ private:
     for (; chain != kNoInstance; chain = w_.records[chain].parent) w_.records[chain].ray.seen |= bit;
   }
 
-  /// The wave's rays that leave an object: offered to the hook (when it wants lookups); those it
-  /// serves end their path with the cached radiance (UseIfClear after an occlusion ray confirms
-  /// nothing is in the way) and leave the wave; the others open a leaving record.
+  /// Opens a leaving record for each of the wave's rays that leave a cached object (before they
+  /// are traced: the record counts the ray and everything after it).
   void open_leaving(std::uint32_t depth) {
-    if (w_.wave_exits.empty()) return;
-    const std::size_t m = w_.wave_exits.size();
-    w_.answers.assign(m, CachedRadiance{});
-    if (frame_.lookups) {
-      w_.queries.clear();
-      for (const PathExit& e : w_.wave_exits) {
-        const Path& p = w_.wave_paths[e.path];
-        const Ray& r = w_.wave_rays[e.path];
-        w_.queries.push_back(
-            LeavingQuery{e.instance, p.pixel, depth, r.origin, r.direction, p.sample});
-      }
-      hook_->lookup(w_.queries, w_.answers);
-      w_.confirm_rays.clear();
-      w_.confirm_index.clear();
-      for (std::size_t q = 0; q < m; ++q)
-        if (w_.answers[q].answer == CacheAnswer::UseIfClear) {
-          const Ray& r = w_.wave_rays[w_.wave_exits[q].path];
-          w_.confirm_rays.push_back(Ray{r.origin, 0.0f, r.direction, w_.answers[q].clear_distance});
-          w_.confirm_index.push_back(std::uint32_t(q));
-        }
-      if (!w_.confirm_rays.empty()) {
-        w_.confirm_blocked.resize(w_.confirm_rays.size());
-        counts_[RayKind::Shadow] += w_.confirm_rays.size();
-        frame_.tracer.occluded(w_.confirm_rays, w_.confirm_blocked);
-      }
-    }
-    w_.served.assign(w_.wave_paths.size(), 0);
-    std::size_t confirm = 0;
-    for (std::size_t q = 0; q < m; ++q) {
+    w_.exit_of.assign(w_.wave_paths.size(), kNoInstance);
+    for (std::size_t q = 0; q < w_.wave_exits.size(); ++q) {
       const PathExit& e = w_.wave_exits[q];
       Path& p = w_.wave_paths[e.path];
       const Ray& r = w_.wave_rays[e.path];
-      const CachedRadiance& a = w_.answers[q];
       PathLeaving rec;
       LeavingRadiance& l = rec.ray;
       l.from = tables_.entity(e.instance);
       l.instance = e.instance;
       l.kind = e.kind;
       l.exits = true;
-      l.answer = a.answer;
+      l.answer = CacheAnswer::Trace;
       l.depth = depth;
       l.pixel = p.pixel;
       l.sample = p.sample;
@@ -395,54 +418,64 @@ private:
       l.weight = e.weight;
       l.throughput = p.throughput;
       l.radiance = vec3(0.0f);
-      l.cached = a.radiance;
+      l.cached = vec3(0.0f);
       l.hit_t = std::numeric_limits<float>::quiet_NaN();
       l.hit_entity = kNoInstance;
       l.seen = 0;
       l.rays = 0;
       rec.sum = vec3(0.0f);
+      rec.emitted = vec3(0.0f);
       rec.parent = p.leaving;
-      if (a.answer == CacheAnswer::UseIfClear) {
-        l.rays = 1; // the confirming ray
-        l.answer = w_.confirm_blocked[confirm++] != 0 ? CacheAnswer::Trace : CacheAnswer::Use;
-      }
-      if (l.answer == CacheAnswer::Use) {
-        // Served: the path ends here with the cached radiance (its record only counts).
-        l.radiance = a.radiance;
-        l.seen = a.seen;
-        l.hit_t = std::numeric_limits<float>::infinity();
-        contribute(p.slot, p.leaving, p.throughput * a.radiance);
-        w_.served[e.path] = 1;
-        rec.parent = kNoInstance;
-        w_.records.push_back(rec);
-        --counts_[e.kind];
-        continue;
-      }
+      w_.exit_of[e.path] = std::uint32_t(q);
       p.leaving = std::uint32_t(w_.records.size());
       w_.records.push_back(rec);
     }
-    // The wave keeps what must still be traced, in order.
-    std::size_t kept = 0;
+  }
+
+  /// Once the wave is traced: the leaving rays that hit something are offered to the hook
+  /// (when it wants lookups) with their first hit, which it may accept for its cached value
+  /// (the radiance scattered there towards the ray; docs/design/ray-cache.md, "Path mode").
+  void look_up_leaving(std::uint32_t depth) {
+    if (!frame_.lookups || w_.wave_exits.empty()) return;
+    w_.queries.clear();
+    w_.query_path.clear();
     for (std::size_t k = 0; k < w_.wave_paths.size(); ++k) {
-      if (w_.served[k] != 0) continue;
-      w_.wave_paths[kept] = w_.wave_paths[k];
-      w_.wave_rays[kept] = w_.wave_rays[k];
-      ++kept;
+      if (w_.exit_of[k] == kNoInstance || !w_.hits[k].hit()) continue;
+      const Path& p = w_.wave_paths[k];
+      const LeavingRadiance& l = w_.records[p.leaving].ray;
+      LeavingQuery q{l.instance, p.pixel, depth, l.origin, l.direction, p.sample};
+      q.hit_entity = l.hit_entity;
+      q.hit_t = l.hit_t;
+      w_.queries.push_back(q);
+      w_.query_path.push_back(std::uint32_t(k));
     }
-    w_.wave_paths.resize(kept);
-    w_.wave_rays.resize(kept);
+    w_.answers.assign(w_.queries.size(), CachedRadiance{});
+    hook_->lookup(w_.queries, w_.answers);
+    for (std::size_t q = 0; q < w_.queries.size(); ++q) {
+      const CachedRadiance& a = w_.answers[q];
+      LeavingRadiance& l = w_.records[w_.wave_paths[w_.query_path[q]].leaving].ray;
+      // Path mode's answers: Use or Refresh; anything else traces on.
+      if (a.answer != CacheAnswer::Use && a.answer != CacheAnswer::Refresh) continue;
+      l.answer = a.answer;
+      l.cached = a.radiance;
+      l.seen |= a.seen; // what the cached value saw
+    }
   }
 
   /// The batch's leaving records to the hook, in the order they were opened (deterministic): a
-  /// traced ray's radiance is what its path gathered after it left, over its throughput.
+  /// traced ray's radiance is what its path gathered after its first hit (the emission there
+  /// left out: the traced ray gives it exactly), over its throughput.
   void deliver_leaving() {
     if (w_.records.empty()) return;
     w_.delivered.clear();
     for (PathLeaving& rec : w_.records) {
       LeavingRadiance& l = rec.ray;
-      if (l.answer != CacheAnswer::Use) {
+      if (l.answer == CacheAnswer::Use) {
+        l.radiance = l.cached;
+      } else {
+        const vec3 scattered = rec.sum - rec.emitted;
         for (int c = 0; c < 3; ++c)
-          l.radiance[c] = l.throughput[c] > 0.0f ? rec.sum[c] / l.throughput[c] : 0.0f;
+          l.radiance[c] = l.throughput[c] > 0.0f ? scattered[c] / l.throughput[c] : 0.0f;
         if (!std::isfinite(l.radiance.x + l.radiance.y + l.radiance.z)) continue;
       }
       w_.delivered.push_back(l);

@@ -11,9 +11,12 @@
 /// of the outer ray's radiance delivered to the outer one). A pixel is its primary hit's local
 /// shading plus the sum over the rays leaving that hit of weight × radiance.
 ///
-/// In path mode a leaving ray's radiance is a one-sample Monte Carlo estimate (the rest of its
-/// path: emission, next-event estimates and bounces it met, divided by its throughput): a hook
-/// that caches it averages the samples (RadianceHook::begin_frame says which mode the frame is).
+/// In path mode a leaving ray's radiance is a one-sample Monte Carlo estimate of what its first
+/// hit scatters back along it (the rest of its path after that hit: next-event estimates and
+/// bounces, divided by its throughput; the emission at the hit itself is left out, since the
+/// traced ray gives it exactly): a hook that caches it averages the samples, and path mode asks
+/// it after tracing the leaving ray, with that hit (RadianceHook::begin_frame says which mode
+/// the frame is).
 
 #include "specula/core/math.h"
 #include "specula/ecs/entity.h"
@@ -31,6 +34,10 @@ enum class CacheAnswer : std::uint8_t {
   Use,        ///< the cached radiance was used; the ray was not traced
   UseIfClear, ///< use it if nothing lies within clear_distance (an occlusion ray confirms)
   Verify,     ///< the cached radiance would be used, but the ray is traced to measure its error
+  /// Path mode: the cached radiance is used for the sample and the ray is traced anyway, for the
+  /// cache alone (its path's contributions go to its leaving record, not to the image): a probe
+  /// keeps gathering fresh samples while every pixel reads its mean.
+  Refresh,
 };
 
 /// A ray about to leave an object, asked about before it is traced.
@@ -41,6 +48,10 @@ struct LeavingQuery {
   vec3 origin;
   vec3 direction; ///< unit
   std::uint32_t sample = 0; ///< path mode: the sample's index in the pixel's sequence
+  /// Path mode asks after tracing the ray: the entity index of its first hit (kNoInstance in
+  /// Whitted frames, which ask before) and the distance to it.
+  std::uint32_t hit_entity = 0xffffffffu;
+  float hit_t = 0.0f;
 };
 
 struct CachedRadiance {
@@ -71,7 +82,7 @@ struct LeavingRadiance {
   vec3 direction;         ///< unit, world space
   vec3 weight;     ///< relative to the ray it was spawned by (its share of that ray's radiance)
   vec3 throughput; ///< relative to the pixel (product of weights along the path)
-  vec3 radiance;   ///< what the ray brought back
+  vec3 radiance;   ///< what the ray brought back (path mode: without its first hit's emission)
   vec3 cached;     ///< Verify: the cached value the hook offered
   float hit_t;     ///< distance to its first hit (+inf: it left the scene)
   std::uint32_t hit_entity; ///< entity index of its first hit (kNoInstance: none)
@@ -89,8 +100,13 @@ public:
   /// Whether the integrators should ask lookup() about leaving rays this frame (read once per
   /// frame, after begin_frame).
   [[nodiscard]] virtual bool wants_lookups() const { return false; }
+  /// Whether path mode should record its leaving rays this frame (read once per frame, after
+  /// begin_frame): following every path's contributions costs, so a hook with nothing to store
+  /// says no. Whitted's leaving rays are values of its ray tree and are always delivered.
+  [[nodiscard]] virtual bool wants_leaving() const { return true; }
   /// Answers, for each ray about to leave an object (only rays that exit), whether a cached
-  /// value replaces tracing it. Called from worker threads, several tiles at once; must read
+  /// value replaces tracing it (path mode: tracing the rest of its path after its first hit,
+  /// given in the query). Called from worker threads, several tiles at once; must read
   /// only what was there at frame start (writes wait for end_frame), so frames are
   /// deterministic.
   virtual void lookup(std::span<const LeavingQuery> queries,

@@ -153,6 +153,7 @@ FrameStats render_frame(const Tracer& tracer, const SceneLayer& layer, const Cam
                                   out.pixels(),
                                   out.width(),
                                   lookups,
+                                  hook != nullptr && hook->wants_leaving(),
                                   &layer.emitters(),
                                   stochastic ? guides : nullptr};
   tbb::combinable<RayCounts> counts;
@@ -189,8 +190,8 @@ RayCounts trace_radiance(const Tracer& tracer, const SceneLayer& layer,
                          std::uint32_t depth, std::uint32_t skip, std::span<RadianceSample> out) {
   if (out.size() != rays.size()) throw Error("trace_radiance", "out and rays differ in size");
   const CameraRays camera(Camera{}, 1, 1); // unused: the roots are given
-  const detail::FrameInputs frame{tracer, layer.tables(), settings,          camera, nullptr,
-                                  {},     0,              false,    &layer.emitters()};
+  const detail::FrameInputs frame{tracer, layer.tables(), settings, camera,           nullptr, {},
+                                  0,      false,          false,    &layer.emitters()};
   tbb::combinable<RayCounts> counts;
   tbb::enumerable_thread_specific<detail::TileScratch> scratch;
   constexpr std::size_t kChunk = 256;

@@ -99,16 +99,16 @@ std::string stats_to_json(const RunStats& stats) {
                    {"time1", s.time1},
                    {"threads", s.threads},
                    {"max_depth", s.max_depth},
-                   {"cache", s.cache_policy == "off"
-                                 ? json("off")
-                                 : json{{"policy", s.cache_policy},
-                                        {"lookup", s.cache_lookup},
-                                        {"tau_deg", s.cache_tau_deg},
-                                        {"resolution", s.cache_resolution},
-                                        {"fill_budget", s.cache_fill_budget},
-                                        {"prefill", s.cache_prefill},
-                                        {"samples", s.cache_samples},
-                                        {"max_error_db", s.max_error_db}}},
+                   {"cache", s.cache_policy == "off" ? json("off")
+                                                     : json{{"policy", s.cache_policy},
+                                                            {"lookup", s.cache_lookup},
+                                                            {"tau_deg", s.cache_tau_deg},
+                                                            {"resolution", s.cache_resolution},
+                                                            {"fill_budget", s.cache_fill_budget},
+                                                            {"prefill", s.cache_prefill},
+                                                            {"samples", s.cache_samples},
+                                                            {"refresh", s.cache_refresh},
+                                                            {"max_error_db", s.max_error_db}}},
                    {"spp", s.spp},
                    {"shadow_samples", s.shadow_samples},
                    {"sampling", s.sampling},
@@ -231,6 +231,7 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
     s.cache_fill_budget = read<std::uint32_t>(cache, "fill_budget", name, at);
     s.cache_prefill = read<bool>(cache, "prefill", name, at);
     read_optional(cache, "samples", s.cache_samples, name, at);
+    read_optional(cache, "refresh", s.cache_refresh, name, at);
     s.max_error_db = read<double>(cache, "max_error_db", name, at);
   } else if (!cache.is_string()) {
     // Files from before the cubes landed gave a bare resolution.

@@ -143,7 +143,8 @@ struct RunSettings {
   float cache_tau_deg = 0.5f;
   std::uint32_t cache_fill_budget = 0;
   bool cache_prefill = false;
-  std::uint32_t cache_samples = 16; ///< path mode: samples a texel averages before it serves
+  std::uint32_t cache_samples = 4; ///< path mode: sample weight a texel needs before it serves
+  std::uint32_t cache_refresh = 2; ///< path mode: lookups a serving texel traces a frame
   double max_error_db = 40.0;
   // The stochastic modes (files from before them have none: readers take these defaults).
   std::uint32_t spp = 1;

@@ -8,10 +8,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
-#include <mutex>
 #include <filesystem>
+#include <mutex>
 #include <numbers>
+#include <tuple>
 
 namespace specula {
 namespace {
@@ -468,7 +470,29 @@ TEST(RayCachePolicy, AutoOnTheMirrorSpheresKeepsTheBoundOrStopsCaching) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Path mode: texels average the path samples that leave through them (a radiance probe).
+// Path mode: a texel is a probe of the radiance that the surface its direction hits scatters
+// towards the object (docs/design/ray-cache.md, "Path mode").
+
+/// Far diffuse spheres over a ground, lit by a point light, and one far emitter: a ray leaving
+/// the mirror meets surfaces whose scattered radiance is a noisy path estimate, or a light whose
+/// emission the traced ray gives exactly.
+struct LitSurroundings {
+  ecs::Entity lamp;
+  void operator()(ecs::Registry& reg) {
+    const vec3 colours[] = {vec3(0.8f, 0.3f, 0.2f), vec3(0.2f, 0.7f, 0.3f), vec3(0.3f, 0.4f, 0.8f),
+                            vec3(0.8f, 0.8f, 0.3f), vec3(0.7f, 0.3f, 0.7f)};
+    const vec3 where[] = {vec3(40, 6, 0), vec3(-40, 0, 10), vec3(0, 10, 40), vec3(6, -4, -40),
+                          vec3(-28, 14, -28)};
+    for (int i = 0; i < 5; ++i)
+      test::add_mesh(reg, test::primitive("sphere", 12.0f), test::at(where[i]),
+                     diffuse(colours[i]));
+    test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(400.0f)), test::at(vec3(0, -30, 0)),
+                   diffuse(vec3(0.5f)));
+    test::add_point_light(reg, vec3(10, 80, 20), 8000.0f);
+    lamp = test::add_mesh(reg, test::primitive("sphere", 8.0f), test::at(vec3(30, 24, 30)),
+                          emissive(vec3(3.0f, 2.6f, 2.2f)));
+  }
+};
 
 /// Forwards everything to the store and keeps the leaving rays it was handed.
 class Tap final : public RadianceHook {
@@ -478,6 +502,7 @@ public:
     store_->begin_frame(w, h, mode);
   }
   [[nodiscard]] bool wants_lookups() const override { return store_->wants_lookups(); }
+  [[nodiscard]] bool wants_leaving() const override { return store_->wants_leaving(); }
   void lookup(std::span<const LeavingQuery> q, std::span<CachedRadiance> a) const override {
     store_->lookup(q, a);
   }
@@ -505,64 +530,164 @@ void path_mode(World& w, std::uint32_t seed = 0) {
   job.settings.seed = seed;
 }
 
-CacheSettings path_cache(std::uint32_t samples) {
+CacheSettings path_cache(std::uint32_t samples, std::uint32_t refresh = 2) {
   CacheSettings s = on(LookupMode::Direction);
   s.path_samples = samples;
+  s.path_refresh = refresh;
   return s;
 }
 
-TEST(RayCachePathMode, TexelsAverageTheSamplesThatLeftThroughThem) {
+bool served(const LeavingRadiance& r) {
+  return r.answer == CacheAnswer::Use || r.answer == CacheAnswer::Refresh;
+}
+
+TEST(RayCachePathMode, ProbesAverageTheSamplesOfOneSurfaceBatchByBatch) {
+  // The store's probes against a model fed with the leaving rays themselves, frame by frame: a
+  // texel's surface is its first sample's hit entity (first in pixel, sample, depth, kind and
+  // direction order); each frame's samples of that surface join a moving average with weight
+  // (1 − α) for what it held; the lookups its direction had are kept; it serves while the
+  // average's weight reaches path_samples.
   World w;
-  make_world(w, path_cache(3), 16, distant_surroundings, 64);
+  LitSurroundings lit;
+  // Coarse texels (several lookups each), so that most served lookups are not refreshed.
+  make_world(
+      w, path_cache(3, 1), 8, [&](ecs::Registry& r) { lit(r); }, 64);
   path_mode(w);
   auto tap = std::make_shared<Tap>(w.reg.resource<cache::RayCaches>().store);
   w.reg.resource<RenderJob>().hook = tap;
-  for (int k = 0; k < 4; ++k) (void)frame(w);
-  const cache::CubeView cube = store_of(w.reg).cube(0);
-  ASSERT_EQ(cube.probe.size(), cube.texels.size());
-  // Every traced (or refining) sample that left the mirror, by the texel its direction picks.
-  std::vector<glm::dvec3> sum(cube.texels.size(), glm::dvec3(0.0));
-  std::vector<std::uint32_t> count(cube.texels.size(), 0);
-  std::size_t served = 0;
-  for (const LeavingRadiance& r : tap->rays_) {
-    ASSERT_TRUE(r.exits);
-    ASSERT_EQ(r.instance, cube.instance);
-    if (r.answer == CacheAnswer::Use) {
-      ++served;
-      continue;
+  const std::uint32_t resolution = 8;
+  const std::size_t texels = std::size_t(cache::kFaceCount) * resolution * resolution;
+  struct Model {
+    glm::dvec3 sum{0.0};
+    double weight = 0.0;
+    std::uint32_t samples = 0, lookups = 0, surface = kNoInstance;
+  };
+  std::vector<Model> model(texels);
+  std::size_t served_rays = 0, refreshed = 0, other_surface = 0, served_elsewhere = 0;
+  for (int k = 0; k < 6; ++k) {
+    tap->rays_.clear();
+    (void)frame(w);
+    std::vector<std::vector<const LeavingRadiance*>> by_texel(texels);
+    for (const LeavingRadiance& r : tap->rays_) {
+      ASSERT_TRUE(r.exits);
+      by_texel[cache::texel_of(r.direction, resolution)].push_back(&r);
+      served_rays += served(r) ? 1 : 0;
+      refreshed += r.answer == CacheAnswer::Refresh ? 1 : 0;
     }
-    const std::uint32_t t = cache::texel_of(r.direction, cube.resolution);
-    sum[t] += glm::dvec3(r.radiance);
-    ++count[t];
+    const cache::CubeView cube = store_of(w.reg).cube(0);
+    ASSERT_EQ(cube.probe.size(), texels);
+    for (std::size_t i = 0; i < texels; ++i) {
+      auto& rays = by_texel[i];
+      if (rays.empty()) continue;
+      std::sort(rays.begin(), rays.end(), [](const LeavingRadiance* a, const LeavingRadiance* b) {
+        const auto key = [](const LeavingRadiance* r) {
+          std::uint32_t x, y;
+          std::memcpy(&x, &r->direction.x, 4);
+          std::memcpy(&y, &r->direction.y, 4);
+          return std::tuple(r->pixel, (r->sample << 12) | (r->depth << 4) | std::uint32_t(r->kind),
+                            (std::uint64_t(x) << 32) | y);
+        };
+        return key(a) < key(b);
+      });
+      Model& m = model[i];
+      // A served ray hit the surface of its texel's probe.
+      for (const LeavingRadiance* r : rays)
+        if (served(*r) && r->hit_entity != m.surface) ++served_elsewhere;
+      glm::dvec3 batch(0.0);
+      std::uint32_t n = 0;
+      for (const LeavingRadiance* r : rays) {
+        if (r->answer == CacheAnswer::Use) continue;
+        if (m.samples == 0 && n == 0) m.surface = r->hit_entity;
+        if (r->hit_entity != m.surface) {
+          ++other_surface;
+          continue;
+        }
+        batch += glm::dvec3(r->radiance);
+        ++n;
+      }
+      m.lookups = std::uint32_t(rays.size());
+      if (n > 0) {
+        m.sum = m.sum * double(1.0f - cache::kProbeDecay) + batch;
+        m.weight = m.weight * double(1.0f - cache::kProbeDecay) + double(n);
+        m.samples += n;
+      }
+      const cache::ProbeTexel& p = cube.probe[i];
+      ASSERT_EQ(p.samples, m.samples) << "frame " << k << ", texel " << i;
+      ASSERT_EQ(p.lookups, m.lookups) << "frame " << k << ", texel " << i;
+      if (m.samples == 0) continue;
+      ASSERT_EQ(cube.texels[i].hit, m.surface) << "frame " << k << ", texel " << i;
+      EXPECT_NEAR(p.weight, m.weight, 1e-4 * m.weight);
+      for (int c = 0; c < 3; ++c) EXPECT_NEAR(p.sum[c], m.sum[c], 1e-4 * (1.0 + m.sum[c]));
+      EXPECT_EQ(cube.texels[i].valid(), m.weight >= 3.0) << "frame " << k << ", texel " << i;
+      // The texel's colour is the mean (in half precision).
+      const vec3 colour = cache::texel_radiance(cube.texels[i]);
+      for (int c = 0; c < 3; ++c)
+        EXPECT_NEAR(colour[c], m.sum[c] / m.weight, 2e-3 * (1.0 + m.sum[c] / m.weight));
+    }
   }
-  std::size_t sampled = 0, valid = 0;
-  for (std::size_t i = 0; i < cube.texels.size(); ++i) {
-    ASSERT_EQ(cube.probe[i].count, count[i]) << "texel " << i;
-    EXPECT_EQ(cube.texels[i].valid(), count[i] >= 3) << "texel " << i;
-    if (count[i] == 0) continue;
-    ++sampled;
-    valid += cube.texels[i].valid() ? 1 : 0;
-    const glm::dvec3 mean = sum[i] / double(count[i]);
-    const glm::dvec3 probe =
-        glm::dvec3(cube.probe[i].sum[0], cube.probe[i].sum[1], cube.probe[i].sum[2]) /
-        double(cube.probe[i].count);
-    for (int c = 0; c < 3; ++c) EXPECT_NEAR(probe[c], mean[c], 1e-4 * (1.0 + mean[c]));
-    // The texel's colour is the mean (in half precision).
-    const vec3 colour = cache::texel_radiance(cube.texels[i]);
-    for (int c = 0; c < 3; ++c) EXPECT_NEAR(colour[c], mean[c], 2e-3 * (1.0 + mean[c]));
-  }
-  EXPECT_GT(sampled, 200u);
-  EXPECT_GT(valid, 20u);
-  EXPECT_GT(served, 0u) << "valid texels serve the later frames' paths";
+  EXPECT_GT(served_rays, 100u) << "valid texels serve the later frames' samples";
+  EXPECT_GT(refreshed, 10u) << "and some of those are traced on for the probe";
+  EXPECT_LT(refreshed, served_rays / 2);
+  EXPECT_GT(other_surface, 0u) << "texels on silhouettes must see both surfaces";
+  EXPECT_EQ(served_elsewhere, 0u) << "a texel serves only rays that hit its probe's surface";
 }
 
-TEST(RayCachePathMode, ServedPathsEndAtTheCacheAndTheImageConvergesToUncached) {
-  // Surroundings at infinity: a texel's mean is what every path leaving in its direction would
-  // bring back, so the cached image converges to the uncached one; served paths end there.
+TEST(RayCachePathMode, ASampleTakesEmissionAndTheCachedValueAndRefreshedPathsStayOutOfIt) {
+  // A perfect mirror (no diffuse part, so nothing at the primary vertex): a mirror pixel is
+  // throughput × (emission at the leaving ray's hit + what comes after it). Traced on, that is
+  // the record's radiance; served or refreshed, the cached value alone — what a refreshed path
+  // gathers afterwards must not reach the image. Frames not accumulated.
+  World w;
+  LitSurroundings lit;
+  make_world(
+      w, path_cache(2, 1), 8, [&](ecs::Registry& r) { lit(r); }, 64, vec3(0.0f, 0.3f, 4.0f), 2,
+      mirror_material(1.0f));
+  path_mode(w);
+  w.reg.resource<RenderJob>().accumulate = false;
+  auto tap = std::make_shared<Tap>(w.reg.resource<cache::RayCaches>().store);
+  w.reg.resource<RenderJob>().hook = tap;
+  const vec3 lamp = vec3(3.0f, 2.6f, 2.2f);
+  std::size_t checked = 0, by_answer[4] = {0, 0, 0, 0}, lamp_hits = 0, mismatched = 0;
+  for (int k = 0; k < 5; ++k) {
+    tap->rays_.clear();
+    const Framebuffer image = frame(w);
+    std::vector<int> first(image.pixel_count(), -1);
+    for (std::size_t j = 0; j < tap->rays_.size(); ++j)
+      if (tap->rays_[j].depth == 1) {
+        ASSERT_EQ(first[tap->rays_[j].pixel], -1) << "one sample: one ray leaves a pixel's hit";
+        first[tap->rays_[j].pixel] = int(j);
+      }
+    for (std::size_t p = 0; p < image.pixel_count(); ++p) {
+      if (first[p] < 0) continue;
+      const LeavingRadiance& r = tap->rays_[std::size_t(first[p])];
+      const vec3 emitted = r.hit_entity == lit.lamp.index ? lamp : vec3(0.0f);
+      lamp_hits += r.hit_entity == lit.lamp.index ? 1 : 0;
+      const vec3 expected = r.throughput * (emitted + (served(r) ? r.cached : r.radiance));
+      const vec3 got = image.pixels()[p];
+      if (glm::any(glm::greaterThan(glm::abs(expected - got), 1e-5f * glm::abs(got) + vec3(1e-6f))))
+        ++mismatched;
+      ++checked;
+      ++by_answer[std::size_t(r.answer)];
+    }
+  }
+  EXPECT_GT(checked, 1000u);
+  EXPECT_EQ(mismatched, 0u);
+  EXPECT_GT(lamp_hits, 5u) << "the lamp must be seen in the mirror";
+  EXPECT_GT(by_answer[std::size_t(CacheAnswer::Trace)], 100u);
+  EXPECT_GT(by_answer[std::size_t(CacheAnswer::Use)], 100u);
+  EXPECT_GT(by_answer[std::size_t(CacheAnswer::Refresh)], 20u);
+}
+
+TEST(RayCachePathMode, ServedSamplesEndAtTheirFirstHitAndTheImageConvergesToUncached) {
+  // A texel's mean is what paths scattered towards the mirror from its surface bring back, so
+  // the cached image converges to the uncached one (within the texel's blur, small against the
+  // noise here); served samples trace nothing after the leaving ray's hit.
+  LitSurroundings lit;
   World cached, uncached, other_seed;
-  make_world(cached, path_cache(4), 32, distant_surroundings, 48);
-  make_world(uncached, CacheSettings{}, 32, distant_surroundings, 48);
-  make_world(other_seed, CacheSettings{}, 32, distant_surroundings, 48);
+  const auto build = [&](ecs::Registry& r) { lit(r); };
+  make_world(cached, path_cache(4, 1), 16, build, 64);
+  make_world(uncached, CacheSettings{}, 16, build, 64);
+  make_world(other_seed, CacheSettings{}, 16, build, 64);
   path_mode(cached);
   path_mode(uncached);
   path_mode(other_seed, 7);
@@ -575,7 +700,7 @@ TEST(RayCachePathMode, ServedPathsEndAtTheCacheAndTheImageConvergesToUncached) {
   const FrameStats& last = cached.reg.resource<RenderJob>().last;
   const FrameStats& plain = uncached.reg.resource<RenderJob>().last;
   EXPECT_GT(last.cache.hits, last.cache.lookups / 2);
-  EXPECT_LT(last.rays[RayKind::Reflection], plain.rays[RayKind::Reflection]);
+  EXPECT_LT(last.rays[RayKind::Shadow], plain.rays[RayKind::Shadow]);
   EXPECT_LT(last.rays.total(), plain.rays.total());
   // The cache's error against uncached is of the order of the noise between two uncached runs.
   const double noise = psnr(b, c);
@@ -589,9 +714,11 @@ TEST(RayCachePathMode, ServedPathsEndAtTheCacheAndTheImageConvergesToUncached) {
 }
 
 TEST(RayCachePathMode, FramesAndProbesAreTheSameWhateverTheThreadCount) {
+  LitSurroundings lit;
+  const auto build = [&](ecs::Registry& r) { lit(r); };
   World one, two;
-  make_world(one, path_cache(2), 16, distant_surroundings, 48, vec3(0.0f, 0.3f, 4.0f), 1);
-  make_world(two, path_cache(2), 16, distant_surroundings, 48, vec3(0.0f, 0.3f, 4.0f), 2);
+  make_world(one, path_cache(2), 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 1);
+  make_world(two, path_cache(2), 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2);
   path_mode(one);
   path_mode(two);
   one.reg.resource<RenderJob>().settings.tile_size = 8;
@@ -602,13 +729,16 @@ TEST(RayCachePathMode, FramesAndProbesAreTheSameWhateverTheThreadCount) {
   }
   const cache::CubeView a = store_of(one.reg).cube(0), b = store_of(two.reg).cube(0);
   ASSERT_EQ(a.probe.size(), b.probe.size());
+  EXPECT_GT(store_of(one.reg).counts().hits, 0u);
   EXPECT_EQ(std::memcmp(a.probe.data(), b.probe.data(), a.probe.size_bytes()), 0);
   EXPECT_EQ(std::memcmp(a.texels.data(), b.texels.data(), a.texels.size_bytes()), 0);
 }
 
 TEST(RayCachePathMode, SwitchingBetweenWhittedAndPathStartsTheCubesAfresh) {
+  LitSurroundings lit;
   World w;
-  make_world(w, path_cache(2), 16, distant_surroundings, 48);
+  make_world(
+      w, path_cache(2), 16, [&](ecs::Registry& r) { lit(r); }, 48);
   for (int k = 0; k < 2; ++k) (void)frame(w); // Whitted: exact values, no indirect light
   ASSERT_GT(store_of(w.reg).counts().valid, 0u);
   path_mode(w);
@@ -617,12 +747,39 @@ TEST(RayCachePathMode, SwitchingBetweenWhittedAndPathStartsTheCubesAfresh) {
   ASSERT_EQ(cube.probe.size(), cube.texels.size());
   for (std::size_t i = 0; i < cube.texels.size(); ++i) {
     if (cube.texels[i].valid()) {
-      ASSERT_GE(cube.probe[i].count, 2u) << "a Whitted value survived";
+      ASSERT_GE(cube.probe[i].weight, 2.0f) << "a Whitted value survived";
     }
   }
   w.reg.resource<RenderJob>().settings.mode = TraceMode::Whitted;
   (void)frame(w);
   EXPECT_TRUE(store_of(w.reg).cube(0).probe.empty());
+}
+
+TEST(RayCachePathMode, AutoKeepsPathModeUncachedAndSaysWhy) {
+  // Measured (docs/cache-report/path-cache.md): no probe setting reached uncached path tracing's
+  // error sooner, so auto turns path-mode cubes off — and then the frames are uncached ones,
+  // image and rays alike (no lookups, no leaving records).
+  LitSurroundings lit;
+  const auto build = [&](ecs::Registry& r) { lit(r); };
+  CacheSettings automatic;
+  automatic.policy = CachePolicy::Auto;
+  World cached, uncached;
+  make_world(cached, automatic, 16, build, 48);
+  make_world(uncached, CacheSettings{}, 16, build, 48);
+  path_mode(cached);
+  path_mode(uncached);
+  Framebuffer a{1, 1}, b{1, 1};
+  for (int k = 0; k < 3; ++k) {
+    a = frame(cached);
+    b = frame(uncached);
+  }
+  const FrameStats& last = cached.reg.resource<RenderJob>().last;
+  EXPECT_EQ(rmse(a, b), 0.0);
+  EXPECT_EQ(last.rays.total(), uncached.reg.resource<RenderJob>().last.rays.total());
+  EXPECT_EQ(last.cache.lookups, 0u);
+  ASSERT_EQ(last.cache.cubes.size(), 1u);
+  EXPECT_EQ(last.cache.cubes[0].mode, "off");
+  EXPECT_NE(last.cache.cubes[0].reason.find("path mode"), std::string::npos);
 }
 
 TEST(RayCachePathMode, AMoveOutdatesSamplesStillBeingAveraged) {
@@ -636,7 +793,7 @@ TEST(RayCachePathMode, AMoveOutdatesSamplesStillBeingAveraged) {
   ASSERT_EQ(store_of(w.reg).counts().valid, 0u);
   const cache::CubeView before = store_of(w.reg).cube(0);
   std::uint64_t pending = 0;
-  for (const cache::ProbeTexel& p : before.probe) pending += p.count > 0 ? 1 : 0;
+  for (const cache::ProbeTexel& p : before.probe) pending += p.samples > 0 ? 1 : 0;
   ASSERT_GT(pending, 100u);
   move(w.reg, build.c, vec3(1.2f, 0.0f, 2.5f));
   (void)frame(w);

@@ -156,7 +156,9 @@ TEST(RadianceHook, DeliveriesAreTheSameWhateverTheTilesAndThreads) {
 TEST(RadianceHook, InPathModeALeavingRayBringsBackTheRestOfItsPath) {
   // One sample per pixel: a pixel is its primary vertex's own part (emission and next-event
   // estimates, which the same sample gives with nothing beyond it: max_depth 0) plus, when its
-  // path left the front sphere by a specular bounce, throughput × what that ray brought back.
+  // path left the front sphere by a specular bounce, throughput × what that ray brought back
+  // (the scene has no emitters, so that is all of it: the emission at the ray's first hit, which
+  // a path-mode leaving ray leaves out, is zero; tests/cache checks a scene with one).
   const Rendered full = render(5, true, 16, 2, TraceMode::Path);
   const Rendered local = render(0, false, 16, 2, TraceMode::Path);
   const std::size_t n = full.image.pixel_count();
