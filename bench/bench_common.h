@@ -44,6 +44,8 @@ struct Options {
   std::string source_dir = SPECULA_SOURCE_DIR;
   /// The path sections' scenes (samples/scenes/NAME.json), comma-separated.
   std::string path_scenes = "cornell_box,area_lights";
+  /// path-cache's scenes (square images, so the front mirror covers a third of the frame).
+  std::string path_cache_scenes = "mirror_spheres_distant_32,mirror_spheres_hall_32";
   /// path-error accumulates 1-spp frames up to this many samples.
   std::uint32_t path_spp = 256;
   /// Samples per pixel of the converged references.
@@ -83,6 +85,7 @@ void section_cache_paper(const Options& o);
 // Path tracing (path_sections.cpp): cached converged references, speed against error.
 void section_path_reference(const Options& o);
 void section_path_error(const Options& o);
+void section_path_cache(const Options& o);
 
 // The Vulkan backends beside the CPU ones (gpu_sections.cpp): kernel styles, structures, grid
 // resolution.

@@ -13,6 +13,14 @@
 //                   log-log slope of RMSE against time; the target check (Cornell box frames/s at
 //                   1 spp, FLIP after 1 s of accumulation with and without the denoiser). Writes
 //                   path-error.md and one log-log PNG per scene under --out-dir.
+//   path-cache      ray-cache cubes in path mode (texels averaging path samples): per scene of
+//                   --path-cache-scenes (square images), uncached MIS frames accumulated for
+//                   3 × --path-budget-ms set the target — their FLIP after --path-budget-ms —
+//                   and each cached contender (lookup mode × resolution × --cache-refresh, its
+//                   cubes empty at the start) accumulates until it reaches that FLIP: the
+//                   equal-error time and its ratio to the budget, and the FLIP on the cached
+//                   object's pixels and elsewhere. Writes path-cache.md and one FLIP-against-time
+//                   PNG per scene under --out-dir.
 //
 // Frames are rendered with render_frame directly (the scene layer and tracer built by one tick of
 // the schedule), so a frame's time is the integrator's, not the schedule's bookkeeping. The
@@ -22,6 +30,7 @@
 #include "bench_common.h"
 #include "plot_png.h"
 
+#include "specula/cache/ray_cache.h"
 #include "specula/core/error.h"
 #include "specula/image/denoise.h"
 #include "specula/image/flip.h"
@@ -82,9 +91,10 @@ std::uint32_t path_height(const Options& o) { return std::max(16u, o.size * 400 
 /// render_frame.
 class PathScene {
 public:
-  PathScene(const Options& o, const std::string& name)
+  PathScene(const Options& o, const std::string& name, bool square = false)
       : name_(name), file_(fs::path(o.source_dir) / "samples/scenes" / (name + ".json")),
-        scene_(load_scene(file_)), width_(path_width(o)), height_(path_height(o)) {
+        scene_(load_scene(file_)), width_(path_width(o)),
+        height_(square ? path_width(o) : path_height(o)) {
     RenderJob job;
     job.backend = "embree";
     job.settings.mode = TraceMode::Cast; // the tick only builds the layer and the tracer
@@ -112,10 +122,40 @@ public:
     s.seed = seed;
     return s;
   }
-  FrameStats render(const TraceSettings& s, Framebuffer& out, GuideBuffers* guides) {
+  FrameStats render(const TraceSettings& s, Framebuffer& out, GuideBuffers* guides,
+                    RadianceHook* hook = nullptr) {
     ecs::Registry& reg = scene_.registry;
     return render_frame(*reg.resource<ActiveTracer>().tracer, reg.resource<SceneLayer>(), camera_,
-                        s, out, nullptr, guides);
+                        s, out, hook, guides);
+  }
+  /// A ray-cache store with the scene's cubes made (empty).
+  std::shared_ptr<cache::RayCacheStore> make_store(const cache::CacheSettings& settings) {
+    auto store = std::make_shared<cache::RayCacheStore>(settings);
+    (void)store->invalidate(scene_.registry, scene_.registry.resource<SceneLayer>());
+    return store;
+  }
+  /// Per pixel, whether its camera ray meets a cached entity first.
+  [[nodiscard]] std::vector<std::uint8_t> cached_mask(const cache::RayCacheStore& store) {
+    ecs::Registry& reg = scene_.registry;
+    std::vector<std::uint32_t> instances;
+    for (std::size_t i = 0; i < store.cube_count(); ++i)
+      instances.push_back(store.cube(i).instance);
+    const CameraRays rays(camera_, width_, height_, reg.resource<SceneLayer>().render_origin());
+    std::vector<Ray> batch;
+    for (std::uint32_t y = 0; y < height_; ++y)
+      for (std::uint32_t x = 0; x < width_; ++x) {
+        Ray r = rays.ray(x, y);
+        r.tnear = 0.0f;
+        r.tfar = std::numeric_limits<float>::infinity();
+        batch.push_back(r);
+      }
+    std::vector<Hit> hits(batch.size());
+    reg.resource<ActiveTracer>().tracer->intersect(batch, hits);
+    std::vector<std::uint8_t> mask(hits.size());
+    for (std::size_t i = 0; i < hits.size(); ++i)
+      mask[i] = hits[i].hit() &&
+                std::find(instances.begin(), instances.end(), hits[i].instance) != instances.end();
+    return mask;
   }
 
 private:
@@ -570,6 +610,230 @@ void path_error(const Options& o) {
   out("\nWrote %s and path-error-*.png there.\n", (dir / "path-error.md").string().c_str());
 }
 
+// --- Path mode with ray-cache cubes ------------------------------------------------------------
+
+/// One contender's accumulation: after every 1-spp frame, the wall time so far (tracing and
+/// accumulation) and the mean's FLIP and RMSE against the reference.
+struct CacheRun {
+  std::string label;
+  std::uint32_t resolution = 0, samples = 0;
+  std::vector<double> ms, flip, rmse, frame_ms;
+  /// Per frame: mean FLIP over the cached object's pixels and over the others.
+  std::vector<double> flip_cached, flip_rest;
+  CacheCounts last;
+  double served = 0.0; ///< share of the lookups served, over the run
+};
+
+/// Accumulates MIS frames (cached when `settings` has a policy) until `until_ms` of wall time,
+/// or, with a target, until the FLIP reaches it; FLIP is also split by `mask` (the pixels whose
+/// camera ray meets a cached object).
+CacheRun accumulate(PathScene& scene, const Framebuffer& ref, const cache::CacheSettings& settings,
+                    const std::vector<std::uint8_t>& mask, double until_ms,
+                    double target_flip = -1.0) {
+  CacheRun run;
+  TraceSettings s = scene.settings(LightSampling::Mis, kMeasureSeed);
+  std::shared_ptr<cache::RayCacheStore> store;
+  if (settings.policy != cache::CachePolicy::Off) store = scene.make_store(settings);
+  Framebuffer frame(scene.width(), scene.height()), mean(scene.width(), scene.height());
+  std::vector<dvec3> sum(frame.pixel_count(), dvec3(0.0));
+  double elapsed = 0.0;
+  std::uint64_t lookups = 0, hits = 0;
+  for (std::uint32_t k = 0;; ++k) {
+    s.sample_offset = k;
+    elapsed += time_ms([&] {
+      const double ms = time_ms([&] { (void)scene.render(s, frame, nullptr, store.get()); });
+      run.frame_ms.push_back(ms);
+      const double inv = 1.0 / double(k + 1);
+      for (std::size_t i = 0; i < sum.size(); ++i) {
+        sum[i] += dvec3(frame.pixels()[i]);
+        mean.pixels()[i] = vec3(sum[i] * inv);
+      }
+    });
+    if (store) {
+      run.last = store->counts();
+      lookups += run.last.lookups;
+      hits += run.last.hits;
+    }
+    run.ms.push_back(elapsed);
+    const FlipResult f = flip(ref, mean);
+    run.flip.push_back(f.mean);
+    double in = 0.0, out = 0.0;
+    std::size_t n_in = 0;
+    for (std::size_t i = 0; i < mask.size(); ++i) {
+      (mask[i] != 0 ? in : out) += double(f.error_map[i]);
+      n_in += mask[i];
+    }
+    run.flip_cached.push_back(n_in > 0 ? in / double(n_in) : 0.0);
+    run.flip_rest.push_back(n_in < mask.size() ? out / double(mask.size() - n_in) : 0.0);
+    run.rmse.push_back(rmse(ref, mean));
+    if (elapsed >= until_ms) break;
+    if (target_flip > 0.0 && run.flip.back() <= target_flip) break;
+  }
+  run.served = lookups > 0 ? double(hits) / double(lookups) : 0.0;
+  return run;
+}
+
+/// Where a run's FLIP (log-log interpolated between frames) first reaches `target`; NaN if it
+/// never does.
+double time_to_flip(const CacheRun& r, double target) {
+  for (std::size_t k = 0; k < r.flip.size(); ++k) {
+    if (r.flip[k] > target) continue;
+    if (k == 0) return r.ms[0];
+    const double x0 = std::log(r.ms[k - 1]), x1 = std::log(r.ms[k]);
+    const double y0 = std::log(r.flip[k - 1]), y1 = std::log(r.flip[k]), y = std::log(target);
+    return std::exp(y1 == y0 ? x1 : x0 + (x1 - x0) * (y - y0) / (y1 - y0));
+  }
+  return std::numeric_limits<double>::quiet_NaN();
+}
+
+/// The FLIP at `ms` (log-log interpolated; the last frame's when the run is shorter).
+double flip_at(const CacheRun& r, double ms) {
+  for (std::size_t k = 0; k < r.ms.size(); ++k) {
+    if (r.ms[k] < ms) continue;
+    if (k == 0) return r.flip[0];
+    const double x0 = std::log(r.ms[k - 1]), x1 = std::log(r.ms[k]), x = std::log(ms);
+    const double y0 = std::log(r.flip[k - 1]), y1 = std::log(r.flip[k]);
+    return std::exp(y0 + (y1 - y0) * (x - x0) / (x1 - x0));
+  }
+  return r.flip.back();
+}
+
+void path_cache_plot(const std::vector<CacheRun>& runs, const std::string& name, double target,
+                     const fs::path& path) {
+  Plot plot;
+  plot.title = "PATH MODE WITH RAY-CACHE PROBES, " + name;
+  plot.x_label = "LOG10 WALL TIME (MS): TRACING + ACCUMULATION";
+  plot.y_label = "LOG10 MEAN FLIP";
+  plot.y_reference = std::log10(target);
+  const Rgb colours[] = {{0, 0, 0},       {31, 119, 180}, {230, 110, 0}, {30, 140, 30},
+                         {200, 40, 40},   {140, 90, 180}, {140, 86, 75}, {220, 110, 190},
+                         {120, 120, 120}, {180, 180, 40}, {20, 190, 200}};
+  const Marker markers[] = {Marker::Circle, Marker::Square, Marker::TriangleUp,  Marker::Diamond,
+                            Marker::Cross,  Marker::Plus,   Marker::TriangleDown};
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    PlotSeries series;
+    series.colour = colours[i % std::size(colours)];
+    series.marker = markers[i % std::size(markers)];
+    for (std::size_t k = 0; k < runs[i].ms.size(); ++k)
+      if (runs[i].flip[k] > 0.0)
+        series.points.emplace_back(std::log10(runs[i].ms[k]), std::log10(runs[i].flip[k]));
+    plot.series.push_back(series);
+    std::string text = runs[i].label;
+    for (char& c : text)
+      if (c == ',') c = ' ';
+    plot.legend.push_back({text, series.colour, series.marker});
+  }
+  write_plot_png(plot, path);
+}
+
+void path_cache(const Options& o) {
+  Report out;
+  // Beside the other ray-cache reports.
+  const fs::path dir =
+      o.out_dir.empty() ? fs::path(o.source_dir) / "docs/cache-report" : fs::path(o.out_dir);
+  fs::create_directories(dir);
+  const double budget = o.path_budget_ms;
+  out("\n## Path tracing with ray-cache cubes: equal-error time (%ux%u, %u threads)\n\n",
+      path_width(o), path_width(o), o.threads);
+  out("Uncached MIS path tracing accumulates 1-spp frames for %.0f ms of wall time (tracing and "
+      "accumulation); its mean FLIP against the %u-spp reference after %.0f ms is the target. "
+      "Each cached contender starts with empty cubes (path mode: a leaving ray is traced to its "
+      "first hit, whose emission it takes; a texel whose probe belongs to the surface hit — a "
+      "moving average of the radiance scattered from it, weight at least *samples* — gives "
+      "the rest and the path ends there; about *refresh* of a texel's lookups a frame are traced "
+      "on anyway, for the probe alone) and accumulates until it reaches that FLIP (or %.0f ms). "
+      "*equal-error time*: when it got there (log-log interpolated between frames); "
+      "*speed-up*: %.0f ms over it. *on the mirror / elsewhere*: the mean FLIP over the pixels "
+      "whose camera ray meets the cached object, and over the others, at the frame that "
+      "reached %.0f ms (or the last). The uncached run is repeated last, to show the machine's "
+      "drift.\n\n",
+      3.0 * budget, o.reference_spp, budget, 3.0 * budget, budget, budget);
+  for (const std::string& name : [&] {
+         std::vector<std::string> names;
+         for (std::size_t b = 0; b <= o.path_cache_scenes.size();) {
+           std::size_t e = o.path_cache_scenes.find(',', b);
+           if (e == std::string::npos) e = o.path_cache_scenes.size();
+           if (e > b) names.push_back(o.path_cache_scenes.substr(b, e - b));
+           b = e + 1;
+         }
+         return names;
+       }()) {
+    PathScene scene(o, name, true);
+    const Framebuffer ref = reference(o, scene, out);
+    std::vector<CacheRun> runs;
+    cache::CacheSettings any;
+    any.policy = cache::CachePolicy::On;
+    const std::vector<std::uint8_t> mask = scene.cached_mask(*scene.make_store(any));
+    const double coverage =
+        double(std::count(mask.begin(), mask.end(), std::uint8_t{1})) / double(mask.size());
+    CacheRun off = accumulate(scene, ref, cache::CacheSettings{}, mask, 3.0 * budget);
+    off.label = "uncached";
+    const double target = flip_at(off, budget);
+    runs.push_back(off);
+    // Path mode's lookups test the surface hit instead of the parallax (tau and march behave as
+    // direction there): what varies is the texel size and the refresh rate.
+    struct Setting {
+      std::uint32_t resolution, samples, refresh;
+    };
+    const Setting settings[] = {{16, 4, 2}, {32, 4, 2}, {32, 4, 8},
+                                {64, 4, 2}, {64, 4, 8}, {128, 4, 2}};
+    for (const Setting& st : settings) {
+      if (st.resolution > o.cache_max_resolution) continue;
+      cache::CacheSettings cs;
+      cs.policy = cache::CachePolicy::On;
+      cs.resolution = st.resolution;
+      cs.path_samples = st.samples;
+      cs.path_refresh = st.refresh;
+      CacheRun r = accumulate(scene, ref, cs, mask, 3.0 * budget, target);
+      char label[96];
+      std::snprintf(label, sizeof label, "faces %u, samples %u, refresh %u", st.resolution,
+                    st.samples, st.refresh);
+      r.label = label;
+      r.resolution = st.resolution;
+      r.samples = st.samples;
+      runs.push_back(r);
+    }
+    CacheRun again = accumulate(scene, ref, cache::CacheSettings{}, mask, 3.0 * budget);
+    again.label = "uncached again";
+    runs.push_back(again);
+
+    out("\n### %s\n\nThe cached mirror covers %.1f%% of the frame. Target: uncached FLIP "
+        "after %.0f ms = %.4f (the repeated uncached run: %.4f).\n\n",
+        name.c_str(), 100.0 * coverage, budget, target, flip_at(again, budget));
+    out("| contender | frame ms (median) | frames in %.0f ms | FLIP after %.0f ms | on the mirror "
+        "/ elsewhere | RMSE after %.0f ms | equal-error time (ms) | speed-up | lookups served | "
+        "texels valid | memory |\n"
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        budget, budget, budget);
+    for (const CacheRun& r : runs) {
+      const double t = time_to_flip(r, target);
+      std::size_t at = 0;
+      while (at + 1 < r.ms.size() && r.ms[at] < budget) ++at;
+      const bool cached = r.resolution != 0;
+      char row[512];
+      std::snprintf(
+          row, sizeof row,
+          "| %s | %.1f | %zu | %.4f | %.4f / %.4f | %.4f | %s | %s | %s | %s | %s |\n",
+          r.label.c_str(), median(r.frame_ms), at + 1, flip_at(r, budget), r.flip_cached[at],
+          r.flip_rest[at], r.rmse[at],
+          std::isnan(t) ? ("not in " + fixed(r.ms.back(), 0)).c_str() : fixed(t, 0).c_str(),
+          std::isnan(t) ? "—" : (fixed(budget / t, 2) + "×").c_str(),
+          cached ? (fixed(100.0 * r.served, 1) + "%").c_str() : "—",
+          cached ? (std::to_string(r.last.valid) + " / " + std::to_string(r.last.texels)).c_str()
+                 : "—",
+          cached ? (fixed(double(r.last.memory_bytes) / 1024.0, 0) + " KiB").c_str() : "—");
+      out("%s", row);
+    }
+    const fs::path png = dir / ("path-cache-" + name + ".png");
+    std::string upper = name;
+    for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
+    path_cache_plot(runs, upper, target, png);
+    out("\n![FLIP against time, %s](path-cache-%s.png)\n", name.c_str(), name.c_str());
+  }
+  out.save(dir / "path-cache.md");
+  out("\nWrote %s.\n", (dir / "path-cache.md").string().c_str());
+}
+
 } // namespace
 
 void section_path_reference(const Options& o) {
@@ -577,6 +841,14 @@ void section_path_reference(const Options& o) {
     path_reference(o);
   } catch (const UnavailableError& e) {
     std::printf("\npath-reference skipped: %s\n", e.what()); // a build without path mode
+  }
+}
+
+void section_path_cache(const Options& o) {
+  try {
+    path_cache(o);
+  } catch (const UnavailableError& e) {
+    std::printf("\npath-cache skipped: %s\n", e.what());
   }
 }
 

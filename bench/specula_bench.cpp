@@ -18,6 +18,9 @@
 //            cached converged references, and RMSE / FLIP against samples and wall time for BSDF,
 //            light and MIS sampling with and without the à-trous denoiser (Markdown and log-log
 //            PNGs under --out-dir).
+//   path-cache  ray-cache cubes in path mode (path_sections.cpp; not in the default list): the
+//            equal-error time of cached against uncached path tracing (FLIP against the
+//            converged reference), per lookup mode, resolution and --cache-samples.
 //   gpu      the Vulkan backends (gpu_sections.cpp; not in the default list): primary Mrays/s on
 //            the bunny and the Cornell box per kernel style and structure beside native-bvh and
 //            Embree, vulkan-grid's resolution sweep, and ray-cache cubes on the device (also
@@ -354,12 +357,14 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 6));
   app.add_option("--sections", o.sections,
                  "Comma-separated: primary,tiles,whitted,depth,build,refit,native,paper,cache,"
-                 "cache-paper,path-reference,path-error,gpu,gpu-cache,dynamic,editor");
+                 "cache-paper,path-reference,path-error,path-cache,gpu,gpu-cache,dynamic,editor");
   app.add_option("--out-dir", o.out_dir,
                  "Where cache, cache-paper and path-error write Markdown and PNGs (default: "
                  "SOURCE_DIR/docs/cache-report, SOURCE_DIR/docs/path-report)");
   app.add_option("--path-scenes", o.path_scenes,
                  "Comma-separated sample scenes of the path sections");
+  app.add_option("--path-cache-scenes", o.path_cache_scenes,
+                 "Comma-separated sample scenes of path-cache (square images)");
   app.add_option("--path-spp", o.path_spp, "Samples path-error accumulates (1-spp frames)")
       ->check(CLI::Range(1u, 1u << 20));
   app.add_option("--reference-spp", o.reference_spp, "Samples per pixel of the references")
@@ -420,6 +425,7 @@ int main(int argc, char** argv) {
     if (has("cache-paper")) section_cache_paper(o);
     if (has("path-reference")) section_path_reference(o);
     if (has("path-error")) section_path_error(o);
+    if (has("path-cache")) section_path_cache(o);
     if (has("dynamic")) section_dynamic(o);
 #ifdef SPECULA_BENCH_EDITOR
     if (has("editor")) section_editor(o);

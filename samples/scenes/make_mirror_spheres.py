@@ -26,6 +26,11 @@ Variants of mirror_spheres_32 for the ray-cache report (bench/cache_sections.cpp
     20 below the front sphere's centre and the 32 hidden spheres (radius 2) on a shell of radius
     24 around it, where direction-only lookups (the paper's) should be nearly exact; the light is
     moved out and brightened so that the distant surroundings are lit about as before.
+  * mirror_spheres_hall_32: the distant layout closed in a hall (walls, floor and ceiling at least
+    20 front-sphere radii from its centre; red and green side walls) lit only by an emissive
+    panel in the ceiling, with no background: what the front sphere reflects is lit indirectly,
+    so in path mode every ray leaving it starts a whole, noisy diffuse path (the ray-cache
+    report's path-mode scene, bench/path_sections.cpp).
 
 Python 3 standard library only. Run from anywhere:  python3 samples/scenes/make_mirror_spheres.py
 """
@@ -46,10 +51,17 @@ HIDDEN_RADIUS = 0.75
 ROWS, COLUMNS = 4, 8
 ELEVATION_STEP_DEG = 11.0
 AZIMUTH_STEP_DEG = 11.0
-VARIANTS = ["glass", "heavy", "distant"]  # of mirror_spheres_32
+VARIANTS = ["glass", "heavy", "distant", "hall"]  # of mirror_spheres_32
 DISTANT_SHELL_RADIUS = 24.0
 DISTANT_HIDDEN_RADIUS = 2.0
 DISTANT_GROUND_DEPTH = 20.0
+# The hall (x from -30 to 30, y from -19 to 25, z from -30 to 32: every wall at least 20 front-sphere
+# radii from its centre, and the hidden-sphere shell, 24 around it, inside) and its ceiling panel.
+HALL_HALF_WIDTH = 30.0
+HALL_FLOOR, HALL_CEILING = -19.0, 25.0
+HALL_BACK, HALL_FRONT = -30.0, 32.0
+HALL_PANEL = [16, 16]
+HALL_EMISSION = [25, 23.5, 21]
 
 
 def rounded(v, digits=4):
@@ -82,9 +94,41 @@ def hidden_color(row, col):
     return [rounded(c, 3) for c in colorsys.hsv_to_rgb(hue, 0.65, 0.85)]
 
 
+def hall():
+    """The hall of mirror_spheres_hall_32: five walls and a floor, facing inwards, and the
+    ceiling's light panel."""
+    x, y0, y1, z0, z1 = HALL_HALF_WIDTH, HALL_FLOOR, HALL_CEILING, HALL_BACK, HALL_FRONT
+    height, depth_ = y1 - y0, z1 - z0
+    mid_y, mid_z = rounded((y0 + y1) / 2), rounded((z0 + z1) / 2)
+    grey, floor = [0.7, 0.7, 0.7], [0.55, 0.55, 0.5]
+    half_turn = 0.70710678
+
+    def plane(name, translation, rotation, size, color):
+        return {"name": name, "transform": {"translation": translation, "rotation": rotation},
+                "mesh": {"primitive": "plane", "size": size}, "material": {"base_color": color}}
+
+    return [
+        plane("floor", [0, y0, mid_z], [0, 0, 0, 1], [2 * x, depth_], floor),
+        plane("ceiling", [0, y1, mid_z], [1, 0, 0, 0], [2 * x, depth_], grey),
+        plane("back wall", [0, mid_y, z0], [half_turn, 0, 0, half_turn], [2 * x, height], grey),
+        plane("front wall", [0, mid_y, z1], [-half_turn, 0, 0, half_turn], [2 * x, height],
+              grey),
+        plane("left wall (red)", [-x, mid_y, mid_z], [0, 0, -half_turn, half_turn],
+              [height, depth_], [0.63, 0.065, 0.05]),
+        plane("right wall (green)", [x, mid_y, mid_z], [0, 0, half_turn, half_turn],
+              [height, depth_], [0.14, 0.45, 0.091]),
+        {
+            "name": "light panel",
+            "transform": {"translation": [0, rounded(y1 - 0.05), 0], "rotation": [1, 0, 0, 0]},
+            "mesh": {"primitive": "plane", "size": HALL_PANEL},
+            "material": {"base_color": [0, 0, 0], "emission": HALL_EMISSION},
+        },
+    ]
+
+
 def scene(count, cache_resolution, variant=None):
-    """The scene with `count` hidden spheres; variant None (the paper's), "glass", "heavy" or
-    "distant" (see the module docstring)."""
+    """The scene with `count` hidden spheres; variant None (the paper's), "glass", "heavy",
+    "distant" or "hall" (see the module docstring)."""
     front_material = {"base_color": [0.9, 0.9, 0.9], "reflectivity": 0.9}
     if variant == "glass":
         front_material = {"base_color": [0.9, 0.9, 0.9], "reflectivity": 0.05,
@@ -95,7 +139,7 @@ def scene(count, cache_resolution, variant=None):
     ground = {"mesh": {"primitive": "plane", "size": 60}}
     if variant == "heavy":
         hidden_segments, hidden_rings = 180, 90
-    if variant == "distant":
+    if variant in ("distant", "hall"):
         shell_radius, hidden_radius = DISTANT_SHELL_RADIUS, DISTANT_HIDDEN_RADIUS
         light = {"translation": [20, 40, 30]}, 4000
         ground = {
@@ -111,12 +155,19 @@ def scene(count, cache_resolution, variant=None):
                 "vertical_fov_deg": 30,
             },
         },
-        {
-            "name": "light",
-            "transform": light[0],
-            "light": {"type": "point", "color": [1, 1, 1], "intensity": light[1]},
-        },
-        dict({"name": "ground"}, **ground, material={"base_color": [0.55, 0.55, 0.5]}),
+    ]
+    if variant == "hall":
+        entities += hall()
+    else:
+        entities += [
+            {
+                "name": "light",
+                "transform": light[0],
+                "light": {"type": "point", "color": [1, 1, 1], "intensity": light[1]},
+            },
+            dict({"name": "ground"}, **ground, material={"base_color": [0.55, 0.55, 0.5]}),
+        ]
+    entities += [
         {
             "name": "glass sphere" if variant == "glass" else "mirror sphere",
             "transform": {"translation": list(FRONT_CENTER)},
@@ -138,7 +189,8 @@ def scene(count, cache_resolution, variant=None):
     return {
         "format": "specula-scene",
         "version": 1,
-        "settings": {"width": 1024, "height": 1024, "max_depth": 5, "background": [0.3, 0.4, 0.55]},
+        "settings": {"width": 1024, "height": 1024, "max_depth": 5,
+                     "background": [0, 0, 0] if variant == "hall" else [0.3, 0.4, 0.55]},
         "entities": entities,
     }
 
