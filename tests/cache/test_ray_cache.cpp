@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <map>
 #include <mutex>
 #include <numbers>
 #include <tuple>
@@ -647,7 +648,8 @@ TEST(RayCachePathMode, ASampleTakesEmissionAndTheCachedValueAndRefreshedPathsSta
   auto tap = std::make_shared<Tap>(w.reg.resource<cache::RayCaches>().store);
   w.reg.resource<RenderJob>().hook = tap;
   const vec3 lamp = vec3(3.0f, 2.6f, 2.2f);
-  std::size_t checked = 0, by_answer[4] = {0, 0, 0, 0}, lamp_hits = 0, mismatched = 0;
+  std::size_t checked = 0, lamp_hits = 0, mismatched = 0;
+  std::map<CacheAnswer, std::size_t> by_answer;
   for (int k = 0; k < 5; ++k) {
     tap->rays_.clear();
     const Framebuffer image = frame(w);
@@ -667,15 +669,15 @@ TEST(RayCachePathMode, ASampleTakesEmissionAndTheCachedValueAndRefreshedPathsSta
       if (glm::any(glm::greaterThan(glm::abs(expected - got), 1e-5f * glm::abs(got) + vec3(1e-6f))))
         ++mismatched;
       ++checked;
-      ++by_answer[std::size_t(r.answer)];
+      ++by_answer[r.answer];
     }
   }
   EXPECT_GT(checked, 1000u);
   EXPECT_EQ(mismatched, 0u);
   EXPECT_GT(lamp_hits, 5u) << "the lamp must be seen in the mirror";
-  EXPECT_GT(by_answer[std::size_t(CacheAnswer::Trace)], 100u);
-  EXPECT_GT(by_answer[std::size_t(CacheAnswer::Use)], 100u);
-  EXPECT_GT(by_answer[std::size_t(CacheAnswer::Refresh)], 20u);
+  EXPECT_GT(by_answer[CacheAnswer::Trace], 100u);
+  EXPECT_GT(by_answer[CacheAnswer::Use], 100u);
+  EXPECT_GT(by_answer[CacheAnswer::Refresh], 20u);
 }
 
 TEST(RayCachePathMode, ServedSamplesEndAtTheirFirstHitAndTheImageConvergesToUncached) {
