@@ -412,11 +412,13 @@ InvalidationStats RayCacheStore::invalidate(ecs::Registry& registry, const Scene
     }
     changes.push_back(ch);
   };
-  // The delta describes one sync. A store that missed one (caching switched off while objects
-  // moved, a store made for a layer that synced before) cannot tell what changed in between:
-  // every texel goes. The same sync seen twice brings nothing new.
+  // The delta describes one sync. A store that missed a sync that changed something (caching
+  // switched off while objects moved, a store made for a layer that synced before) cannot tell
+  // what changed in between: every texel goes. Missed syncs that changed nothing (another
+  // renderer's frames of a still scene) cost nothing. The same sync seen twice brings nothing
+  // new.
   const bool fresh = layer.syncs() != synced_;
-  const bool missed = fresh && layer.syncs() != synced_ + 1;
+  const bool missed = fresh && layer.missed_changes(synced_);
   synced_ = layer.syncs();
   bool flush_everything = missed || (fresh && delta.static_rebuilt);
   bool flush_surfaces = fresh && (delta.lights_changed || delta.materials_changed);

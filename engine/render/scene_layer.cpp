@@ -145,6 +145,8 @@ const SceneDelta& SceneLayer::sync(ecs::Registry& registry) {
   version_material_ = registry.version<Material>();
   transform_sequence_ = sequence;
   ++syncs_;
+  changed_before_ = changed_;
+  if (syncs_ == 1 || !delta_.empty()) changed_ = syncs_;
   stats_.static_instances = std::uint32_t(tables_.static_instances.size());
   stats_.static_triangles = tables_.static_triangle_count;
   stats_.dynamic_instances = std::uint32_t(slot_of_entity_.size()) - stats_.static_instances;

@@ -129,6 +129,12 @@ public:
   [[nodiscard]] std::optional<std::uint32_t> instance_of(ecs::Entity entity) const;
   /// Number of syncs so far (0: never synced).
   [[nodiscard]] std::uint64_t syncs() const { return syncs_; }
+  /// Whether a consumer whose last sync seen was number `seen` missed a change: some sync after
+  /// it and before the latest had a delta that was not empty. (The latest sync's own delta is
+  /// delta(); syncs in between that changed nothing leave delta() valid for that consumer.)
+  [[nodiscard]] bool missed_changes(std::uint64_t seen) const {
+    return seen + 1 < syncs_ && changed_before_ > seen;
+  }
   /// Where render space's origin lies in world space. It starts at the world origin and moves to
   /// the active camera's position when a sync finds the camera farther than kRebaseDistance
   /// from it (a rebase: the static set is baked again and every dynamic instance is rewritten
@@ -196,6 +202,8 @@ private:
   std::unordered_map<const TriangleMesh*, SharedMesh> shared_;
   std::vector<std::uint32_t> deforming_; ///< slots of deforming instances
   std::uint64_t syncs_ = 0;
+  std::uint64_t changed_ = 0;        ///< the latest sync whose delta was not empty (0: none)
+  std::uint64_t changed_before_ = 0; ///< the same, before the latest sync
   std::uint64_t rebases_ = 0;
   mutable SceneDelta whole_;          ///< delta_since's full delta, made once per sync
   mutable std::uint64_t whole_sync_ = 0;

@@ -190,6 +190,25 @@ TEST(SceneLayer, AFrameInWhichNothingMovedDoesNoWork) {
   }
 }
 
+TEST(SceneLayer, AConsumerMissesOnlySyncsThatChangedSomething) {
+  World w;
+  SceneLayer layer;
+  Ticker tick;
+  tick(w.reg, layer); // sync 1: everything added
+  tick(w.reg, layer); // 2: still
+  tick(w.reg, layer); // 3: still
+  EXPECT_FALSE(layer.missed_changes(2)) << "in step";
+  EXPECT_FALSE(layer.missed_changes(1)) << "sync 2 changed nothing";
+  EXPECT_TRUE(layer.missed_changes(0)) << "sync 1 added everything";
+  w.reg.get<Transform>(w.ball).translation = vec3(2, 3, -1);
+  tick(w.reg, layer); // 4: the ball moved
+  EXPECT_FALSE(layer.missed_changes(2)) << "the change is the latest delta itself";
+  tick(w.reg, layer); // 5: still
+  EXPECT_FALSE(layer.missed_changes(4));
+  EXPECT_TRUE(layer.missed_changes(3)) << "sync 4 moved the ball";
+  EXPECT_TRUE(layer.missed_changes(2));
+}
+
 TEST(SceneLayer, OneFreeEntityMovedIsOneInstanceUpdate) {
   World w;
   SceneLayer layer;
