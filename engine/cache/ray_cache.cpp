@@ -842,6 +842,7 @@ void RayCacheStore::leaving(std::span<const LeavingRadiance> rays) {
     const std::int32_t ci = cube_of_instance_[r.instance];
     if (ci < 0) continue;
     Cube& c = *cubes_[std::size_t(ci)];
+    if (!c.enabled) continue; // off: nothing it holds is read, so nothing is written
     bool sample = true;
     switch (r.answer) {
     case CacheAnswer::Use:

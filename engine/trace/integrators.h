@@ -31,7 +31,7 @@ struct FrameInputs {
   std::span<vec3> pixels; ///< the image, row-major
   std::uint32_t width;
   bool lookups = false; ///< hook->wants_lookups() at frame start
-  bool leaving = false; ///< hook->wants_leaving() at frame start (path mode records them)
+  bool leaving = false; ///< hook->wants_leaving() at frame start: leaving rays are delivered
   const EmitterTable* emitters = nullptr; ///< the layer's area lights and scene features
   GuideBuffers* guides = nullptr;         ///< path, shadow: primary-hit guides (sized), or none
 };

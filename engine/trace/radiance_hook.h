@@ -100,9 +100,9 @@ public:
   /// Whether the integrators should ask lookup() about leaving rays this frame (read once per
   /// frame, after begin_frame).
   [[nodiscard]] virtual bool wants_lookups() const { return false; }
-  /// Whether path mode should record its leaving rays this frame (read once per frame, after
-  /// begin_frame): following every path's contributions costs, so a hook with nothing to store
-  /// says no. Whitted's leaving rays are values of its ray tree and are always delivered.
+  /// Whether the integrators should deliver leaving rays this frame (read once per frame, after
+  /// begin_frame): path mode's records follow every path's contributions and Whitted's are built
+  /// for every node of the ray tree, so a hook with nothing to store says no.
   [[nodiscard]] virtual bool wants_leaving() const { return true; }
   /// Answers, for each ray about to leave an object (only rays that exit), whether a cached
   /// value replaces tracing it (path mode: tracing the rest of its path after its first hit,

@@ -38,7 +38,7 @@ public:
     trace_shadows();
     trace_waves();
     fold(n);
-    if (frame_.hook != nullptr && s_.nodes.size() > n) deliver_leaving(n);
+    if (frame_.hook != nullptr && frame_.leaving && s_.nodes.size() > n) deliver_leaving(n);
     for (std::size_t k = 0; k < n; ++k)
       frame_.pixels[s_.nodes[k].pixel] = finite_or_counted(s_.nodes[k].radiance, counts_);
   }

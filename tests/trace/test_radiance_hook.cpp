@@ -11,6 +11,7 @@
 
 #include <filesystem>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <mutex>
 #include <set>
@@ -22,6 +23,8 @@ namespace {
 /// Keeps every leaving ray, from every tile.
 class Recorder final : public RadianceHook {
 public:
+  explicit Recorder(bool wants = true) : wants_(wants) {}
+  [[nodiscard]] bool wants_leaving() const override { return wants_; }
   void leaving(std::span<const LeavingRadiance> rays) override {
     const std::lock_guard lock(mutex_);
     rays_.insert(rays_.end(), rays.begin(), rays.end());
@@ -29,6 +32,7 @@ public:
   std::vector<LeavingRadiance> rays_;
 
 private:
+  bool wants_;
   std::mutex mutex_;
 };
 
@@ -39,7 +43,8 @@ struct Rendered {
 };
 
 Rendered render(std::uint32_t max_depth, bool record, std::uint32_t tile = 16,
-                std::uint32_t threads = 2, TraceMode mode = TraceMode::Whitted) {
+                std::uint32_t threads = 2, TraceMode mode = TraceMode::Whitted,
+                bool wants = true) {
   Rendered run;
   run.scene = load_scene(std::filesystem::path(SPECULA_SOURCE_DIR) /
                          "samples/scenes/mirror_spheres_8.json");
@@ -50,7 +55,7 @@ Rendered render(std::uint32_t max_depth, bool record, std::uint32_t tile = 16,
   job.settings.tile_size = tile;
   job.settings.threads = threads;
   job.image = Framebuffer(96, 96);
-  auto recorder = std::make_shared<Recorder>();
+  auto recorder = std::make_shared<Recorder>(wants);
   if (record) job.hook = recorder;
   prepare_rendering(run.scene.registry, std::move(job));
   Schedule schedule;
@@ -94,6 +99,20 @@ TEST(RadianceHook, LeavingRaysAddUpToTheReflectedPartOfEveryPixel) {
     ASSERT_TRUE(full.scene.registry.valid(r.from));
     EXPECT_TRUE(r.kind == RayKind::Reflection || r.kind == RayKind::Refraction);
     EXPECT_NEAR(glm::length(r.direction), 1.0f, 1e-5f);
+  }
+}
+
+TEST(RadianceHook, AHookThatWantsNoLeavingRaysGetsNoneAndTheImageIsTheSame) {
+  // A hook with nothing to store (every ray-cache cube off) says so, and neither integrator
+  // builds or delivers leaving rays for it.
+  for (const TraceMode mode : {TraceMode::Whitted, TraceMode::Path}) {
+    const Rendered told = render(5, true, 16, 2, mode, false);
+    const Rendered plain = render(5, false, 16, 2, mode);
+    EXPECT_TRUE(told.rays.empty()) << trace_mode_name(mode);
+    EXPECT_EQ(std::memcmp(told.image.pixels().data(), plain.image.pixels().data(),
+                          plain.image.pixels().size_bytes()),
+              0)
+        << trace_mode_name(mode);
   }
 }
 
