@@ -229,8 +229,9 @@ void measure(Bench& bench, Contender& off, std::vector<Contender>& cs, int warmu
     }
   bench.orbit(0.0);
   // Auto is measured where it settles: frames from the measured view until every cube's mode
-  // has held for kSettled frames (at most kMaxSettle).
-  constexpr int kSettled = 6, kMaxSettle = 60;
+  // has held for kSettled frames (longer than the policy waits before it retries a mode that
+  // missed the error bound; at most kMaxSettle).
+  constexpr int kSettled = 40, kMaxSettle = 200;
   for (Contender& c : cs) {
     if (c.settings.policy != CachePolicy::Auto) continue;
     std::string modes;
@@ -344,8 +345,9 @@ void section_cache(const Options& o) {
       "front sphere towards the scene's view (from %g° away, in equal steps, the last one step "
       "short of it: so most texels were written from other viewpoints than the one measured, as "
       "when a camera moves); auto then renders from the scene's view until its cube's mode has "
-      "held for 6 frames (at most 60: it is measured where it settles); then, from the scene's "
-      "view, each repetition renders an uncached frame and a cached frame back to back. Frame ms: the median whole tick (invalidation and "
+      "held for 40 frames (longer than it waits before retrying a mode that missed the error "
+      "bound; at most 200: it is measured where it settles); then, from the scene's view, each "
+      "repetition renders an uncached frame and a cached frame back to back. Frame ms: the median whole tick (invalidation and "
       "prefill included); speed-up: the median of the uncached frames paired with it over its "
       "own median. PSNR and mean FLIP compare its last frame with the uncached frame of the same "
       "view. Acceptance: hits / lookups in the last frame (hits include tau/march answers that "

@@ -99,6 +99,13 @@ constexpr double kMarchStepRayCost = 0.02; // one step of the distance march
 constexpr std::uint32_t kMaxMarchSteps = 96;
 constexpr std::uint32_t kRefineSteps = 6;
 constexpr std::uint64_t kMinErrorSamples = 64;
+/// The auto policy's error estimate: each frame's verified errors weigh this much of the next
+/// frame's (about the last two frames count).
+constexpr double kErrorDecay = 0.5;
+/// Auto: a cube that left a rung for its error tries it again after this many frames in slower
+/// rungs or off (the error of a direction cache depends on where the camera has been: it can be
+/// within the bound again once the camera rests).
+constexpr std::uint32_t kRetryFrames = 32;
 constexpr std::uint32_t kEvaluationVerifyEvery = 4;
 
 std::uint32_t mix_hash(std::uint64_t x) {
@@ -181,10 +188,18 @@ struct RayCacheStore::Cube {
   bool enabled = true;
   bool evaluating = true; ///< auto: verify often until the error of this mode is known
   std::string reason;
-  double err_sum = 0.0;           ///< Σ |throughput·(cached − traced)|² over verified rays
-  std::uint64_t err_samples = 0;  ///< since the mode was chosen
+  /// Σ |throughput·(cached − traced)|² over verified rays, and their number, since the mode was
+  /// chosen, each frame's weighing kErrorDecay of the one after it.
+  double err_sum = 0.0;
+  double err_samples = 0.0;
   double estimated_psnr = 0.0;
   std::uint32_t frames_in_mode = 0;
+  /// Auto's retry: the fastest rung left for its error (-1: none), the frames spent since in
+  /// slower rungs or off, and where a retry that fails goes back to (-1: off).
+  int retry_rung = -1;
+  std::uint32_t frames_below_retry = 0;
+  bool retrying = false;
+  int return_rung = -1;
   double saved_ms = 0.0;
   // This frame, from lookups (several threads).
   std::atomic<std::uint64_t> lookups{0}, outdated{0}, rejected{0}, march_steps{0};
@@ -198,7 +213,7 @@ struct RayCacheStore::Cube {
     tau_deg = kLadder[r].tau_deg;
     cos_tau = std::cos(glm::radians(tau_deg));
     err_sum = 0.0;
-    err_samples = 0;
+    err_samples = 0.0;
     evaluating = true;
     frames_in_mode = 0;
   }
@@ -863,7 +878,7 @@ void RayCacheStore::leaving(std::span<const LeavingRadiance> rays) {
       c.traced_rays += r.rays;
       const vec3 e = r.throughput * (r.cached - r.radiance);
       c.err_sum += double(glm::dot(e, e));
-      ++c.err_samples;
+      c.err_samples += 1.0;
       continue;
     }
     case CacheAnswer::Trace:
@@ -1003,7 +1018,20 @@ void RayCacheStore::decide(Cube& c, double ns_per_ray, double frame_rays) {
                             double(lookups) * kLookupRayCost -
                             double(c.march_steps.load()) * kMarchStepRayCost;
   c.saved_ms = saved_rays * ns_per_ray * 1e-6;
-  if (settings_.policy != CachePolicy::Auto || !c.enabled) return;
+  if (settings_.policy != CachePolicy::Auto || averaging_) return;
+  if (c.retry_rung >= 0 && !c.retrying && (!c.enabled || c.rung > c.retry_rung) &&
+      ++c.frames_below_retry >= kRetryFrames) {
+    const std::string was = c.enabled ? lookup_mode_name(c.mode) : "off";
+    c.return_rung = c.enabled ? c.rung : -1;
+    c.retrying = true;
+    c.frames_below_retry = 0;
+    c.enabled = true;
+    c.set_rung(c.retry_rung);
+    c.reason = format("%.0f frames in ", double(kRetryFrames)) + was + " mode since " +
+               lookup_mode_name(c.mode) + " mode missed the error bound: trying it again";
+    return;
+  }
+  if (!c.enabled) return;
   ++c.frames_in_mode;
 
   // Error: the verified rays' squared error, scaled to every accepted ray of the frame, over
@@ -1011,16 +1039,36 @@ void RayCacheStore::decide(Cube& c, double ns_per_ray, double frame_rays) {
   const double pixels = double(width_) * double(height_);
   const std::uint64_t accepted = c.used + c.verified;
   if (c.err_samples > 0) {
-    const double mse = c.err_sum / double(c.err_samples) * double(accepted) / (3.0 * pixels);
+    const double mse = c.err_sum / c.err_samples * double(accepted) / (3.0 * pixels);
     c.estimated_psnr = mse > 0.0 ? -10.0 * std::log10(mse) : 200.0;
   }
   std::size_t enabled = 0;
   for (const auto& other : cubes_) enabled += other->enabled ? 1 : 0;
   const double bound = settings_.max_error_db + 10.0 * std::log10(double(std::max<std::size_t>(1, enabled)));
-  if (c.err_samples >= kMinErrorSamples) {
+  // The estimate is of the texels as they are now: what was verified frames ago (before later
+  // writes, while the camera was elsewhere) fades, by kErrorDecay a frame.
+  const double verified = c.err_samples;
+  c.err_sum *= kErrorDecay;
+  c.err_samples *= kErrorDecay;
+  if (verified >= double(kMinErrorSamples)) {
     if (c.estimated_psnr < bound) {
       const std::string was = lookup_mode_name(c.mode);
       const double psnr = c.estimated_psnr;
+      if (c.retrying) {
+        // Still not within the bound: straight back to where the retry started.
+        c.retrying = false;
+        c.frames_below_retry = 0;
+        if (c.return_rung >= 0) {
+          c.set_rung(c.return_rung);
+        } else {
+          c.enabled = false;
+        }
+        c.reason = format("estimated %.1f dB, below the %.1f dB bound again: ", psnr, bound) +
+                   was + " → " + (c.enabled ? lookup_mode_name(c.mode) : "off");
+        return;
+      }
+      if (c.retry_rung < 0 || c.rung < c.retry_rung) c.retry_rung = c.rung;
+      c.frames_below_retry = 0;
       if (c.rung + 1 < kLadderSize) {
         c.set_rung(c.rung + 1);
         c.reason = format("estimated %.1f dB, below the %.1f dB bound: ", psnr, bound) + was +
@@ -1035,6 +1083,7 @@ void RayCacheStore::decide(Cube& c, double ns_per_ray, double frame_rays) {
     }
     if (c.evaluating) {
       c.evaluating = false;
+      c.retrying = false;
       c.reason = format("estimated %.1f dB, within the %.1f dB bound: ", c.estimated_psnr, bound) +
                  lookup_mode_name(c.mode) + " mode kept";
     }

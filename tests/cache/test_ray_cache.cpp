@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <numbers>
@@ -479,6 +480,86 @@ TEST(RayCachePolicy, AutoOnTheMirrorSpheresKeepsTheBoundOrStopsCaching) {
                  reference.registry.resource<RenderJob>().image),
             40.0)
       << r.mode << ": " << r.reason;
+}
+
+/// Drives a store's auto policy frame by frame with made-up leaving rays: every valid texel of
+/// cube 0 looked up once, from the owner's surface along the texel's direction; a verified ray
+/// comes back `error` off in each channel (large while "the camera moves", 0 once it rests).
+/// Returns the cube's report after the frame.
+CubeReport policy_frame(RayCacheStore& store, float error) {
+  const cache::CubeView cube = store.cube(0);
+  std::vector<LeavingQuery> queries;
+  for (std::uint32_t i = 0; i < cube.texels.size(); ++i) {
+    if (!cube.texels[i].valid()) continue;
+    const vec3 d = cache::texel_direction(i, cube.resolution);
+    queries.push_back(LeavingQuery{cube.instance, i, 1, cube.centre + d * 1.001f, d});
+  }
+  store.begin_frame(64, 64, TraceMode::Whitted);
+  std::vector<CachedRadiance> answers(queries.size());
+  if (store.wants_lookups()) store.lookup(queries, answers);
+  std::vector<LeavingRadiance> rays;
+  for (std::size_t k = 0; k < queries.size(); ++k) {
+    LeavingRadiance r{};
+    r.from = cube.owner;
+    r.instance = cube.instance;
+    r.kind = RayKind::Reflection;
+    r.exits = true;
+    r.answer = answers[k].answer;
+    r.depth = 1;
+    r.pixel = queries[k].pixel;
+    r.origin = queries[k].origin;
+    r.direction = queries[k].direction;
+    r.weight = r.throughput = vec3(1.0f);
+    r.cached = answers[k].radiance;
+    r.radiance = r.answer == CacheAnswer::Use ? r.cached : r.cached + vec3(error);
+    r.hit_t = std::numeric_limits<float>::infinity();
+    r.hit_entity = kNoInstance;
+    r.rays = r.answer == CacheAnswer::Use ? 0u : 1u;
+    rays.push_back(r);
+  }
+  store.leaving(rays);
+  store.end_frame(1.0, 4 * queries.size());
+  return store.counts().cubes.at(0);
+}
+
+TEST(RayCachePolicy, AutoRetriesAModeThatMissedTheBoundOnceItMayBeWithinAgain) {
+  // A direction cache's error depends on where the camera has been: it leaves direction mode
+  // while the camera moves, and kRetryFrames frames after it is off it tries direction again —
+  // kept if the error is within the bound now, back off at once if not.
+  CacheSettings s;
+  s.policy = CachePolicy::Auto;
+  World w;
+  make_world(w, s, 16, distant_surroundings, 64);
+  (void)frame(w); // the cube made and filled where the camera looks
+  RayCacheStore& store = store_of(w.reg);
+  ASSERT_GT(store.counts().valid, 100u);
+  // Moving: every mode misses the bound, down the ladder to off.
+  CubeReport r;
+  int frames = 0;
+  for (; frames < 60; ++frames) {
+    r = policy_frame(store, 1.0f);
+    if (r.mode == "off") break;
+  }
+  ASSERT_EQ(r.mode, "off") << r.reason;
+  // Resting: off until the retry, then direction within the bound, kept.
+  int off_frames = 0;
+  for (;;) {
+    r = policy_frame(store, 0.0f);
+    if (r.mode != "off") break;
+    ASSERT_LT(++off_frames, 100) << "never retried: " << r.reason;
+  }
+  EXPECT_EQ(off_frames + 1, 32) << "the retry comes kRetryFrames frames after the cube went off";
+  EXPECT_EQ(r.mode, "direction");
+  EXPECT_NE(r.reason.find("trying it again"), std::string::npos) << r.reason;
+  for (int k = 0; k < 8; ++k) r = policy_frame(store, 0.0f);
+  EXPECT_EQ(r.mode, "direction") << r.reason;
+  EXPECT_NE(r.reason.find("kept"), std::string::npos) << r.reason;
+  // Moving again: direction missed; its retries find it still outside and go back off at once.
+  for (int k = 0; k < 60 && r.mode != "off"; ++k) r = policy_frame(store, 1.0f);
+  ASSERT_EQ(r.mode, "off") << r.reason;
+  for (int k = 0; k < 40; ++k) r = policy_frame(store, 1.0f);
+  EXPECT_EQ(r.mode, "off");
+  EXPECT_NE(r.reason.find("below the 40.0 dB bound again"), std::string::npos) << r.reason;
 }
 
 // ---------------------------------------------------------------------------------------------
