@@ -71,12 +71,13 @@ constexpr const char* kReferenceVersion = "specula-path-reference-1";
 
 // --- Scenes ------------------------------------------------------------------------------------
 
-std::vector<std::string> scene_names(const Options& o) {
+/// The names of a comma-separated list (--path-scenes, --path-cache-scenes).
+std::vector<std::string> scene_names(const std::string& list) {
   std::vector<std::string> names;
-  for (std::size_t begin = 0; begin <= o.path_scenes.size();) {
-    std::size_t end = o.path_scenes.find(',', begin);
-    if (end == std::string::npos) end = o.path_scenes.size();
-    if (end > begin) names.push_back(o.path_scenes.substr(begin, end - begin));
+  for (std::size_t begin = 0; begin <= list.size();) {
+    std::size_t end = list.find(',', begin);
+    if (end == std::string::npos) end = list.size();
+    if (end > begin) names.push_back(list.substr(begin, end - begin));
     begin = end + 1;
   }
   return names;
@@ -544,7 +545,7 @@ void path_reference(const Options& o) {
   Report out;
   out("\n## Path tracing: converged references (MIS, %u spp, %ux%u, %u threads)\n\n",
       o.reference_spp, path_width(o), path_height(o), o.threads);
-  for (const std::string& name : scene_names(o)) {
+  for (const std::string& name : scene_names(o.path_scenes)) {
     PathScene scene(o, name);
     (void)reference(o, scene, out);
   }
@@ -566,7 +567,7 @@ void path_error(const Options& o) {
       o.reference_spp, d.iterations, double(d.sigma_color), double(d.sigma_normal),
       double(d.sigma_depth));
   std::vector<std::string> summary_rows;
-  for (const std::string& name : scene_names(o)) {
+  for (const std::string& name : scene_names(o.path_scenes)) {
     PathScene scene(o, name);
     const Framebuffer ref = reference(o, scene, out);
     std::vector<Run> runs;
@@ -748,16 +749,7 @@ void path_cache(const Options& o) {
       "reached %.0f ms (or the last). The uncached run is repeated last, to show the machine's "
       "drift.\n\n",
       3.0 * budget, o.reference_spp, budget, 3.0 * budget, budget, budget);
-  for (const std::string& name : [&] {
-         std::vector<std::string> names;
-         for (std::size_t b = 0; b <= o.path_cache_scenes.size();) {
-           std::size_t e = o.path_cache_scenes.find(',', b);
-           if (e == std::string::npos) e = o.path_cache_scenes.size();
-           if (e > b) names.push_back(o.path_cache_scenes.substr(b, e - b));
-           b = e + 1;
-         }
-         return names;
-       }()) {
+  for (const std::string& name : scene_names(o.path_cache_scenes)) {
     PathScene scene(o, name, true);
     const Framebuffer ref = reference(o, scene, out);
     std::vector<CacheRun> runs;
