@@ -989,6 +989,10 @@ std::uint64_t RayCacheStore::apply_writes() {
 void RayCacheStore::report(CacheCounts& out) const { out = counts_; }
 
 void RayCacheStore::start_auto(Cube& c) const {
+  c.retry_rung = -1;
+  c.frames_below_retry = 0;
+  c.retrying = false;
+  c.return_rung = -1;
   if (averaging_) {
     // Measured (docs/cache-report/path-cache.md): on every scene and setting there, cached path
     // tracing reached uncached path tracing's error later, not sooner — a probe's blur and its
