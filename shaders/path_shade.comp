@@ -44,6 +44,15 @@ vec3 add_product(vec3 r, vec3 a, vec3 b, float w) {
   return x;
 }
 
+// shadow_integrator.cpp's area_light_point: the pick dimension u0 reused within the picked
+// emitter's interval [cdf - pick, cdf). A function of its own: `precise` on these two in the
+// sampling loop propagated back through the loop's sample sets and made glslang run for 100 s.
+float reuse_pick(float u0, float cdf, float pick) {
+  precise float below = cdf - pick;
+  precise float reused = clamp((u0 - below) / pick, 0.0, uintBitsToFloat(0x3f7fffffu));
+  return reused;
+}
+
 void end_path(uint i, vec3 radiance, uint shadow_count) {
   paths[i].radiance = radiance;
   paths[i].shadow_count = shadow_count;
@@ -71,11 +80,9 @@ void shade_shadow_caster(uint i, GpuPath p, GpuHit hit, GpuMaterial m) {
       for (uint n = 0u; n < pp.shadow_samples; ++n) {
         uvec2 set = sample_set(seed, pp.sample_offset + n, 0u);
         float u0 = sample_dim(set, 0u), u1 = sample_dim(set, 1u);
-        // shadow_integrator.cpp's area_light_point: the pick dimension reused within its interval.
         uint k = pick_emitter(u0);
         GpuEmitter e = emitters[k];
-        precise float below = e.cdf - e.pick;
-        precise float reused = clamp((u0 - below) / e.pick, 0.0, uintBitsToFloat(0x3f7fffffu));
+        float reused = reuse_pick(u0, e.cdf, e.pick);
         // Sampled from the shadow ray's origin, as the CPU does: its direction and distance.
         AreaLightSample ls = sample_emitter_triangle(k, origin, reused, u1);
         if (!(ls.pdf > 0.0)) continue;
