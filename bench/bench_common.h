@@ -93,6 +93,8 @@ void section_gpu(const Options& o);
 // Ray-cache cubes on the device (gpu_sections.cpp; part of gpu, or alone as gpu-cache): the
 // mirror-spheres scene's frames/s cached against uncached, with the cached frames' PSNR.
 void section_gpu_cache(const Options& o);
+// Path and shadow frames by execution style (gpu_sections.cpp; part of gpu, or alone as gpu-path).
+void section_gpu_path(const Options& o);
 
 // Animated scenes (dynamic_sections.cpp): acceleration update against frame time per backend,
 // per-frame plots, and the paper's Table 1 grid (Markdown and PNGs under --out-dir, default

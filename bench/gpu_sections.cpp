@@ -5,7 +5,8 @@
 // sweep of the grid's resolution on the device and on the CPU, with the mean traversal steps and
 // triangle tests per ray (Purcell et al. chose theirs by that balance); then hybrid mode (primary
 // visibility rasterised, the rest traced) against fully traced device frames, frames per second
-// in the same run and the PSNR between the images; last the ray-cache cubes on the device.
+// in the same run and the PSNR between the images; path and shadow frames in both kernel styles
+// against the CPU integrators; last the ray-cache cubes on the device.
 //
 // Every tracer comes from the factory (make_tracer), so this file names no backend type, and a
 // configuration the machine or build cannot run is reported in its row ("n/a: why") rather than
@@ -353,6 +354,85 @@ void hybrid_table(const Options& o, const char* title, Scene& scene) {
   std::fflush(stdout);
 }
 
+/// Path and shadow frames in both execution styles (device_path.h) beside the CPU integrators on
+/// native-bvh: median frame ms, device (timestamp) ms, rays per second of frame time, the single
+/// kernel's frame time against the wavefront's on the same structure, and the share of pixels
+/// equal to the wavefront's image (1: bit for bit, as tested).
+void stochastic_table(const Options& o, const char* title, Scene& scene) {
+  SceneLayer layer;
+  layer.sync(scene.registry);
+  const Camera camera = *active_camera(scene.registry);
+  const std::uint32_t width = scene.settings.width;
+  const std::uint32_t height = scene.settings.height;
+  std::printf("\n### Path (1 spp, depth 5) and shadow (4 area samples) frames by execution style: "
+              "%s, %ux%u, %u CPU threads\n\n",
+              title, width, height, o.threads);
+  std::printf("| mode | configuration | frame ms | GPU ms | Mrays/s | single ÷ wavefront time | "
+              "pixels equal to the wavefront's |\n|---|---|---:|---:|---:|---:|---:|\n");
+  GpuTracerOptions single;
+  single.execution = GpuTracerOptions::Execution::single_kernel;
+  const std::vector<Config> rows = {{"native-bvh (CPU integrator)", "native-bvh", {}},
+                                    {"vulkan, wavefront", "vulkan", {}},
+                                    {"vulkan, single kernel", "vulkan", single},
+                                    {"vulkan-grid, wavefront", "vulkan-grid", {}},
+                                    {"vulkan-grid, single kernel", "vulkan-grid", single}};
+  for (const TraceMode mode : {TraceMode::Path, TraceMode::Shadow}) {
+    TraceSettings settings;
+    settings.mode = mode;
+    settings.threads = o.threads;
+    settings.max_depth = 5;
+    settings.spp = 1;
+    settings.shadow_samples = 4;
+    settings.seed = 1;
+    double wavefront_ms = 0.0;
+    Framebuffer wavefront_image(width, height);
+    for (const Config& c : rows) {
+      try {
+        TracerOptions options;
+        options.gpu = c.gpu;
+        const std::unique_ptr<Tracer> tracer = make_tracer(c.backend, options);
+        tracer->update(layer);
+        Framebuffer image(width, height);
+        (void)render_frame(*tracer, layer, camera, settings, image); // warm-up: pipelines
+        std::vector<double> ms, gpu_ms;
+        std::uint64_t rays = 0;
+        for (int r = 0; r < o.repetitions; ++r) {
+          FrameStats stats;
+          ms.push_back(
+              time_ms([&] { stats = render_frame(*tracer, layer, camera, settings, image); }));
+          rays = stats.rays.total();
+          if (const auto d = tracer_device(*tracer)) gpu_ms.push_back(d->gpu_ms);
+        }
+        const double frame = median(ms);
+        const bool device = tracer_device(*tracer).has_value();
+        const bool is_wavefront = device && c.gpu.execution == GpuTracerOptions::Execution::wavefront;
+        if (is_wavefront) {
+          wavefront_ms = frame;
+          wavefront_image = image;
+        }
+        std::string against, equal;
+        if (device && !is_wavefront && wavefront_ms > 0.0) {
+          against = ratio(frame, wavefront_ms);
+          std::size_t same = 0;
+          for (std::size_t i = 0; i < image.pixels().size(); ++i)
+            same += image.pixels()[i] == wavefront_image.pixels()[i];
+          char text[32];
+          std::snprintf(text, sizeof text, "%.3f%%",
+                        100.0 * double(same) / double(image.pixels().size()));
+          equal = text;
+        }
+        std::printf("| %s | %s | %.1f | %s | %.2f | %s | %s |\n", trace_mode_name(mode), c.label,
+                    frame, gpu_ms.empty() ? "" : fixed(median(gpu_ms)).c_str(),
+                    mrays(rays, frame), against.c_str(), equal.c_str());
+      } catch (const std::exception& e) {
+        std::printf("| %s | %s | n/a | | | | %s |\n", trace_mode_name(mode), c.label,
+                    one_line(e.what(), 120).c_str());
+      }
+      std::fflush(stdout);
+    }
+  }
+}
+
 } // namespace
 
 /// Ray-cache cubes on the device (issue 10): the mirror-spheres scene with 32 spheres on the
@@ -432,6 +512,12 @@ void section_gpu_cache(const Options& o) {
   std::fflush(stdout);
 }
 
+void section_gpu_path(const Options& o) {
+  Scene cornell = load_scene(o.source_dir + "/samples/scenes/cornell_box.json");
+  cornell.settings.width = cornell.settings.height = o.size;
+  stochastic_table(o, "Cornell box", cornell);
+}
+
 void section_gpu(const Options& o) {
   std::string why;
   std::printf("\n### Vulkan devices\n\n");
@@ -447,6 +533,7 @@ void section_gpu(const Options& o) {
   table(o, "Cornell box", cornell);
   grid_sweep(o, bunny_mesh, bunny);
   hybrid_table(o, "Cornell box", cornell);
+  stochastic_table(o, "Cornell box", cornell);
   Scene spheres = load_scene(o.source_dir + "/samples/scenes/mirror_spheres_8.json");
   spheres.settings.width = spheres.settings.height = o.size;
   hybrid_table(o, "mirror spheres (8)", spheres);

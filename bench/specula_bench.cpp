@@ -23,8 +23,8 @@
 //            converged reference), per lookup mode, resolution and --cache-samples.
 //   gpu      the Vulkan backends (gpu_sections.cpp; not in the default list): primary Mrays/s on
 //            the bunny and the Cornell box per kernel style and structure beside native-bvh and
-//            Embree, vulkan-grid's resolution sweep, and ray-cache cubes on the device (also
-//            alone: gpu-cache).
+//            Embree, vulkan-grid's resolution sweep, path and shadow frames per kernel style
+//            (also alone: gpu-path), and ray-cache cubes on the device (also alone: gpu-cache).
 //   dynamic  animated scenes (dynamic_sections.cpp; not in the default list): the acceleration
 //            update against the frame per backend on the three-classes sample and a ~90k-triangle
 //            variant, per-frame plots, and the paper's Table 1 grid (under --out-dir).
@@ -357,7 +357,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 6));
   app.add_option("--sections", o.sections,
                  "Comma-separated: primary,tiles,whitted,depth,build,refit,native,paper,cache,"
-                 "cache-paper,path-reference,path-error,path-cache,gpu,gpu-cache,dynamic,editor");
+                 "cache-paper,path-reference,path-error,path-cache,gpu,gpu-cache,gpu-path,dynamic,editor");
   app.add_option("--out-dir", o.out_dir,
                  "Where cache, cache-paper and path-error write Markdown and PNGs (default: "
                  "SOURCE_DIR/docs/cache-report, SOURCE_DIR/docs/path-report)");
@@ -432,6 +432,7 @@ int main(int argc, char** argv) {
 #endif
     if (has("gpu")) section_gpu(o);
     if (has("gpu-cache") && !has("gpu")) section_gpu_cache(o);
+    if (has("gpu-path") && !has("gpu")) section_gpu_path(o);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "specula_bench: %s\n", e.what());
     return 1;

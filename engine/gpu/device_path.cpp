@@ -3,6 +3,7 @@
 #include "specula/core/error.h"
 #include "specula/gpu/gpu_scene.h"
 #include "specula/gpu/shaders.h"
+#include "specula/gpu/vulkan_tracer.h"
 #include "specula/render/scene_layer.h"
 #include "specula/shared/path_layout.h"
 #include "specula/trace/render_frame.h"
@@ -35,7 +36,10 @@ struct PathPush {
 constexpr std::uint32_t kMaxPaths = 1u << 18;
 /// Trace (or shadow) passes per submit: the first finishes every ray unless the budget is small.
 constexpr std::uint32_t kPasses = 2;
-/// Passes after which a depth whose rays are still queued is abandoned with an error.
+/// Single kernel: dispatches per submit (most paths end within the first).
+constexpr std::uint32_t kSingleRounds = 2;
+/// Passes after which a depth whose rays are still queued (single kernel: dispatches after which
+/// a batch's paths are still going) is abandoned with an error.
 constexpr std::uint32_t kMaxPasses = 4096;
 
 std::uint32_t groups(std::uint32_t n) { return (n + 63) / 64; }
@@ -67,11 +71,11 @@ void StatePool::reserve(Context& context, std::uint32_t pools, std::uint64_t ray
 
 struct DevicePath::Pipelines {
   Features features;
-  Pipeline eye, args, trace, shade, shadow, gather, resolve;
+  Pipeline eye, args, trace, shade, shadow, gather, resolve, single;
 };
 
-DevicePath::DevicePath(Context& context, const GpuScene& scene)
-    : context_(context), scene_(scene) {}
+DevicePath::DevicePath(Context& context, const GpuScene& scene, Execution execution)
+    : context_(context), scene_(scene), execution_(execution) {}
 
 DevicePath::~DevicePath() = default;
 
@@ -113,12 +117,16 @@ void DevicePath::ensure_pipelines(const Features& f) {
     return context_.make_pipeline({shader_spirv(name), kFramePoolBindings, sizeof(PathPush), spec, name});
   };
   p->eye = make("path_eye");
-  p->args = make("path_args");
-  p->trace = make("path_trace");
-  p->shade = make("path_shade");
-  p->shadow = make("frame_shadow");
-  p->gather = make("path_gather");
   p->resolve = make("path_resolve");
+  if (execution_ == Execution::wavefront) {
+    p->args = make("path_args");
+    p->trace = make("path_trace");
+    p->shade = make("path_shade");
+    p->shadow = make("frame_shadow");
+    p->gather = make("path_gather");
+  } else {
+    p->single = make("path_single");
+  }
   previous_ = std::move(pipelines_);
   pipelines_ = std::move(p);
 }
@@ -144,7 +152,13 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
   const VkDeviceSize range = context_.info().max_storage_buffer_range;
   const std::uint64_t fit = std::min<std::uint64_t>(
       {kMaxPaths, range / sizeof(GpuPath), range / (sizeof(GpuShadowRay) * std::max(1u, slots))});
-  const std::uint32_t max_paths = std::uint32_t(std::max<std::uint64_t>(1, fit));
+  std::uint32_t max_paths = std::uint32_t(std::max<std::uint64_t>(1, fit));
+  const bool single = execution_ == Execution::single_kernel;
+  if (single) {
+    // One pool slot per path in flight: a chunk is no larger than the pool.
+    pool_.reserve(context_, 1, max_paths, scene_.stack_depth());
+    max_paths = std::min(max_paths, pool_.slots);
+  }
   const std::uint32_t batch =
       std::clamp(max_paths / std::max(1u, pixels), 1u, std::min(spp, kMaxBatch));
   const std::uint32_t chunk = std::max(1u, std::min(pixels, max_paths / batch));
@@ -152,15 +166,16 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
   const std::uint32_t shadow_capacity = capacity * std::max(1u, slots);
   ensure_size(context_, paths_, VkDeviceSize(capacity) * sizeof(GpuPath));
   ensure_size(context_, hits_, VkDeviceSize(capacity) * sizeof(GpuHit));
-  ensure_size(context_, queues_, VkDeviceSize(capacity) * 8);
+  ensure_size(context_, queues_, VkDeviceSize(capacity) * 8); // single kernel: 4 B cursors
   ensure_size(context_, shadows_, VkDeviceSize(shadow_capacity) * sizeof(GpuShadowRay));
-  ensure_size(context_, shadow_queues_, VkDeviceSize(shadow_capacity) * 8);
+  ensure_size(context_, shadow_queues_, single ? 16 : VkDeviceSize(shadow_capacity) * 8);
   ensure_size(context_, sums_, VkDeviceSize(pixels) * 16);
   ensure_size(context_, path_params_, sizeof(GpuPathParams), MemoryKind::host);
   ensure_size(context_, no_cache_, 16);
   params.node_capacity = capacity;
   params.shadow_capacity = shadow_capacity;
-  pool_.reserve(context_, 2, std::uint64_t(capacity) + shadow_capacity, scene_.stack_depth());
+  if (!single)
+    pool_.reserve(context_, 2, std::uint64_t(capacity) + shadow_capacity, scene_.stack_depth());
   params.stack_stride = pool_.stride;
   params.pool_slots = pool_.slots;
   frame.params->upload(&params, sizeof params);
@@ -242,10 +257,35 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
       const PathPush start{};
       cmd.dispatch(p.eye, buffers, &start, all);
       cmd.barrier();
-      const std::uint32_t queued = pp.path_count;
+      if (single) {
+        // The eye kernel's queue entries become the walks' shadow cursors (0: none traced).
+        cmd.fill(queues_, 0, 0, VkDeviceSize(pp.path_count) * 4);
+        cmd.barrier();
+        for (std::uint32_t rounds = 0;;) {
+          mark();
+          for (std::uint32_t r = 0; r < kSingleRounds; ++r) {
+            if (r + 1 == kSingleRounds) {
+              cmd.fill(*frame.counters, 0, offsetof(GpuFrameCounters, pending), 4);
+              cmd.barrier();
+            }
+            cmd.dispatch(p.single, buffers, &start, all);
+            cmd.barrier();
+            ++dispatches;
+          }
+          const GpuFrameCounters c = submit();
+          rounds += kSingleRounds;
+          if (c.pending == 0) break;
+          if (rounds >= kMaxPasses)
+            throw Error("vulkan", "device path frame: " + std::to_string(c.pending) +
+                                      " paths unfinished after " + std::to_string(rounds) +
+                                      " single-kernel dispatches (traversal budget " +
+                                      std::to_string(params.budget) + " too small for this scene)");
+        }
+      }
+      const std::uint32_t queued = single ? 0 : pp.path_count;
       cmd.fill(*frame.counters, queued, offsetof(GpuFrameCounters, queue_count), 4);
       cmd.barrier();
-      for (std::uint32_t depth = 0; depth <= max_depth; ++depth) {
+      for (std::uint32_t depth = 0; !single && depth <= max_depth; ++depth) {
         passes(p.trace, 0, offsetof(GpuFrameCounters, ray_args));
         // Shading appends to queue 0 of either kind.
         mark();

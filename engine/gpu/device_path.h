@@ -1,15 +1,21 @@
 #pragma once
 /// \file
-/// Path and shadow frames on the device (DeviceRenderer's stochastic modes), wavefront only:
+/// Path and shadow frames on the device (DeviceRenderer's stochastic modes):
 /// path_integrator.cpp and shadow_integrator.cpp as kernels (shaders/path_*.comp), with the same
 /// sample sequences (shaders/include/sampler.glsl is trace/sampler.h bit for bit), so CPU and GPU
-/// images converge to the same reference. Each path is a record in a buffer and a chain of
-/// depths (no recursion): per depth, trace passes over an indirect-dispatched queue until every
-/// ray is done (a ray that uses up a pass's budget saves its walk and goes on in the next),
-/// one shading dispatch (emission, shadow rays into the path's own slots, the sampled
-/// continuation queued), shadow passes as the Whitted wavefront's (frame_shadow.comp), and a
-/// gather adding the visible shadow rays in the CPU's order. A resolve sums each pixel's samples.
-/// Paths are run in chunks of pixels × sample batches that fit a storage buffer.
+/// images converge to the same reference. Each path is a record in a buffer (no recursion), run in
+/// either execution style:
+/// - wavefront: a chain of depths; per depth, trace passes over an indirect-dispatched queue until
+///   every ray is done (a ray that uses up a pass's budget saves its walk and goes on in the next),
+///   one shading dispatch (emission, shadow rays into the path's own slots, the sampled
+///   continuation queued), shadow passes as the Whitted wavefront's (frame_shadow.comp), and a
+///   gather adding the visible shadow rays in the CPU's order;
+/// - single kernel (path_single.comp): one invocation walks its path to the end, the same shading
+///   and gather in its own loop, dispatched again until every path has ended (a walk stopped by
+///   the budget or its step bound keeps its state in the buffers and its trace in its own pool
+///   slot), so its image is the wavefront's bit for bit.
+/// A resolve then sums each pixel's samples. Paths are run in chunks of pixels × sample batches
+/// that fit a storage buffer (and, single kernel, the state pool's one slot per path).
 
 #include "specula/gpu/vk_context.h"
 #include "specula/shared/frame_layout.h"
@@ -25,6 +31,7 @@ struct TraceSettings;
 namespace specula::gpu {
 
 class GpuScene;
+enum class Execution : std::uint8_t;
 
 /// DeviceRenderer's frame buffers that the path kernels share (bindings 8-14).
 struct FrameBuffers {
@@ -51,7 +58,7 @@ struct StatePool {
 
 class DevicePath {
 public:
-  DevicePath(Context& context, const GpuScene& scene);
+  DevicePath(Context& context, const GpuScene& scene, Execution execution);
   ~DevicePath();
   DevicePath(const DevicePath&) = delete;
   DevicePath& operator=(const DevicePath&) = delete;
@@ -84,6 +91,7 @@ private:
 
   Context& context_;
   const GpuScene& scene_;
+  Execution execution_;
   std::unique_ptr<Pipelines> pipelines_;
   std::unique_ptr<Pipelines> previous_; ///< the set before the last change (DeviceRenderer's)
   Buffer paths_, hits_, queues_, shadows_, shadow_queues_, path_params_, emitters_,

@@ -78,12 +78,11 @@ DeviceRenderer::~DeviceRenderer() = default;
 bool DeviceRenderer::supports(const TraceSettings& settings, RadianceHook* hook,
                               bool has_guides) const {
   if (has_guides) return false;
-  // Path and shadow frames run wavefront only (DevicePath); the single kernel falls back to the
-  // CPU integrators for them.
+  // Path and shadow frames (DevicePath, either execution style) take no radiance hook.
   if (settings.mode == TraceMode::Shadow && settings.shadow_samples > DevicePath::kMaxShadowSamples)
     return false;
   if (settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow)
-    return execution_ == Execution::wavefront && hook == nullptr;
+    return hook == nullptr;
   return hook == nullptr || DeviceCache::store_of(hook) != nullptr;
 }
 
@@ -405,7 +404,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     if (stochastic) {
       const GpuFrameCounters zero{};
       counters_buffer_.upload(&zero, sizeof zero);
-      if (!path_) path_ = std::make_unique<DevicePath>(context_, scene_);
+      if (!path_) path_ = std::make_unique<DevicePath>(context_, scene_, execution_);
       path_->render(layer, settings, params,
                     FrameBuffers{&params_, &materials_, &lights_, &normals_, &counters_buffer_,
                                  &image_, &primary_buffer_},

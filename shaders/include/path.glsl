@@ -135,10 +135,12 @@ void add_shadow(uint i, inout uint count, vec3 origin, vec3 direction, float tfa
   r.status = kShadows ? kRayPending : kRayDone;
   r.visible = kShadows ? 0u : 1u;
   shadows[s] = r;
+#ifndef SPECULA_PATH_SINGLE // the single kernel traces a path's slots itself, in order
   if (kShadows) {
     uint slot = atomicAdd(counters.shadow_queue_count[0], 1u);
     if (slot < params.shadow_capacity) shadow_queues[slot] = s;
   }
+#endif
 }
 
 #endif

@@ -33,11 +33,13 @@ struct Device {
   gpu::GpuTraceCounters counters;
   FrameStats stats;
 
-  explicit Device(const SceneLayer& layer) {
+  explicit Device(const SceneLayer& layer,
+                  gpu::Execution execution = gpu::Execution::wavefront,
+                  gpu::GpuStructure structure = gpu::GpuStructure::bvh) {
     context = gpu::Context::create();
-    scene = std::make_unique<gpu::GpuScene>(*context, gpu::GpuStructure::bvh);
+    scene = std::make_unique<gpu::GpuScene>(*context, structure);
     scene->update(layer);
-    renderer = std::make_unique<gpu::DeviceRenderer>(*context, *scene, gpu::Execution::wavefront);
+    renderer = std::make_unique<gpu::DeviceRenderer>(*context, *scene, execution);
   }
   Framebuffer render(const SceneLayer& layer, const TraceSettings& s) {
     Framebuffer out(kWidth, kHeight);
@@ -236,17 +238,70 @@ TEST(DevicePath, SmallBudgetResumesToTheSameImage) {
   }
 }
 
-TEST(DevicePath, SingleKernelFallsBackToTheCpu) {
+// The single kernel (path_single.comp) walks each path in one invocation with the wavefront's
+// shading and gather, so its path and shadow frames are the wavefront's bit for bit, on both
+// structures, with several samples per pixel (batches) and with a budget so small that nearly
+// every trace stops mid-walk and goes on in a later dispatch from its own pool slot.
+TEST(DevicePath, SingleKernelFramesEqualTheWavefrontsBitForBit) {
   SPECULA_NEED_DEVICE();
   Cpu cpu;
+  TraceSettings shadow;
+  shadow.mode = TraceMode::Shadow;
+  shadow.threads = 2;
+  shadow.shadow_samples = 4;
+  shadow.seed = 11;
+  TraceSettings bsdf = path_settings(3, 5);
+  bsdf.sampling = LightSampling::Bsdf;
+  auto context = gpu::Context::create();
+  for (const gpu::GpuStructure structure : {gpu::GpuStructure::bvh, gpu::GpuStructure::grid}) {
+    gpu::GpuScene scene(*context, structure);
+    scene.update(cpu.world->layer);
+    gpu::DeviceRenderer wavefront(*context, scene, gpu::Execution::wavefront);
+    gpu::DeviceRenderer single(*context, scene, gpu::Execution::single_kernel);
+    gpu::DeviceRenderer small(*context, scene, gpu::Execution::single_kernel);
+    small.set_budget(16);
+    struct Run {
+      Framebuffer image{kWidth, kHeight};
+      FrameStats stats;
+      gpu::GpuTraceCounters counters;
+    };
+    const auto render = [&](gpu::DeviceRenderer& r, const TraceSettings& s) {
+      Run run;
+      r.render(cpu.world->layer, test::cornell_camera(), s, run.image, run.stats, run.counters);
+      return run;
+    };
+    for (const TraceSettings& s : {path_settings(1, 0), bsdf, shadow}) {
+      ASSERT_TRUE(single.supports(s, nullptr, false));
+      const Run a = render(wavefront, s), b = render(single, s), c = render(small, s);
+      std::cout << trace_mode_name(s.mode) << " " << s.spp << " spp, "
+                << (structure == gpu::GpuStructure::bvh ? "bvh" : "grid")
+                << ": single kernel identical pixels " << 100.0 * identical(a.image, b.image)
+                << "%, budget 16 " << 100.0 * identical(a.image, c.image) << "% ("
+                << c.counters.resumed << " resumed, " << c.counters.dispatches << " dispatches)\n";
+      EXPECT_EQ(identical(a.image, b.image), 1.0);
+      EXPECT_EQ(identical(a.image, c.image), 1.0);
+      for (int k = 0; k < kRayKindCount; ++k) {
+        EXPECT_EQ(a.stats.rays.count[k], b.stats.rays.count[k]) << "kind " << k;
+        EXPECT_EQ(a.stats.rays.count[k], c.stats.rays.count[k]) << "kind " << k;
+      }
+      EXPECT_EQ(b.counters.cut, 0u);
+      EXPECT_EQ(c.counters.cut, 0u);
+      EXPECT_GT(c.counters.resumed, 0u); // walks did stop and go on
+      EXPECT_EQ(c.counters.restarted, 0u);
+    }
+  }
+}
+
+TEST(DevicePath, FramesWithDenoiserGuidesRunOnTheCpu) {
+  SPECULA_NEED_DEVICE();
   auto ctx = gpu::Context::create();
   gpu::GpuScene scene(*ctx, gpu::GpuStructure::bvh);
-  const gpu::DeviceRenderer single(*ctx, scene, gpu::Execution::single_kernel);
-  const gpu::DeviceRenderer wavefront(*ctx, scene, gpu::Execution::wavefront);
-  const TraceSettings s = path_settings(1, 0);
-  EXPECT_FALSE(single.supports(s, nullptr, false));
-  EXPECT_TRUE(wavefront.supports(s, nullptr, false));
-  EXPECT_FALSE(wavefront.supports(s, nullptr, true)); // denoiser guides: on the CPU
+  for (const gpu::Execution e : {gpu::Execution::single_kernel, gpu::Execution::wavefront}) {
+    const gpu::DeviceRenderer renderer(*ctx, scene, e);
+    const TraceSettings s = path_settings(1, 0);
+    EXPECT_TRUE(renderer.supports(s, nullptr, false));
+    EXPECT_FALSE(renderer.supports(s, nullptr, true)); // denoiser guides: on the CPU
+  }
 }
 
 // path_shade draws a pixel's area-light samples in one loop: more than lavapipe's loop cap allows
