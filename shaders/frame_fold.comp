@@ -50,7 +50,7 @@ void main() {
         }
       }
       cache_record(node.leaves, node.origin, node.direction, node.pixel, radiance, hit_t, entity,
-                   seen, rays, node.depth, node.kind, node.answer);
+                   seen, rays, node.depth, node.kind, node.answer, node.throughput);
     }
   }
   if (node.depth == 0u) write_pixel(node.pixel, radiance);

@@ -45,7 +45,7 @@ uint spawn(GpuFrameNode parent, vec3 origin, vec3 direction, float weight, uint 
   c._pad1 = 0u;
   if (kCache && leaves != kNoIndex) {
     vec3 cached;
-    c.answer = cache_lookup(leaves, origin, direction, cached, c.seen);
+    c.answer = cache_lookup(leaves, c.pixel, c.depth, origin, direction, cached, c.seen);
     if ((c.answer & 15u) != kAnswerTrace) c.radiance = cached;
     if ((c.answer & 15u) == kAnswerUse) {
       c.rays = 0u;

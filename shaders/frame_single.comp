@@ -80,7 +80,8 @@ bool push_child(uint base, uint top, vec3 origin, vec3 direction, float weight, 
   if (kCache && leaves != kNoIndex) {
     vec3 cached;
     uint seen;
-    uint answer = cache_lookup(leaves, origin, direction, cached, seen);
+    uint pixel = params.first_pixel + base / kStackFrames;
+    uint answer = cache_lookup(leaves, pixel, stack[f].depth + 1u, origin, direction, cached, seen);
     stack[f + 1u].answer = answer;
     if ((answer & 15u) != kAnswerTrace) {
       stack[f + 1u].radiance = cached;
@@ -249,7 +250,8 @@ void main() {
         if (stack[f].leaves != kNoIndex)
           cache_record(stack[f].leaves, stack[f].origin, stack[f].direction, pixel,
                        stack[f].radiance, stack[f].hit_t, stack[f].hit_entity, stack[f].seen,
-                       stack[f].rays, stack[f].depth, stack[f].kind, stack[f].answer);
+                       stack[f].rays, stack[f].depth, stack[f].kind, stack[f].answer,
+                       stack[f].throughput);
       }
       --top;
     }

@@ -322,10 +322,15 @@ RayCacheStore::~RayCacheStore() = default;
 
 std::size_t RayCacheStore::cube_count() const { return cubes_.size(); }
 
+std::uint32_t RayCacheStore::verify_period(const Cube& c) const {
+  return c.evaluating ? kEvaluationVerifyEvery : settings_.verify_every;
+}
+
 CubeView RayCacheStore::cube(std::size_t i) const {
   const Cube& c = *cubes_.at(i);
-  return CubeView{c.owner,   c.instance, c.resolution, c.centre,     c.texels, c.probe,
-                  c.mode,    c.enabled,  c.cos_tau,    c.generation};
+  return CubeView{c.owner,   c.instance, c.resolution, c.centre,     c.texels,
+                  c.probe,   c.mode,     c.enabled,    c.cos_tau,    c.generation,
+                  settings_.policy == CachePolicy::Auto ? verify_period(c) : 0u};
 }
 
 std::optional<std::size_t> RayCacheStore::cube_of(ecs::Entity owner) const {
@@ -830,11 +835,9 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
     out.seen = tx.seen | (tx.hit != kNoInstance ? entity_bit(tx.hit) : 0u);
     const std::uint64_t cost = tx.rays;
     if (verify) {
-      const std::uint32_t every = c.evaluating ? kEvaluationVerifyEvery : settings_.verify_every;
-      const std::uint64_t key = (std::uint64_t(q.pixel) << 8) ^ (std::uint64_t(q.depth) << 2) ^
-                                (frame_ << 40) ^ (std::uint64_t(q.sample) << 24) ^
-                                std::uint64_t(ci);
-      if (mix_hash(key) % every == 0) out.answer = CacheAnswer::Verify;
+      if (verify_chosen(q.pixel, q.depth, q.sample, std::uint32_t(frame_), std::uint32_t(ci),
+                        verify_period(c)))
+        out.answer = CacheAnswer::Verify;
     }
     if (out.answer == CacheAnswer::Use || out.answer == CacheAnswer::UseIfClear)
       l.offered_rays += cost;

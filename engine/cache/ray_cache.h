@@ -18,6 +18,7 @@
 #include "specula/render/scene_layer.h"
 #include "specula/trace/radiance_hook.h"
 #include "specula/trace/render_frame.h"
+#include "specula/trace/sampler.h"
 #include "specula/trace/stats.h"
 
 #include <atomic>
@@ -96,7 +97,22 @@ struct CubeView {
   /// Changes whenever a texel does (from a process-wide counter: never reused, even by a cube
   /// made anew), so a device copy re-uploads only the cubes that changed.
   std::uint64_t generation;
+  /// Auto, Whitted frames: one accepted lookup in this many is traced anyway to measure the
+  /// error (verify_chosen); 0: none (policy on).
+  std::uint32_t verify_every;
 };
+
+/// Which accepted Whitted lookups auto traces anyway (CacheAnswer::Verify): one in `every`, by a
+/// 32-bit hash of the lookup (pixel, depth, sample, the store's frame, the cube's index), so that
+/// the choice depends on no thread count and the device kernels make it alike
+/// (shaders/include/frame_cache.glsl).
+[[nodiscard]] constexpr bool verify_chosen(std::uint32_t pixel, std::uint32_t depth,
+                                           std::uint32_t sample, std::uint32_t frame,
+                                           std::uint32_t cube, std::uint32_t every) {
+  const std::uint32_t h = hash_combine(
+      hash_combine(hash_combine(hash_u32(pixel), depth | (sample << 8)), frame), cube);
+  return every != 0 && h % every == 0;
+}
 
 /// What one invalidation did.
 struct InvalidationStats {
@@ -131,6 +147,8 @@ public:
   /// one-sample estimates, which include indirect light) starts every cube afresh.
   void begin_frame(std::uint32_t width, std::uint32_t height, TraceMode mode) override;
   [[nodiscard]] bool wants_lookups() const override;
+  /// The frame number verify_chosen hashes (counted by begin_frame; its low 32 bits).
+  [[nodiscard]] std::uint32_t verify_frame() const { return std::uint32_t(frame_); }
   /// True unless every cube is off.
   [[nodiscard]] bool wants_leaving() const override;
   void lookup(std::span<const LeavingQuery> queries,
@@ -154,6 +172,8 @@ public:
   struct Cube;
 
 private:
+  /// Auto: verify_chosen's period for cube `c` (shorter while a mode is being evaluated).
+  [[nodiscard]] std::uint32_t verify_period(const Cube& c) const;
   std::uint64_t apply_writes();
   void decide(Cube& c, double ns_per_ray, double frame_rays);
   /// Auto: where a cube starts (its ladder's first rung; in path mode, off).

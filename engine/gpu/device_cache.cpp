@@ -6,6 +6,7 @@
 #include "specula/shared/cache_layout.h"
 
 #include <algorithm>
+#include <cstring>
 #include <string>
 
 namespace specula::gpu {
@@ -14,16 +15,21 @@ cache::RayCacheStore* DeviceCache::store_of(RadianceHook* hook) {
   auto* store = dynamic_cast<cache::RayCacheStore*>(hook);
   if (store == nullptr) return nullptr;
   const cache::CacheSettings& s = store->settings();
-  // Auto (a per-cube ladder of modes with verified rays) and the march stay with the CPU
-  // integrators.
-  const bool mode = s.lookup == cache::LookupMode::Direction || s.lookup == cache::LookupMode::Tau;
-  return s.policy == cache::CachePolicy::On && mode ? store : nullptr;
+  if (s.policy != cache::CachePolicy::On && s.policy != cache::CachePolicy::Auto) return nullptr;
+  if (s.policy == cache::CachePolicy::On && s.lookup == cache::LookupMode::March) return nullptr;
+  // The kernels look up in direction and tau modes; a frame in which some cube marches stays
+  // with the CPU integrators (under auto, while that cube's march is on trial).
+  for (std::size_t i = 0; i < store->cube_count(); ++i) {
+    const cache::CubeView v = store->cube(i);
+    if (v.enabled && v.mode == cache::LookupMode::March) return nullptr;
+  }
+  return store;
 }
 
 void DeviceCache::upload(const cache::RayCacheStore& store, std::uint32_t slots, bool lookups) {
   const VkDeviceSize range = context_.info().max_storage_buffer_range;
   std::vector<GpuCube> table(std::max(1u, slots));
-  for (GpuCube& c : table) c = GpuCube{vec3(0.0f), 0, 0, kCubeNone, 1.0f, 0};
+  for (GpuCube& c : table) c = GpuCube{vec3(0.0f), 0, 0, kCubeNone, 1.0f, 0, 0, 0, 0, 0};
   std::uint64_t total = 0;
   for (std::size_t i = 0; i < store.cube_count(); ++i) total += store.cube(i).texels.size();
   if (total * sizeof(cache::Texel) > range)
@@ -45,9 +51,15 @@ void DeviceCache::upload(const cache::RayCacheStore& store, std::uint32_t slots,
     c.centre = v.centre;
     c.resolution = v.resolution;
     c.first_texel = first;
-    c.mode = v.mode == cache::LookupMode::Tau ? kCubeTau : kCubeDirection;
+    // An off cube (auto) is neither looked up nor handed its leaving rays, as on the CPU.
+    c.mode = !v.enabled                         ? kCubeNone
+             : v.mode == cache::LookupMode::Tau ? kCubeTau
+                                                : kCubeDirection;
     c.cos_tau = v.cos_tau;
     c.flags = lookups && v.enabled ? kCubeEnabled : 0u;
+    c.verify_every = v.verify_every;
+    c.index = std::uint32_t(i);
+    c.frame = store.verify_frame();
     const Uploaded u{v.owner.index, first, v.resolution, v.generation};
     const bool same = i < uploaded_.size() && uploaded_[i].owner == u.owner &&
                       uploaded_[i].first == u.first && uploaded_[i].resolution == u.resolution &&
@@ -70,7 +82,8 @@ void DeviceCache::reserve_records(std::uint32_t capacity) {
   const VkDeviceSize range = context_.info().max_storage_buffer_range;
   record_capacity_ =
       std::uint32_t(std::min<VkDeviceSize>(capacity, range / sizeof(GpuLeavingRecord)));
-  const VkDeviceSize bytes = std::max<VkDeviceSize>(16, VkDeviceSize(record_capacity_) * 64);
+  const VkDeviceSize bytes =
+      std::max<VkDeviceSize>(16, VkDeviceSize(record_capacity_) * sizeof(GpuLeavingRecord));
   if (!records_.valid() || records_.size() < bytes) records_ = context_.make_buffer(bytes);
 }
 
@@ -81,6 +94,12 @@ std::uint64_t DeviceCache::deliver(cache::RayCacheStore& store, const SceneTable
                               " ray-cache records, room for " + std::to_string(record_capacity_));
   std::vector<GpuLeavingRecord> records(count);
   if (count > 0) records_.download(records.data(), records.size() * sizeof(GpuLeavingRecord));
+  // The kernels append in whatever order their atomics run: sorted (by pixel, then every byte),
+  // the store receives the same sequence every run (auto sums verified errors in this order).
+  std::sort(records.begin(), records.end(), [](const GpuLeavingRecord& a, const GpuLeavingRecord& b) {
+    if (a.pixel != b.pixel) return a.pixel < b.pixel;
+    return std::memcmp(&a, &b, sizeof a) < 0;
+  });
   std::vector<LeavingQuery> queries;
   std::vector<std::uint32_t> queried;
   std::vector<LeavingRadiance> leaving(count);
@@ -93,13 +112,15 @@ std::uint64_t DeviceCache::deliver(cache::RayCacheStore& store, const SceneTable
     r.instance = g.instance;
     r.kind = RayKind((g.packed >> 8) & 15u);
     r.exits = true;
-    r.answer = answer == kAnswerUse ? CacheAnswer::Use : CacheAnswer::Trace;
+    r.answer = answer == kAnswerUse      ? CacheAnswer::Use
+               : answer == kAnswerVerify ? CacheAnswer::Verify
+                                         : CacheAnswer::Trace;
     r.depth = depth;
     r.pixel = g.pixel;
     r.origin = g.origin;
     r.direction = g.direction;
-    r.weight = vec3(0.0f); // only verified rays (auto) read these
-    r.throughput = vec3(0.0f);
+    r.weight = vec3(0.0f); // read by none of the store's Whitted paths
+    r.throughput = g.throughput;
     r.radiance = g.radiance;
     r.cached = vec3(0.0f);
     r.hit_t = g.hit_t;
@@ -117,10 +138,14 @@ std::uint64_t DeviceCache::deliver(cache::RayCacheStore& store, const SceneTable
   store.lookup(queries, answers);
   std::uint64_t differ = 0;
   for (std::size_t q = 0; q < queries.size(); ++q) {
-    const LeavingRadiance& r = leaving[queried[q]];
+    LeavingRadiance& r = leaving[queried[q]];
     const CacheAnswer a = answers[q].answer;
+    // A verified ray's error is against the texel the kernel read: the store's (texels change
+    // only at the frame's end).
+    if (a == CacheAnswer::Verify) r.cached = answers[q].radiance;
     // A cached miss (UseIfClear) is used with its occlusion ray, or traced after it.
-    const bool agree = a == CacheAnswer::Trace ? r.answer == CacheAnswer::Trace
+    const bool agree = a == CacheAnswer::Trace    ? r.answer == CacheAnswer::Trace
+                       : a == CacheAnswer::Verify ? r.answer == CacheAnswer::Verify
                        : a == CacheAnswer::Use
                            ? r.answer == CacheAnswer::Use && r.rays == 0
                            : (r.answer == CacheAnswer::Use && r.rays == 1) ||

@@ -353,7 +353,9 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
         settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow;
     const bool specular = whitted && (scene.mirrors || scene.dielectrics);
     // Cubes only matter where rays leave objects: the cache code is compiled in for those frames.
-    const bool cache = specular && store != nullptr && store->cube_count() > 0;
+    // A store whose cubes are all off (auto) wants no leaving rays: none are recorded.
+    const bool cache =
+        specular && store != nullptr && store->cube_count() > 0 && store->wants_leaving();
     if (stochastic) {
       ensure_frame_buffers(pixels);
     } else {

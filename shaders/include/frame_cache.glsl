@@ -7,6 +7,7 @@
 
 #include "shared/cache_layout.h"
 #include "include/cube.glsl"
+#include "include/hash.glsl"
 
 layout(constant_id = 5) const bool kCache = false;
 
@@ -34,10 +35,19 @@ bool cache_within_tau(vec3 centre, vec3 s, float distance, vec3 p, vec3 d, float
   return len > 0.0 && dot3(v, d) >= bound;
 }
 
-// RayCacheStore::lookup for one ray leaving `slot` (a cube's): kAnswerTrace, or kAnswerUse /
-// kAnswerUseIfClear with the texel's radiance and seen mask, | kAnswerLookedUp when the cube is
-// looked up at all this frame.
-uint cache_lookup(uint slot, vec3 origin, vec3 direction, out vec3 radiance, out uint seen) {
+// cache::verify_chosen (ray_cache.h): whether auto traces this accepted lookup anyway. Whitted
+// frames have one sample per pixel (sample 0).
+bool cache_verify(GpuCube c, uint pixel, uint depth) {
+  uint h = hash_combine(hash_combine(hash_combine(hash_u32(pixel), depth), c.frame), c.index);
+  return c.verify_every != 0u && h % c.verify_every == 0u;
+}
+
+// RayCacheStore::lookup for one ray leaving `slot` (a cube's) from `pixel` at `depth`:
+// kAnswerTrace, or kAnswerUse / kAnswerUseIfClear with the texel's radiance and seen mask, or
+// kAnswerVerify (traced as kAnswerTrace, its radiance and mask left 0: the host takes the cached
+// value from the store), | kAnswerLookedUp when the cube is looked up at all this frame.
+uint cache_lookup(uint slot, uint pixel, uint depth, vec3 origin, vec3 direction,
+                  out vec3 radiance, out uint seen) {
   radiance = vec3(0.0);
   seen = 0u;
   GpuCube c = cubes[slot];
@@ -54,6 +64,8 @@ uint cache_lookup(uint slot, vec3 origin, vec3 direction, out vec3 radiance, out
         answer = kAnswerUse;
     }
   }
+  if (answer != kAnswerTrace && cache_verify(c, pixel, depth))
+    return kAnswerVerify | kAnswerLookedUp;
   if (answer != kAnswerTrace) {
     radiance = texel_radiance(t);
     uint hit = texel_hit(t);
@@ -65,7 +77,8 @@ uint cache_lookup(uint slot, vec3 origin, vec3 direction, out vec3 radiance, out
 // The record of a ray leaving a cube's object once its subtree is folded; records past the
 // buffer are counted (the host reports the overflow).
 void cache_record(uint slot, vec3 origin, vec3 direction, uint pixel, vec3 radiance, float hit_t,
-                  uint hit_entity, uint seen, uint rays, uint depth, uint kind, uint answer) {
+                  uint hit_entity, uint seen, uint rays, uint depth, uint kind, uint answer,
+                  vec3 throughput) {
   uint k = atomicAdd(counters.records, 1u);
   if (k >= params.record_capacity) return;
   GpuLeavingRecord r;
@@ -79,6 +92,8 @@ void cache_record(uint slot, vec3 origin, vec3 direction, uint pixel, vec3 radia
   r.seen = seen;
   r.rays = rays;
   r.packed = depth | (kind << 8) | (answer << 12);
+  r.throughput = throughput;
+  r._pad0 = 0u;
   records[k] = r;
 }
 

@@ -34,6 +34,7 @@ SPECULA_CONST uint kCubeEnabled = 1u; ///< looked up (else only its leaving rays
 SPECULA_CONST uint kAnswerTrace = 0u;
 SPECULA_CONST uint kAnswerUse = 1u;
 SPECULA_CONST uint kAnswerUseIfClear = 2u;
+SPECULA_CONST uint kAnswerVerify = 3u; ///< auto: it would be used, but is traced to measure the error
 
 /// One cube per scene-layer instance slot (mode kCubeNone where the slot has none).
 struct GpuCube {
@@ -43,6 +44,10 @@ struct GpuCube {
   uint mode;
   float cos_tau;
   uint flags;
+  uint verify_every; ///< auto: cache::verify_chosen's period (0: no lookup is verified)
+  uint index;        ///< the cube's index in the store (verify_chosen hashes it)
+  uint frame;        ///< the store's verify_frame()
+  uint _pad0;
 };
 
 /// A ray that left a cached object (the CPU's LeavingRadiance, for the cube's rays only):
@@ -58,11 +63,13 @@ struct GpuLeavingRecord {
   uint seen;
   uint rays;
   uint packed; ///< depth | kind << 8 | answer << 12 | looked up << 16
+  vec3 throughput; ///< relative to the pixel (a verified ray's error is weighed by it)
+  uint _pad0;
 };
 
 #ifdef __cplusplus
-static_assert(sizeof(GpuCube) == 32);
-static_assert(sizeof(GpuLeavingRecord) == 64);
+static_assert(sizeof(GpuCube) == 48);
+static_assert(sizeof(GpuLeavingRecord) == 80 && offsetof(GpuLeavingRecord, throughput) == 64);
 } // namespace specula::gpu
 #endif
 
