@@ -4,6 +4,7 @@
 #include "specula/gpu/gpu_scene.h"
 #include "specula/gpu/shaders.h"
 #include "specula/gpu/vulkan_tracer.h"
+#include "specula/image/denoise.h"
 #include "specula/render/scene_layer.h"
 #include "specula/shared/path_layout.h"
 #include "specula/trace/render_frame.h"
@@ -108,11 +109,11 @@ void DevicePath::ensure_pipelines(const Features& f) {
   auto p = std::make_unique<Pipelines>();
   p->features = f;
   // frame_common.glsl's ids 0-6 (0, 3, 5 the cache and 6 hybrid mode unused here), path.glsl's
-  // 7-10, frame_common.glsl's 11-12.
+  // 7-10, frame_common.glsl's 11-12, path.glsl's 13.
   const std::vector<std::uint32_t> spec = {
       0u, f.shadows ? 1u : 0u, f.dielectrics ? 1u : 0u, 0u, f.lights, 0u, 0u, f.area ? 1u : 0u,
       f.mirrors ? 1u : 0u, f.shadow_mode ? 1u : 0u, f.sampling, f.grid ? 1u : 0u,
-      f.top ? 1u : 0u};
+      f.top ? 1u : 0u, f.guides ? 1u : 0u};
   const auto make = [&](const char* name) {
     return context_.make_pipeline({shader_spirv(name), kFramePoolBindings, sizeof(PathPush), spec, name});
   };
@@ -133,14 +134,20 @@ void DevicePath::ensure_pipelines(const Features& f) {
 
 void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
                         GpuFrameParams params, const FrameBuffers& frame, double& gpu_ms,
-                        std::uint64_t& dispatches) {
+                        std::uint64_t& dispatches, GuideBuffers* guides) {
   upload_emitters(layer);
   const SceneFeatures& scene = layer.emitters().features();
   const bool shadow_mode = settings.mode == TraceMode::Shadow;
   const bool area = scene.area_lights && (!shadow_mode || settings.shadow_samples > 0);
-  const Features f{shadow_mode,  settings.shadows,     scene.dielectrics && !shadow_mode,
-                   scene.mirrors && !shadow_mode, area, params.light_count,
-                   std::uint32_t(settings.sampling), scene_.structure() == GpuStructure::grid,
+  const Features f{shadow_mode,
+                   settings.shadows,
+                   scene.dielectrics && !shadow_mode,
+                   scene.mirrors && !shadow_mode,
+                   area,
+                   guides != nullptr,
+                   params.light_count,
+                   std::uint32_t(settings.sampling),
+                   scene_.structure() == GpuStructure::grid,
                    scene_.has_top_level()};
   ensure_pipelines(f);
   const Pipelines& p = *pipelines_;
@@ -172,6 +179,7 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
   ensure_size(context_, sums_, VkDeviceSize(pixels) * 16);
   ensure_size(context_, path_params_, sizeof(GpuPathParams), MemoryKind::host);
   ensure_size(context_, no_cache_, 16);
+  ensure_size(context_, guides_, guides != nullptr ? VkDeviceSize(pixels) * sizeof(GpuGuide) : 16);
   params.node_capacity = capacity;
   params.shadow_capacity = shadow_capacity;
   if (!single)
@@ -185,7 +193,7 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
                           frame.counters, frame.image, frame.primary, &paths_, &hits_, &queues_,
                           &shadows_, &shadow_queues_, &no_cache_, &no_cache_, &no_cache_,
                           &path_params_, &emitters_, &emitter_first_, &sums_, &sobol_,
-                          &pool_.states, &pool_.stacks})
+                          &pool_.states, &pool_.stacks, &guides_})
     buffers.push_back(b);
 
   Commands cmd(context_, 4);
@@ -304,6 +312,16 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
       cmd.dispatch(p.resolve, buffers, &start, groups(chunk_pixels));
       cmd.barrier();
       submit();
+    }
+  }
+  if (guides != nullptr) {
+    std::vector<GpuGuide> g(pixels);
+    guides_.download(g.data(), g.size() * sizeof(GpuGuide));
+    guides->resize(pixels);
+    for (std::uint32_t i = 0; i < pixels; ++i) {
+      guides->albedo[i] = g[i].albedo;
+      guides->normal[i] = g[i].normal;
+      guides->depth[i] = g[i].depth;
     }
   }
 }

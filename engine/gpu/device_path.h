@@ -25,6 +25,7 @@
 
 namespace specula {
 class SceneLayer;
+struct GuideBuffers;
 struct TraceSettings;
 } // namespace specula
 
@@ -73,13 +74,15 @@ public:
 
   /// Runs a path or shadow frame: `params` filled for the frame (camera, budget, lights), the
   /// tables uploaded, the counters zeroed; leaves the image, primary slots and counters in
-  /// `frame`. Adds GPU time and dispatches.
+  /// `frame`, and, given `guides`, the denoiser's guides there (from each pixel's first sample's
+  /// primary hit, as the CPU integrators write them). Adds GPU time and dispatches.
   void render(const SceneLayer& layer, const TraceSettings& settings, GpuFrameParams params,
-              const FrameBuffers& frame, double& gpu_ms, std::uint64_t& dispatches);
+              const FrameBuffers& frame, double& gpu_ms, std::uint64_t& dispatches,
+              GuideBuffers* guides = nullptr);
 
 private:
   struct Features {
-    bool shadow_mode, shadows, dielectrics, mirrors, area;
+    bool shadow_mode, shadows, dielectrics, mirrors, area, guides;
     std::uint32_t lights, sampling;
     bool grid, top; ///< trace.glsl's grid walk and top level compiled in (frame_common.glsl)
     friend bool operator==(const Features&, const Features&) = default;
@@ -95,7 +98,7 @@ private:
   std::unique_ptr<Pipelines> pipelines_;
   std::unique_ptr<Pipelines> previous_; ///< the set before the last change (DeviceRenderer's)
   Buffer paths_, hits_, queues_, shadows_, shadow_queues_, path_params_, emitters_,
-      emitter_first_, sums_, sobol_;
+      emitter_first_, sums_, sobol_, guides_;
   Buffer no_cache_; ///< bound at the cache's bindings 20-22, which path frames do not use
   StatePool pool_;
   std::uint64_t emitters_sync_ = 0;

@@ -77,12 +77,13 @@ DeviceRenderer::~DeviceRenderer() = default;
 
 bool DeviceRenderer::supports(const TraceSettings& settings, RadianceHook* hook,
                               bool has_guides) const {
-  if (has_guides) return false;
-  // Path and shadow frames (DevicePath, either execution style) take no radiance hook.
+  // Path and shadow frames (DevicePath, either execution style) take no radiance hook, and
+  // write the denoiser's guides when asked; other frames have no guides to write.
   if (settings.mode == TraceMode::Shadow && settings.shadow_samples > DevicePath::kMaxShadowSamples)
     return false;
   if (settings.mode == TraceMode::Path || settings.mode == TraceMode::Shadow)
     return hook == nullptr;
+  if (has_guides) return false;
   return hook == nullptr || DeviceCache::store_of(hook) != nullptr;
 }
 
@@ -192,6 +193,7 @@ std::vector<const Buffer*> DeviceRenderer::bindings() const {
   while (b.size() < kFramePoolStatesBinding) b.push_back(&unused_);
   b.push_back(&pool_->states);
   b.push_back(&pool_->stacks);
+  b.push_back(&unused_); // 30: the path frames' guides
   return b;
 }
 
@@ -335,8 +337,9 @@ std::vector<GpuHit> DeviceRenderer::primary_hits() const {
 
 void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
                             const TraceSettings& settings, Framebuffer& out, FrameStats& stats,
-                            GpuTraceCounters& counters, RadianceHook* hook) {
-  if (!supports(settings, hook, false))
+                            GpuTraceCounters& counters, RadianceHook* hook,
+                            GuideBuffers* guides) {
+  if (!supports(settings, hook, guides != nullptr))
     throw Error("vulkan", std::string("device frames do not render mode ") +
                               trace_mode_name(settings.mode) +
                               (hook != nullptr ? " with this radiance hook" : ""));
@@ -410,7 +413,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
       path_->render(layer, settings, params,
                     FrameBuffers{&params_, &materials_, &lights_, &normals_, &counters_buffer_,
                                  &image_, &primary_buffer_},
-                    gpu_ms_, dispatches_);
+                    gpu_ms_, dispatches_, guides);
     } else if (execution_ == Execution::wavefront)
       run_wavefront(settings, pixels);
     else

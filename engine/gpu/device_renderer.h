@@ -28,6 +28,7 @@
 
 namespace specula {
 class RadianceHook;
+struct GuideBuffers;
 class SceneLayer;
 class Framebuffer;
 struct Camera;
@@ -52,19 +53,20 @@ public:
   DeviceRenderer(const DeviceRenderer&) = delete;
   DeviceRenderer& operator=(const DeviceRenderer&) = delete;
 
-  /// Whether these settings run on the device, never with denoiser guides: cast and Whitted with
-  /// no radiance hook or a ray-cache store the device can serve (DeviceCache::store_of); path and
-  /// shadow in the wavefront style (DevicePath) without a hook, shadow with at most
-  /// DevicePath::kMaxShadowSamples area-light samples.
+  /// Whether these settings run on the device: cast and Whitted with no radiance hook or a
+  /// ray-cache store the device can serve (DeviceCache::store_of), and no denoiser guides; path
+  /// and shadow in either execution style (DevicePath), with or without guides, without a hook,
+  /// shadow with at most DevicePath::kMaxShadowSamples area-light samples.
   [[nodiscard]] bool supports(const TraceSettings& settings, RadianceHook* hook,
                               bool has_guides) const;
   /// Renders one frame of `layer` (GpuScene already updated from it) into `out`; `stats` gets the
   /// ray counts and trace_ms, `counters` the device's counts and GPU time. A ray-cache `hook`
-  /// gets the frame as from render_frame (begin_frame, lookups, leaving, end_frame). Throws
-  /// GpuError (device_lost() for a lost device) naming the device frame.
+  /// gets the frame as from render_frame (begin_frame, lookups, leaving, end_frame); path and
+  /// shadow frames write `guides` when given. Throws GpuError (device_lost() for a lost device)
+  /// naming the device frame.
   void render(const SceneLayer& layer, const Camera& camera, const TraceSettings& settings,
               Framebuffer& out, FrameStats& stats, GpuTraceCounters& counters,
-              RadianceHook* hook = nullptr);
+              RadianceHook* hook = nullptr, GuideBuffers* guides = nullptr);
 
   /// Ray-cache records of the last frame whose device answer differed from the store's replayed
   /// lookup (must be 0), and texels uploaded for it.

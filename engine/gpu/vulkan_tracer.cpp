@@ -210,7 +210,7 @@ bool VulkanTracer::render_frame_on_device(const SceneLayer& layer, const Camera&
                                           FrameStats& stats) const {
   if (!options_.device_frames || !renderer_->supports(settings, hook, guides != nullptr))
     return false;
-  renderer_->render(layer, camera, settings, out, stats, counters_, hook);
+  renderer_->render(layer, camera, settings, out, stats, counters_, hook, guides);
   // The frame's own device counters, for the stats file (frames[].gpu).
   stats.gpu = GpuFrameStats{true,          counters_.rays,       counters_.resumed,
                             counters_.cut, counters_.dispatches, counters_.gpu_ms};

@@ -12,6 +12,7 @@ layout(constant_id = 7) const bool kAreaLights = false; // the emitter table is 
 layout(constant_id = 8) const bool kMirrors = false;    // some material reflects
 layout(constant_id = 9) const bool kShadowMode = false; // shadow caster instead of path tracer
 layout(constant_id = 10) const uint kSampling = 0u;      // kSampling{Mis,Bsdf,Light}
+layout(constant_id = 13) const bool kGuides = false;    // the frame writes the denoiser's guides
 
 layout(std430, set = 0, binding = 15) buffer Paths { GpuPath paths[]; };
 layout(std430, set = 0, binding = 16) buffer PathHits { GpuHit hits[]; };
@@ -24,6 +25,7 @@ layout(std430, set = 0, binding = 24) readonly buffer PathEmitters { GpuEmitter 
 layout(std430, set = 0, binding = 25) readonly buffer PathEmitterFirst { uint emitter_first[]; };
 layout(std430, set = 0, binding = 26) buffer PathSums { vec4 sums[]; };
 layout(std430, set = 0, binding = 27) readonly buffer PathSobol { uint sobol_tables[]; };
+layout(std430, set = 0, binding = 30) writeonly buffer PathGuides { GpuGuide guides[]; };
 
 // parity: the queue a pass reads; depth: the vertex depth shaded; count: path_args' queue (0:
 // rays, 1: shadow rays).

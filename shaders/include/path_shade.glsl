@@ -101,7 +101,25 @@ void shade_shadow_caster(uint i, GpuPath p, GpuHit hit, GpuMaterial m) {
 // Path i's vertex: p its record, its ray traced (hits[i] holds the hit).
 void shade_path(uint i, GpuPath p) {
   GpuHit hit = hits[i];
-  if (p.depth == 0u && p.kind == kKindPrimary) primary_instance[p.pixel] = hit.instance;
+  bool primary = p.depth == 0u && p.kind == kKindPrimary; // a pixel's first sample's camera ray
+  if (primary) primary_instance[p.pixel] = hit.instance;
+  if (kGuides && primary) {
+    // integrators.h's write_guide, from the same hit.
+    GpuGuide g;
+    g.albedo = vec3(1.0);
+    g.depth = kInfinity;
+    g.normal = vec3(0.0);
+    g._pad0 = 0.0;
+    if (hit.instance != kNoIndex) {
+      GpuMaterial gm = materials[instances[hit.instance].material];
+      float diffuse = diffuse_weight(gm);
+      precise vec3 albedo = diffuse * gm.base_color + (1.0 - diffuse);
+      g.albedo = albedo;
+      g.depth = hit.t;
+      g.normal = shading_point(hit, p.direction, false).shading_normal;
+    }
+    guides[p.pixel] = g;
+  }
   if (hit.instance == kNoIndex) {
     vec3 r = add_product(p.radiance, p.throughput, params.background, 1.0);
     end_path(i, kShadowMode ? params.background : r, 0u);

@@ -25,6 +25,8 @@ SPECULA_CONST uint kPathEmitterFirstBinding = 25u; ///< per instance slot: its f
 SPECULA_CONST uint kPathSumsBinding = 26u;      ///< per pixel: the sum of its finished samples
 SPECULA_CONST uint kPathSobolBinding = 27u;     ///< sampler.h's byte tables, 4 × 4 × 256
 SPECULA_CONST uint kPathBindings = 28u;
+/// After the state pools (frame_layout.h): per pixel, the denoiser's guides (GpuGuide).
+SPECULA_CONST uint kPathGuidesBinding = 30u;
 
 /// Sampler.h's LightSampling, as the kernels test it.
 SPECULA_CONST uint kSamplingMis = 0u;
@@ -69,6 +71,16 @@ struct GpuPath {
   uint shadow_count;
 };
 
+/// The denoiser's guides of one pixel (image/denoise.h's GuideBuffers, integrators.h's
+/// write_guide): at its primary hit, the albedo (diffuse colour, specular parts white), the
+/// distance and the shading normal; a miss: albedo 1, depth +inf, normal 0.
+struct GpuGuide {
+  vec3 albedo;
+  float depth;
+  vec3 normal;
+  float _pad0;
+};
+
 /// render/emitters.h's EmitterTriangle (uploaded as is).
 struct GpuEmitter {
   vec3 p0;
@@ -89,6 +101,7 @@ SPECULA_CONST uint kKindUncounted = 4u;
 static_assert(sizeof(GpuPathParams) == 48);
 static_assert(sizeof(GpuPath) == 96 && offsetof(GpuPath, previous) == 64 &&
               offsetof(GpuPath, depth) == 80);
+static_assert(sizeof(GpuGuide) == 32 && offsetof(GpuGuide, normal) == 16);
 static_assert(sizeof(GpuEmitter) == 80 && offsetof(GpuEmitter, normal) == 48 &&
               offsetof(GpuEmitter, emission) == 64);
 } // namespace specula::gpu
