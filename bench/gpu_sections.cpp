@@ -117,12 +117,23 @@ std::string fixed(double value) {
 /// a / b, or empty when b was not measured.
 std::string ratio(double a, double b) { return b > 0.0 ? fixed(a / b) : std::string(); }
 
-void table(const Options& o, const char* title, Scene& scene) {
+/// A scene as the whole-frame tables render it: its layer synced, its active camera, its size.
+struct SceneView {
   SceneLayer layer;
-  layer.sync(scene.registry);
-  const Camera camera = *active_camera(scene.registry);
-  const std::uint32_t width = scene.settings.width;
-  const std::uint32_t height = scene.settings.height;
+  Camera camera;
+  std::uint32_t width, height;
+  explicit SceneView(Scene& scene)
+      : camera(*active_camera(scene.registry)), width(scene.settings.width),
+        height(scene.settings.height) {
+    layer.sync(scene.registry);
+  }
+};
+
+void table(const Options& o, const char* title, Scene& scene) {
+  const SceneView view(scene);
+  const SceneLayer& layer = view.layer;
+  const Camera& camera = view.camera;
+  const std::uint32_t width = view.width, height = view.height;
   std::printf("\n### Vulkan beside the CPU backends: %s, %ux%u primary rays (cast), %u CPU "
               "threads\n\n",
               title, width, height, o.threads);
@@ -301,11 +312,10 @@ void grid_sweep(const Options& o, const TriangleMesh& mesh, Scene& scene) {
 /// still traces (instance boundaries, raster misses) and the PSNR of the hybrid image against the
 /// traced one (its error: pixels whose nearest triangle the raster decides differently).
 void hybrid_table(const Options& o, const char* title, Scene& scene) {
-  SceneLayer layer;
-  layer.sync(scene.registry);
-  const Camera camera = *active_camera(scene.registry);
-  const std::uint32_t width = scene.settings.width;
-  const std::uint32_t height = scene.settings.height;
+  const SceneView view(scene);
+  const SceneLayer& layer = view.layer;
+  const Camera& camera = view.camera;
+  const std::uint32_t width = view.width, height = view.height;
   std::printf("\n### Hybrid mode (--gpu-primary raster) against traced primary rays: %s, %ux%u, "
               "wavefront device frames\n\n",
               title, width, height);
@@ -358,13 +368,12 @@ void hybrid_table(const Options& o, const char* title, Scene& scene) {
 /// Path and shadow frames in both execution styles (device_path.h) beside the CPU integrators on
 /// native-bvh: median frame ms, device (timestamp) ms, rays per second of frame time, the single
 /// kernel's frame time against the wavefront's on the same structure, and the share of pixels
-/// equal to the wavefront's image (1: bit for bit, as tested).
+/// equal to the wavefront's image (100%: bit for bit, as tested).
 void stochastic_table(const Options& o, const char* title, Scene& scene) {
-  SceneLayer layer;
-  layer.sync(scene.registry);
-  const Camera camera = *active_camera(scene.registry);
-  const std::uint32_t width = scene.settings.width;
-  const std::uint32_t height = scene.settings.height;
+  const SceneView view(scene);
+  const SceneLayer& layer = view.layer;
+  const Camera& camera = view.camera;
+  const std::uint32_t width = view.width, height = view.height;
   std::printf("\n### Path (1 spp, depth 5) and shadow (4 area samples) frames by execution style: "
               "%s, %ux%u, %u CPU threads\n\n",
               title, width, height, o.threads);

@@ -78,6 +78,16 @@ TraceSettings path_settings(std::uint32_t spp, std::uint32_t offset) {
   return s;
 }
 
+/// A shadow frame with `samples` area-light samples per pixel.
+TraceSettings shadow_settings(std::uint32_t samples) {
+  TraceSettings s;
+  s.mode = TraceMode::Shadow;
+  s.threads = 2;
+  s.shadow_samples = samples;
+  s.seed = 11;
+  return s;
+}
+
 /// Mean of frames [0, k) of `spp` samples each, frame f at sample offset f·spp.
 template <class Render>
 Framebuffer mean_of_frames(Render&& render, std::uint32_t k, std::uint32_t spp) {
@@ -196,11 +206,7 @@ TEST(DevicePath, ShadowFramesMatchTheCpu) {
   Cpu cpu;
   Device device(cpu.world->layer);
   for (const std::uint32_t samples : {0u, 4u}) { // 0: the point light alone
-    TraceSettings s;
-    s.mode = TraceMode::Shadow;
-    s.threads = 2;
-    s.shadow_samples = samples;
-    s.seed = 11;
+    TraceSettings s = shadow_settings(samples);
     s.sample_offset = 8;
     FrameStats cpu_stats;
     const Framebuffer a = cpu.render(s, &cpu_stats);
@@ -223,11 +229,7 @@ TEST(DevicePath, SmallBudgetResumesToTheSameImage) {
   Cpu cpu;
   Device full(cpu.world->layer), small(cpu.world->layer);
   small.renderer->set_budget(16);
-  TraceSettings shadow;
-  shadow.mode = TraceMode::Shadow;
-  shadow.threads = 2;
-  shadow.shadow_samples = 2;
-  shadow.seed = 11;
+  const TraceSettings shadow = shadow_settings(2);
   for (const TraceSettings& s : {path_settings(1, 0), shadow}) {
     const Framebuffer a = full.render(cpu.world->layer, s);
     const Framebuffer b = small.render(cpu.world->layer, s);
@@ -249,11 +251,7 @@ TEST(DevicePath, SmallBudgetResumesToTheSameImage) {
 TEST(DevicePath, SingleKernelFramesEqualTheWavefrontsBitForBit) {
   SPECULA_NEED_DEVICE();
   Cpu cpu;
-  TraceSettings shadow;
-  shadow.mode = TraceMode::Shadow;
-  shadow.threads = 2;
-  shadow.shadow_samples = 4;
-  shadow.seed = 11;
+  const TraceSettings shadow = shadow_settings(4);
   TraceSettings bsdf = path_settings(3, 5);
   bsdf.sampling = LightSampling::Bsdf;
   auto context = gpu::Context::create();
@@ -302,11 +300,7 @@ TEST(DevicePath, SingleKernelFramesEqualTheWavefrontsBitForBit) {
 TEST(DevicePath, GuidesEqualTheCpusBitForBit) {
   SPECULA_NEED_DEVICE();
   Cpu cpu;
-  TraceSettings shadow;
-  shadow.mode = TraceMode::Shadow;
-  shadow.threads = 2;
-  shadow.shadow_samples = 2;
-  shadow.seed = 11;
+  const TraceSettings shadow = shadow_settings(2);
   TraceSettings whitted;
   whitted.mode = TraceMode::Whitted;
   auto context = gpu::Context::create();
