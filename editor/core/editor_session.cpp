@@ -1,6 +1,7 @@
 #include "editor/core/editor_session.h"
 
 #include "editor/core/fields.h"
+#include "specula/cache/ray_cache.h"
 #include "specula/core/error.h"
 #include "specula/image/image_io.h"
 #include "specula/render/resolution_governor.h"
@@ -85,6 +86,7 @@ EditorSession::EditorSession(const std::filesystem::path& scene_path, ViewSettin
 }
 
 void EditorSession::prepare() {
+  overlay_ready_ = false; // the overlay showed the previous job's frame
   if (!view_.max_depth) view_.max_depth = scene_.settings.max_depth;
   if (*view_.max_depth > kMaxTraceDepth)
     throw Error("--depth", "must be at most " + std::to_string(kMaxTraceDepth));
@@ -123,6 +125,8 @@ EditorId EditorSession::id_of(ecs::Entity e) const {
 void EditorSession::set_render_scale(float scale) { render_scale_ = scale; }
 
 void EditorSession::tick(double dt) {
+  if (auto* caches = scene_.registry.try_resource<cache::RayCaches>(); caches && caches->store)
+    caches->store->set_log_lookups(cache_view_);
   Framebuffer& image = scene_.registry.resource<RenderJob>().image;
   const auto [w, h] = ResolutionGovernor::scaled(view_.width, view_.height, render_scale_);
   if (image.width() != w || image.height() != h) image = Framebuffer(w, h);
@@ -137,11 +141,31 @@ void EditorSession::tick(double dt) {
     s.rays_per_second = double(job.last.rays.total()) / (job.last.trace_ms * 1e-3);
   history_.push_back(std::move(s));
   if (history_.size() > kHistory) history_.pop_front();
+  overlay_ready_ = false;
+  cache_view_counts_ = CacheViewCounts{};
+  const auto* caches = scene_.registry.try_resource<cache::RayCaches>();
+  const std::optional<Camera> cam = active_camera(scene_.registry);
+  if (cache_view_ && caches != nullptr && caches->store && cam) {
+    overlay_ = job.image;
+    cache_view_counts_ =
+        tint_cache_view(overlay_, *cam, scene_.registry.resource<SceneLayer>(),
+                        *scene_.registry.resource<ActiveTracer>().tracer, *caches->store);
+    overlay_ready_ = true;
+  }
 }
 
 const Framebuffer& EditorSession::frame() const {
+  if (overlay_ready_) return overlay_;
   // Registry lookups are non-const (pools are made on demand); nothing is written.
   return const_cast<ecs::Registry&>(scene_.registry).resource<RenderJob>().image;
+}
+
+void EditorSession::set_cache_view(bool on) {
+  cache_view_ = on;
+  if (!on) {
+    overlay_ready_ = false;
+    cache_view_counts_ = CacheViewCounts{};
+  }
 }
 
 // --- render settings

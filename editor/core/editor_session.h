@@ -7,6 +7,7 @@
 /// it writes them with emplace_or_replace / remove, so the next tick's transform and scene-layer
 /// systems see the change as they see an animation's (registry rule 5).
 
+#include "editor/core/cache_view.h"
 #include "specula/cache/cache_settings.h"
 #include "specula/core/math.h"
 #include "specula/render/render_job.h"
@@ -84,8 +85,16 @@ public:
   /// the window shows the frame scaled up; picking and gizmos work in the frame's own pixels).
   /// 1 is the view's size.
   void set_render_scale(float scale);
+  /// The latest frame as shown: the render job's image, or with the cache view on, that image
+  /// with the cached objects tinted (cache_view.h).
   [[nodiscard]] const Framebuffer& frame() const;
   [[nodiscard]] const std::deque<FrameSample>& history() const { return history_; }
+  /// The cache view (cache_view.h): from the next tick on, frame() tints each cached object's
+  /// pixels by the texels their reflections read; off, it shows the rendered frame again at once.
+  void set_cache_view(bool on);
+  [[nodiscard]] bool cache_view() const { return cache_view_; }
+  /// What the latest tick's cache view counted (zeros with the view off or without caches).
+  [[nodiscard]] const CacheViewCounts& cache_view_counts() const { return cache_view_counts_; }
   static constexpr std::size_t kHistory = 120;
 
   // --- render settings (live) -------------------------------------------------------------------
@@ -201,6 +210,10 @@ private:
   EditorId selected_ = kNoId;
   std::vector<Command> undo_, redo_;
   std::deque<FrameSample> history_;
+  bool cache_view_ = false;
+  bool overlay_ready_ = false; ///< overlay_ holds the latest frame with the cache view
+  Framebuffer overlay_{1, 1};
+  CacheViewCounts cache_view_counts_;
 };
 
 /// Projects a world point to pixel coordinates (x right, y down) of a width × height frame;

@@ -210,6 +210,17 @@ void cache_panel(EditorSession& s) {
                 entity_label(s.registry(), c.owner).c_str(), valid, c.texels.size() - valid,
                 c.resolution, c.resolution, c.enabled ? "" : ", off");
   }
+  bool view = s.cache_view();
+  if (ImGui::Checkbox("texels on the objects", &view)) s.set_cache_view(view);
+  if (s.cache_view()) {
+    const CacheViewCounts& n = s.cache_view_counts();
+    ImGui::Text("pixels: %llu valid (green), %llu outdated (red), %llu refused by parallax "
+                "(yellow), %llu off (grey)",
+                static_cast<unsigned long long>(n.valid),
+                static_cast<unsigned long long>(n.outdated),
+                static_cast<unsigned long long>(n.rejected),
+                static_cast<unsigned long long>(n.off));
+  }
   if (const std::optional<ecs::Entity> e = s.selected())
     if (const std::optional<std::size_t> i = store.cube_of(*e)) {
       ImGui::Separator();

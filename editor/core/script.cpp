@@ -155,6 +155,11 @@ void run_line(EditorSession& s, const std::vector<std::string>& w,
     if (!p) throw std::invalid_argument("expected off, on or auto, got '" + w[1] + "'");
     c.policy = *p;
     s.set_cache(c);
+  } else if (op == "cache-view") {
+    want(1, 1, "cache-view off|on");
+    if (w[1] != "on" && w[1] != "off")
+      throw std::invalid_argument("expected on or off, got '" + w[1] + "'");
+    s.set_cache_view(w[1] == "on");
   } else if (op == "orbit") {
     want(2, 2, "orbit DX DY");
     s.set_camera(orbit(s.camera(), number(w[1]), number(w[2])));

@@ -15,6 +15,7 @@
 ///   delete | reparent NAME|none | undo | redo
 ///   save PATH | screenshot PATH   (the last frame, PNG)
 ///   backend NAME | mode cast|whitted|path|shadow | depth N | cache off|on
+///   cache-view on|off        tint cached objects by their texels' state (cache_view.h)
 ///   orbit DX DY | frame-selected
 ///   expect selected NAME|none
 ///   expect PATH VALUE [TOLERANCE]   a field of the selection, numerically within TOLERANCE

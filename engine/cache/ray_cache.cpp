@@ -627,6 +627,7 @@ void RayCacheStore::begin_frame(std::uint32_t width, std::uint32_t height, Trace
     }
   }
   ++frame_;
+  lookup_log_.clear();
   lookups_ = false;
   for (auto& c : cubes_) {
     c->lookups = 0;
@@ -763,10 +764,15 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
   // Whitted frames under auto trace one accepted lookup in verify_every to measure the error
   // (path mode refreshes its probes instead).
   const bool verify = settings_.policy == CachePolicy::Auto;
+  thread_local std::vector<LookupRecord> log;
+  log.clear();
   for (std::size_t k = 0; k < queries.size(); ++k) {
     const LeavingQuery& q = queries[k];
     CachedRadiance& out = answers[k];
     out = CachedRadiance{};
+    const auto note = [&](LookupOutcome outcome) {
+      if (log_lookups_) log.push_back(LookupRecord{q.pixel, q.depth, q.instance, outcome});
+    };
     const std::int32_t ci =
         q.instance < cube_of_instance_.size() ? cube_of_instance_[q.instance] : -1;
     if (ci < 0) continue;
@@ -782,12 +788,15 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
       const Texel& tx = c.texels[ti];
       if (!tx.valid()) {
         ++l.outdated;
+        note(LookupOutcome::Outdated);
         continue;
       }
       if (tx.hit != q.hit_entity) {
         ++l.rejected;
+        note(LookupOutcome::Rejected);
         continue;
       }
+      note(LookupOutcome::Accepted);
       out.answer = CacheAnswer::Use;
       out.radiance = texel_radiance(tx);
       out.seen = tx.seen | entity_bit(tx.hit);
@@ -827,7 +836,11 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
     }
     if (a.outdated) ++l.outdated;
     if (a.rejected) ++l.rejected;
-    if (a.answer == CacheAnswer::Trace) continue;
+    if (a.answer == CacheAnswer::Trace) {
+      note(a.outdated ? LookupOutcome::Outdated : LookupOutcome::Rejected);
+      continue;
+    }
+    note(LookupOutcome::Accepted);
     const Texel& tx = c.texels[a.texel];
     out.answer = a.answer;
     out.radiance = texel_radiance(tx);
@@ -841,6 +854,10 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
     }
     if (out.answer == CacheAnswer::Use || out.answer == CacheAnswer::UseIfClear)
       l.offered_rays += cost;
+  }
+  if (!log.empty()) {
+    const std::lock_guard lock(log_mutex_);
+    lookup_log_.insert(lookup_log_.end(), log.begin(), log.end());
   }
   for (std::size_t i = 0; i < local.size(); ++i) {
     if (local[i].lookups == 0) continue;

@@ -114,6 +114,19 @@ struct CubeView {
   return every != 0 && h % every == 0;
 }
 
+/// What a lookup found in its texel (RayCacheStore::lookup_log).
+enum class LookupOutcome : std::uint8_t {
+  Accepted, ///< valid, and its mode's test accepted it (served, or confirmed, or verified)
+  Outdated, ///< not valid: traced
+  Rejected, ///< valid, but its parallax test (tau, march; path mode: another surface) refused it
+};
+
+/// One lookup of the latest frame, by pixel.
+struct LookupRecord {
+  std::uint32_t pixel, depth, instance;
+  LookupOutcome outcome;
+};
+
 /// What one invalidation did.
 struct InvalidationStats {
   std::uint64_t outdated = 0;  ///< texels this invalidation outdated
@@ -147,6 +160,11 @@ public:
   /// one-sample estimates, which include indirect light) starts every cube afresh.
   void begin_frame(std::uint32_t width, std::uint32_t height, TraceMode mode) override;
   [[nodiscard]] bool wants_lookups() const override;
+  /// Views (the editor's cache view) ask for every lookup's outcome by pixel: off by default.
+  void set_log_lookups(bool on) { log_lookups_ = on; }
+  /// The lookups of the frame since the latest begin_frame, in no particular order (batches
+  /// append as their threads finish), with set_log_lookups on.
+  [[nodiscard]] const std::vector<LookupRecord>& lookup_log() const { return lookup_log_; }
   /// The frame number verify_chosen hashes (counted by begin_frame; its low 32 bits).
   [[nodiscard]] std::uint32_t verify_frame() const { return std::uint32_t(frame_); }
   /// True unless every cube is off.
@@ -194,6 +212,9 @@ private:
   std::uint64_t pending_prefilled_ = 0;
   struct Candidate;
   std::mutex mutex_;
+  bool log_lookups_ = false;
+  mutable std::mutex log_mutex_;
+  mutable std::vector<LookupRecord> lookup_log_;
   std::vector<Candidate> candidates_;
 };
 

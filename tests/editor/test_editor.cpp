@@ -25,6 +25,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <map>
 #include <random>
 #include <string>
@@ -532,6 +533,51 @@ TEST(EditorNavigation, FrameSelectedCentresTheSelection) {
   EXPECT_NEAR(px.y, 24.0, 1.0);
   s.tick();
   EXPECT_EQ(s.click(32, 24), std::optional<ecs::Entity>(block));
+}
+
+// The cache view tints the mirror sphere's pixels by what their lookups found: outdated in the
+// first frame (an empty cube), valid once the frames have filled it, outdated again where a moved
+// sphere invalidated texels, in the very next frame. Other pixels are the rendered frame's.
+TEST(EditorCacheView, ShowsTexelStatesOnTheCachedObjectAndAMoveInTheNextFrame) {
+  ViewSettings v = small_view(64, 48);
+  v.cache.policy = cache::CachePolicy::On;
+  EditorSession s(kScenes / "mirror_spheres_8.json", v);
+  // A hidden sphere the mirror shows becomes free: moving it later outdates only what saw it (a
+  // static entity's move rebuilds the static set, which outdates every texel).
+  s.set_field(named(s, "hidden sphere 4"), "Kinematics.type", "free");
+  run_script_text(s, "cache-view on\nframes 1\n", "view.script");
+  ASSERT_TRUE(s.cache_view());
+  const CacheViewCounts first = s.cache_view_counts();
+  EXPECT_GT(first.outdated, 20u);
+  EXPECT_EQ(first.valid, 0u);
+  // Tinted where the sphere is, the rendered frame elsewhere.
+  const Framebuffer& job = s.registry().resource<RenderJob>().image;
+  std::uint64_t tinted = 0, same = 0;
+  for (std::size_t i = 0; i < job.pixels().size(); ++i) {
+    if (s.frame().pixels()[i] == job.pixels()[i])
+      ++same;
+    else
+      ++tinted;
+  }
+  EXPECT_EQ(tinted, first.outdated);
+  EXPECT_EQ(same + tinted, job.pixels().size());
+  s.tick();
+  s.tick();
+  const CacheViewCounts filled = s.cache_view_counts();
+  EXPECT_GT(filled.valid, 9 * filled.outdated) << filled.valid << " valid, " << filled.outdated;
+  EXPECT_EQ(filled.valid + filled.outdated + filled.rejected, first.outdated);
+  // The sphere moves: the next frame reads outdated texels where it was and where it is.
+  s.set_field(named(s, "hidden sphere 4"), "Transform.translation.x", "-0.3");
+  s.tick();
+  const CacheViewCounts moved = s.cache_view_counts();
+  std::cout << "cache view: first frame " << first.outdated << " outdated; filled " << filled.valid
+            << " valid, " << filled.outdated << " outdated; after the move " << moved.valid
+            << " valid, " << moved.outdated << " outdated\n";
+  EXPECT_GT(moved.outdated, filled.outdated + 2) << moved.outdated << " outdated after the move";
+  EXPECT_GT(moved.valid, 0u); // only the texels that saw it (or now could) were outdated
+  s.set_cache_view(false);
+  EXPECT_TRUE(s.frame() == s.registry().resource<RenderJob>().image);
+  EXPECT_EQ(s.cache_view_counts(), CacheViewCounts{});
 }
 
 TEST(EditorPanels, RunHeadlessOverEveryComponent) {
