@@ -143,15 +143,15 @@ void EditorSession::tick(double dt) {
   if (history_.size() > kHistory) history_.pop_front();
   overlay_ready_ = false;
   cache_view_counts_ = CacheViewCounts{};
+  if (!cache_view_) return;
   const auto* caches = scene_.registry.try_resource<cache::RayCaches>();
   const std::optional<Camera> cam = active_camera(scene_.registry);
-  if (cache_view_ && caches != nullptr && caches->store && cam) {
-    overlay_ = job.image;
-    cache_view_counts_ =
-        tint_cache_view(overlay_, *cam, scene_.registry.resource<SceneLayer>(),
-                        *scene_.registry.resource<ActiveTracer>().tracer, *caches->store);
-    overlay_ready_ = true;
-  }
+  if (caches == nullptr || !caches->store || !cam) return;
+  overlay_ = job.image;
+  cache_view_counts_ =
+      tint_cache_view(overlay_, *cam, scene_.registry.resource<SceneLayer>(),
+                      *scene_.registry.resource<ActiveTracer>().tracer, *caches->store);
+  overlay_ready_ = true;
 }
 
 const Framebuffer& EditorSession::frame() const {
