@@ -332,8 +332,16 @@ void disable_untraceable(std::span<const Ray> rays, R* chunk, std::size_t count)
 
 } // namespace
 
+RTCScene EmbreeTracer::ray_scene() const {
+  return static_scene_ != nullptr && last_.dynamic_instances == 0 ? static_scene_ : top_;
+}
+
 void EmbreeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
   SPECULA_ASSERT(hits.size() == rays.size());
+  // Without dynamic instances the static scene is the whole scene: its rays skip the top level
+  // and the identity instance (a hit's instance id is then invalid, its geometry the static one).
+  RTCScene scene = ray_scene();
+  const bool direct = scene == static_scene_;
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   alignas(64) RTCRayHit chunk[kStreamChunk];
@@ -345,7 +353,7 @@ void EmbreeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) con
       chunk[i].hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
     }
     disable_untraceable(rays.subspan(first, count), chunk, count);
-    rtcIntersect1M(top_, &context, chunk, unsigned(count), sizeof(RTCRayHit));
+    rtcIntersect1M(scene, &context, chunk, unsigned(count), sizeof(RTCRayHit));
     for (std::size_t i = 0; i < count; ++i) {
       const RTCRayHit& rh = chunk[i];
       Hit& hit = hits[first + i];
@@ -354,7 +362,8 @@ void EmbreeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) con
         continue;
       }
       hit.t = rh.ray.tfar;
-      hit.instance = slot_of(rh.hit.geomID, rh.hit.instID[0]);
+      hit.instance = direct ? static_slot_of_geom_[rh.hit.geomID]
+                            : slot_of(rh.hit.geomID, rh.hit.instID[0]);
       hit.primitive = rh.hit.primID;
       hit.uv = vec2(rh.hit.u, rh.hit.v);
       hit.object_normal = vec3(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z);
@@ -364,6 +373,7 @@ void EmbreeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) con
 
 void EmbreeTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded) const {
   SPECULA_ASSERT(occluded.size() == rays.size());
+  RTCScene scene = ray_scene(); // as in intersect()
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   alignas(64) RTCRay chunk[kStreamChunk];
@@ -371,7 +381,7 @@ void EmbreeTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> o
     const std::size_t count = std::min(kStreamChunk, rays.size() - first);
     for (std::size_t i = 0; i < count; ++i) to_embree(rays[first + i], chunk[i]);
     disable_untraceable(rays.subspan(first, count), chunk, count);
-    rtcOccluded1M(top_, &context, chunk, unsigned(count), sizeof(RTCRay));
+    rtcOccluded1M(scene, &context, chunk, unsigned(count), sizeof(RTCRay));
     // Embree sets tfar to -inf on occlusion (a disabled ray keeps its tfar of 0).
     for (std::size_t i = 0; i < count; ++i) occluded[first + i] = chunk[i].tfar < 0.0f ? 1 : 0;
   }
