@@ -5,6 +5,7 @@
 #include "specula/render/scene_layer.h"
 
 #include <algorithm>
+#include <bit>
 #include <cstring>
 #include <string>
 
@@ -35,14 +36,22 @@ template <class T> void append(std::vector<T>& to, std::span<const T> from) {
   to.insert(to.end(), from.begin(), from.end());
 }
 
-/// Mesh `mesh`'s triangles with absolute vertex indices into the positions pool.
+/// Mesh `mesh`'s triangles as the traversal reads them: each vertex's position (its float bits),
+/// three per triangle.
 void append_triangles(std::vector<std::uint32_t>& to, const SceneTables& tables, std::uint32_t mesh) {
   const GpuMesh& m = tables.meshes[mesh];
   for (std::uint32_t t = 0; t < m.triangle_count; ++t) {
     const uvec3 tri = tables.triangles[m.first_triangle + t] + uvec3(m.first_vertex);
-    to.insert(to.end(), {tri.x, tri.y, tri.z});
+    for (int k = 0; k < 3; ++k) {
+      const vec3& p = tables.positions[tri[k]];
+      to.insert(to.end(), {std::bit_cast<std::uint32_t>(p.x), std::bit_cast<std::uint32_t>(p.y),
+                           std::bit_cast<std::uint32_t>(p.z)});
+    }
   }
 }
+
+/// Words of one traced triangle (binding 7).
+constexpr std::size_t kTracedWords = 9;
 
 std::uint32_t size32(std::size_t n) { return std::uint32_t(n); }
 
@@ -59,6 +68,16 @@ GpuScene::GpuScene(Context& context, GpuStructure structure, float grid_density)
 void GpuScene::write(std::uint32_t binding, const void* data, std::size_t bytes, std::size_t offset) {
   if (bytes == 0) return;
   Buffer& b = buffers_[binding];
+  // A shader sees at most the device's storage buffer range of a binding (lavapipe: 128 MiB).
+  const VkDeviceSize range = context_.info().max_storage_buffer_range;
+  if (offset + bytes > range) {
+    static constexpr const char* kNames[] = {"positions", "triangles",         "meshes",
+                                             "instances", "header",            "nodes",
+                                             "indices",   "traced triangles"};
+    throw Error("vulkan: the scene's " + std::string(kNames[binding]) + " take " +
+                std::to_string((offset + bytes) >> 20) + " MiB, more than the device's " +
+                std::to_string(range >> 20) + " MiB storage buffer range");
+  }
   if (b.size() < offset + bytes) {
     // Only whole-buffer writes grow a buffer (partial ones land in an array of unchanged size);
     // a quarter of slack lets the next few growths reuse it.
@@ -118,7 +137,8 @@ void GpuScene::flatten(const SceneTables& tables) {
     const NativeTracer::TopEntry e = native_.top_entry(box);
     if (blas_.contains(e.blas)) continue;
     e.blas->expand_all();
-    blas_[e.blas] = {size32(nodes_.size()), size32(words_.size()), size32(traced_.size() / 3)};
+    blas_[e.blas] = {size32(nodes_.size()), size32(words_.size()),
+                     size32(traced_.size() / kTracedWords)};
     append(nodes_, e.blas->nodes());
     append(words_, e.blas->indices());
     append_triangles(traced_, tables, tables.instances[e.slot].mesh);
@@ -243,6 +263,7 @@ const TracerUpdateStats& GpuScene::update(const SceneLayer& layer) {
     write_header();
     write_vector(kNodes, nodes_);
     write_vector(kWords, words_);
+    write_vector(kTraced, traced_); // the moved vertices' copies
   } else if (!d.instances_moved.empty() && !upload_top()) {
     upload_all(tables); // the top level changed shape (an instance hidden or shown)
   }

@@ -24,9 +24,10 @@
 // conservative slab test, Woop et al.'s watertight test with its double fallback, Bvh::traverse,
 // UniformGrid's 3D-DDA, NativeTracer's two levels), with `precise` wherever the C++ build rounds
 // each operation on its own, so hits are bit-identical to native-bvh / native-grid on the same
-// structures. Layout: shaders/shared/gpu_scene_layout.h. One flat loop, one iteration per step (a
-// node visited, a stack entry popped with the node it leads to, a triangle tested, a grid cell
-// entered): the budget counts them all, and the state between two steps is all there is to save.
+// structures. Layout: shaders/shared/gpu_scene_layout.h. One loop iteration per step (a node
+// visited, a stack entry popped with the node it leads to, a triangle tested, a grid cell
+// entered; a BVH's in two inner loops, trace_run): the budget counts them all, and the state
+// between two steps is all there is to save.
 #ifndef SPECULA_TRACE_GLSL
 #define SPECULA_TRACE_GLSL
 
@@ -96,7 +97,12 @@ bool intersect_box(PreparedRay r, vec3 lo, vec3 hi, out float t_enter) {
   return t0 <= t1;
 }
 
-vec3 traced_vertex(uint tri, uint k) { return scene_position(scene_traced[3u * tri + k]); }
+// Vertex k of traced triangle `tri` (binding 7 holds the positions themselves: no index to read
+// before them).
+vec3 traced_vertex(uint tri, uint k) {
+  uint b = 9u * tri + 3u * k;
+  return uintBitsToFloat(uvec3(scene_traced[b], scene_traced[b + 1u], scene_traced[b + 2u]));
+}
 
 bool trace_triangle(PreparedRay r, uint tri, out float t, out float u, out float v) {
 #ifdef TRACE_ON_TRIANGLE
@@ -275,26 +281,23 @@ void trace_enter_instance(uint box) {
   tr.node = e.node_base;
 }
 
-// One step of a BVH walk (Bvh::traverse): a leaf entry, a node, or a pop.
-void trace_bvh_step() {
-  // Not `TRACE_TOP_CODE && ...` in the initialiser: with a specialisation constant there,
-  // glslang's `precise` pass never finishes on the path kernels.
+// One step of a BVH walk (Bvh::traverse) inside a leaf: its next entry (a triangle, or an
+// instance of the top level). Only while tr.leaf_cursor < tr.leaf_end.
+void trace_bvh_leaf_step() {
+  // Not `TRACE_TOP_CODE && ...` in the initialiser, nor this prologue in a helper function
+  // shared by both steps: either way glslang's `precise` pass never finishes on path_trace.comp
+  // (minutes, gigabytes).
   bool in_instance = false;
   if (TRACE_TOP_CODE) in_instance = tr.entry != kNoIndex;
-  uint node_base, index_base;
-  if (tr.phase == kPhaseStatic) {
-    node_base = scene_header.static_node_base;
+  uint index_base;
+  if (tr.phase == kPhaseStatic)
     index_base = scene_header.static_index_base;
-  } else if (in_instance) {
-    node_base = scene_top[tr.entry].node_base;
+  else if (in_instance)
     index_base = scene_top[tr.entry].index_base;
-  } else {
-    node_base = scene_header.top_node_base;
+  else
     index_base = scene_header.top_index_base;
-  }
   PreparedRay r = in_instance ? tr_local : tr_world;
-
-  if (tr.leaf_cursor < tr.leaf_end) {
+  {
     uint prim = scene_words[index_base + tr.leaf_cursor];
     ++tr.leaf_cursor;
     if (TRACE_TOP_CODE && tr.phase == kPhaseTop && !in_instance) {
@@ -309,8 +312,22 @@ void trace_bvh_step() {
       else
         trace_record(scene_top[tr.entry].slot, tri, prim, t, u, v);
     }
-    return;
   }
+}
+
+// One step of a BVH walk between leaves: a node, or a pop. Only while tr.leaf_cursor >=
+// tr.leaf_end.
+void trace_bvh_node_step() {
+  bool in_instance = false; // as in trace_bvh_leaf_step
+  if (TRACE_TOP_CODE) in_instance = tr.entry != kNoIndex;
+  uint node_base;
+  if (tr.phase == kPhaseStatic)
+    node_base = scene_header.static_node_base;
+  else if (in_instance)
+    node_base = scene_top[tr.entry].node_base;
+  else
+    node_base = scene_header.top_node_base;
+  PreparedRay r = in_instance ? tr_local : tr_world;
 
   // Pop the nearest pending subtree the ray can still reach (its tfar may have shrunk), and
   // visit it in the same step: fewer loop iterations, each running every branch a SIMD vector's
@@ -408,17 +425,37 @@ void trace_begin(vec3 org, vec3 dir, float tnear, float tfar, bool any_hit) {
 // Runs the walk until it ends (kRayDone) or `budget` steps are used up (kRayBudget). Falling out
 // of the loop any other way means the driver cut it off (lavapipe's silent iteration cap):
 // kRayPending then, and the caller must leave the ray's status unset.
+//
+// A BVH walk's steps run grouped, in two inner loops: the nodes and pops up to the next leaf, then
+// that leaf's entries. Each ray takes exactly the steps of one flat loop, in the same order, but
+// llvmpipe runs every branch of a loop's body for all 8 rays of its SIMD vector, so a loop that
+// held both kinds of step paid for a node visit and a triangle test at every step.
+// Lavapipe's iteration cap counts the inner loops' iterations and the outer loop's (one per leaf
+// at most, so at most 1.5 per step).
+bool trace_bvh_walk() {
+  return tr.phase == kPhaseTop || (tr.phase == kPhaseStatic && !trace_static_grid());
+}
+
 uint trace_run(inout uint budget) {
   for (;;) {
     if (tr.phase == kPhaseDone) return kRayDone;
     if (budget == 0u) return kRayBudget;
-    --budget;
-    if (tr.phase == kPhaseStart)
+    if (tr.phase == kPhaseStart) {
+      --budget;
       trace_start_static();
-    else if (tr.phase == kPhaseStatic && trace_static_grid())
+    } else if (tr.phase == kPhaseStatic && trace_static_grid()) {
+      --budget;
       trace_grid_step();
-    else
-      trace_bvh_step();
+    } else {
+      while (budget != 0u && tr.leaf_cursor >= tr.leaf_end && trace_bvh_walk()) {
+        --budget;
+        trace_bvh_node_step();
+      }
+      while (budget != 0u && tr.leaf_cursor < tr.leaf_end && trace_bvh_walk()) {
+        --budget;
+        trace_bvh_leaf_step();
+      }
+    }
   }
   return kRayPending;
 }

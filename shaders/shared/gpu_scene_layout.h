@@ -8,8 +8,9 @@
 //   6: uint[]: the static structure's index array (BVH or grid), the grid's cell_start, the static
 //      set's first triangle and slot per instance, each per-mesh BVH's index array, the top
 //      level's (last);
-//   7: uint[]: the traced triangles, 3 absolute vertex indices into the positions pool each: the
-//      static set in its structure's order, then each per-mesh BVH's mesh.
+//   7: uint[]: the traced triangles, their three vertices' positions each (9 float bit patterns,
+//      copied from the positions pool, so that a triangle test reads no index first): the static
+//      set in its structure's order, then each per-mesh BVH's mesh.
 // A tree's node and entry indices are relative to its own bases (the arrays are copied as the CPU
 // builders lay them out).
 #ifndef SPECULA_SHARED_GPU_SCENE_LAYOUT_H

@@ -413,6 +413,52 @@ TEST(VulkanTraceFailure, ALostDeviceIsAGpuErrorFromIntersectNotACrash) {
   EXPECT_THROW(gpu->occluded(rays, occluded), GpuError);
 }
 
+// trace.glsl walks a BVH in grouped loops (nodes up to a leaf, then the leaf), which lavapipe's
+// iteration cap counts together with the outer loop's iterations: a walk far longer than the
+// default budget must still be saved and resumed at each budget, never cut. 24,576 stacked
+// triangles whose boxes all contain the rays' line but which the rays miss: every ray visits
+// every node and tests every triangle (about 2.5 budgets' worth of steps).
+TEST(VulkanTraceFailure, ABvhWalkOfSeveralBudgetsIsResumedNotCut) {
+  SPECULA_NEED_VULKAN(gpu, VulkanOptions{});
+  auto mesh = std::make_shared<TriangleMesh>();
+  constexpr std::uint32_t kLayers = 24576;
+  for (std::uint32_t i = 0; i < kLayers; ++i) {
+    const float z = 0.001f * float(i);
+    mesh->positions.insert(mesh->positions.end(),
+                           {vec3(0.0f, 0.0f, z), vec3(1.0f, 0.0f, z), vec3(0.0f, 1.0f, z)});
+    mesh->triangles.push_back(uvec3(3 * i, 3 * i + 1, 3 * i + 2));
+  }
+  ecs::Registry reg;
+  add(reg, mesh, test::at(vec3(0.0f)), Kinematics::Type::Static);
+  update_world_transforms(reg, 1);
+  SceneLayer layer;
+  layer.sync(reg);
+  gpu->update(layer);
+  NativeTracer native(8, native_like(VulkanOptions{}));
+  native.update(layer);
+  std::vector<Ray> rays(64);
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    // Inside every box (x, y < 1), beyond every hypotenuse (x + y > 1).
+    rays[i].origin = vec3(0.6f + 0.004f * float(i % 8), 0.6f + 0.004f * float(i / 8), 20.0f);
+    rays[i].direction = vec3(0.0f, 0.0f, -1.0f);
+  }
+  std::vector<Hit> a(rays.size()), b(rays.size());
+  gpu->intersect(rays, a);
+  const GpuTraceCounters c = gpu->counters();
+  native.intersect(rays, b);
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    EXPECT_FALSE(a[i].hit()) << i;
+    EXPECT_TRUE(identical(a[i], b[i])) << i;
+  }
+  EXPECT_EQ(c.cut, 0u);
+  EXPECT_GE(c.resumed, 2 * rays.size()); // each ray saved at least twice
+  EXPECT_GT(c.steps, 2 * std::uint64_t(VulkanOptions{}.traversal_budget) * rays.size());
+  std::vector<std::uint8_t> occluded(rays.size(), 1);
+  gpu->occluded(rays, occluded);
+  EXPECT_EQ(gpu->counters().cut, 0u);
+  EXPECT_EQ(occluded, std::vector<std::uint8_t>(rays.size(), 0));
+}
+
 TEST(VulkanTraceFailure, AWalkTheDriverCutsOffIsReportedAsCutNotAsAWrongHit) {
   // Lavapipe's silent loop cap (PLATFORM-NOTES): a budget past it (measured: 32,768 steps) lets
   // the driver end the walk. The kernel must leave such rays pending and the tracer say so.
