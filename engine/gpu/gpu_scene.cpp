@@ -82,7 +82,9 @@ void GpuScene::write(std::uint32_t binding, const void* data, std::size_t bytes,
     // Only whole-buffer writes grow a buffer (partial ones land in an array of unchanged size);
     // a quarter of slack lets the next few growths reuse it.
     SPECULA_ASSERT(offset == 0);
-    b = context_.make_buffer(std::max<std::size_t>(bytes + bytes / 4, 16));
+    // The slack stays within the range too: the descriptor binds the whole buffer.
+    b = context_.make_buffer(
+        std::min<std::size_t>(std::max<std::size_t>(bytes + bytes / 4, 16), range));
     bindings_[binding] = &b;
   }
   b.upload(data, bytes, offset);

@@ -65,10 +65,10 @@ private:
     std::uint32_t triangles = 0; ///< in its mesh (the update stats' triangle counts)
   };
 
-  /// The instance slot of an Embree hit (instance id 0: the static scene, by geometry id).
   /// The scene single rays are traced in: the static scene when it is the whole scene, else the
   /// top level.
   [[nodiscard]] RTCScene ray_scene() const;
+  /// The instance slot of an Embree hit (instance id 0: the static scene, by geometry id).
   [[nodiscard]] std::uint32_t slot_of(unsigned geom_id, unsigned inst_id) const {
     return inst_id == 0 ? static_slot_of_geom_[geom_id] : inst_id - 1;
   }
