@@ -297,21 +297,19 @@ void trace_bvh_leaf_step() {
   else
     index_base = scene_header.top_index_base;
   PreparedRay r = in_instance ? tr_local : tr_world;
-  {
-    uint prim = scene_words[index_base + tr.leaf_cursor];
-    ++tr.leaf_cursor;
-    if (TRACE_TOP_CODE && tr.phase == kPhaseTop && !in_instance) {
-      trace_enter_instance(prim);
-      return;
-    }
-    uint tri = tr.phase == kPhaseStatic ? prim : scene_top[tr.entry].tri_base + prim;
-    float t, u, v;
-    if (trace_triangle(r, tri, t, u, v)) {
-      if (tr.phase == kPhaseStatic)
-        trace_record(kStaticHit, tri, prim, t, u, v);
-      else
-        trace_record(scene_top[tr.entry].slot, tri, prim, t, u, v);
-    }
+  uint prim = scene_words[index_base + tr.leaf_cursor];
+  ++tr.leaf_cursor;
+  if (TRACE_TOP_CODE && tr.phase == kPhaseTop && !in_instance) {
+    trace_enter_instance(prim);
+    return;
+  }
+  uint tri = tr.phase == kPhaseStatic ? prim : scene_top[tr.entry].tri_base + prim;
+  float t, u, v;
+  if (trace_triangle(r, tri, t, u, v)) {
+    if (tr.phase == kPhaseStatic)
+      trace_record(kStaticHit, tri, prim, t, u, v);
+    else
+      trace_record(scene_top[tr.entry].slot, tri, prim, t, u, v);
   }
 }
 
