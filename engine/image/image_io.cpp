@@ -373,8 +373,7 @@ struct ExrCoreDecode {
   ~ExrCoreDecode() { exr_decoding_destroy(context, &decode); }
 };
 
-void check_exr_chunks(std::span<const std::uint8_t> bytes, const ExrColourChannels& colour,
-                      const std::filesystem::path& path) {
+void check_exr_chunks(std::span<const std::uint8_t> bytes, const std::filesystem::path& path) {
   ExrCoreInput input{bytes, {}};
   const auto check = [&](exr_result_t result) {
     if (result == EXR_ERR_SUCCESS) return;
@@ -433,28 +432,34 @@ void check_exr_chunks(std::span<const std::uint8_t> bytes, const ExrColourChanne
   }
   if (compression == EXR_COMPRESSION_DWAA || compression == EXR_COMPRESSION_DWAB) return;
 
-  // Then each chunk decoded, the colour channels into a scratch buffer of the chunk's size.
+  // Then each chunk decoded: every channel, read or not, into its own float plane of a scratch
+  // buffer. Leaving the unread channels without a destination (as Core allows) is not safe in
+  // 3.1: its fast unpackers for 3 and 4 interleaved HALF channels are chosen from the filled
+  // channels alone and then write every channel, a luminance file's Y beside two unread ones
+  // to null.
   std::vector<float> scratch;
   for (const exr_chunk_info_t& chunk : chunks) {
     ExrCoreDecode pipeline{context};
     exr_decode_pipeline_t& decode = pipeline.decode;
     check(exr_decoding_initialize(context, 0, &chunk, &decode));
-    scratch.assign(
-        static_cast<std::size_t>(chunk.width) * static_cast<std::size_t>(chunk.height) * 3, 0.0f);
+    std::size_t samples = 0;
+    for (int c = 0; c < decode.channel_count; ++c) {
+      const exr_coding_channel_info_t& channel = decode.channels[c];
+      if (channel.width < 0 || channel.height < 0) fail(path, "corrupt EXR: inconsistent chunk");
+      samples += static_cast<std::size_t>(channel.width) * static_cast<std::size_t>(channel.height);
+    }
+    // At most twice the chunk's decompressed size (2-byte HALF samples become floats), which
+    // Core has already allocated: no new bound needed.
+    scratch.assign(std::max<std::size_t>(samples, 1), 0.0f);
+    std::size_t at = 0;
     for (int c = 0; c < decode.channel_count; ++c) {
       exr_coding_channel_info_t& channel = decode.channels[c];
-      const auto found = std::find(colour.names.begin(), colour.names.end(), channel.channel_name);
-      if (found == colour.names.end() || channel.width != chunk.width ||
-          channel.height != chunk.height) {
-        channel.decode_to_ptr = nullptr; // not read (or subsampled): decompressed, not unpacked
-        continue;
-      }
-      const auto k = static_cast<std::size_t>(found - colour.names.begin());
-      channel.decode_to_ptr = reinterpret_cast<std::uint8_t*>(scratch.data() + k);
-      channel.user_pixel_stride = 3 * sizeof(float);
-      channel.user_line_stride = static_cast<std::int32_t>(3 * sizeof(float)) * chunk.width;
+      channel.decode_to_ptr = reinterpret_cast<std::uint8_t*>(scratch.data() + at);
+      channel.user_pixel_stride = sizeof(float);
+      channel.user_line_stride = static_cast<std::int32_t>(sizeof(float)) * channel.width;
       channel.user_bytes_per_element = sizeof(float);
       channel.user_data_type = EXR_PIXEL_FLOAT;
+      at += static_cast<std::size_t>(channel.width) * static_cast<std::size_t>(channel.height);
     }
     check(exr_decoding_choose_default_routines(context, 0, &decode));
     check(exr_decoding_run(context, 0, &decode));
@@ -496,7 +501,7 @@ Framebuffer decode_exr(std::span<const std::uint8_t> bytes, const std::filesyste
     check_memory(w * h * sizeof(vec3), memory_budget({}, "--memory-limit"), path.string(),
                  "reading this " + size_text(std::int64_t(w), std::int64_t(h)) + " EXR");
   }
-  check_exr_chunks(bytes, colour, path);
+  check_exr_chunks(bytes, path);
 
   // The header passed: now the library reads the file from the start, tables and pixels.
   stream.seekg(0);

@@ -527,6 +527,37 @@ TEST(Exr, ReadsLuminanceOnlyAsGrayAndRefusesChroma) {
   expect_exr_error(dir.file("ryby.exr"), "found: BY RY Y");
 }
 
+// The chunk check decodes through OpenEXRCore, whose fast unpackers for 3 and 4 interleaved HALF
+// channels once received a luminance image's Y among unread channels (the fuzzer's B, G, Y): they
+// wrote all three channels, two of them to null. Every count and position of the extra channels,
+// of both pixel types, each compression that takes Core's unpack path.
+TEST(Exr, ReadsLuminanceBesideUnreadChannelsInAnyPosition) {
+  TempDir dir;
+  const Framebuffer image = test::random_image(7, 20, 43);
+  const std::vector<std::vector<std::string>> layouts = {
+      {"B", "G", "Y"}, {"A", "Y", "Z"}, {"Y", "Z", "ZZ"}, {"A", "B", "G", "Y"}, {"Y", "Z"}};
+  int n = 0;
+  for (const auto& names : layouts) {
+    for (const Imf::PixelType type : {Imf::HALF, Imf::FLOAT}) {
+      for (const Imf::Compression compression : {Imf::NO_COMPRESSION, Imf::ZIP_COMPRESSION}) {
+        std::vector<ChannelData> channels;
+        for (const std::string& name : names) {
+          ChannelData& channel = channels.emplace_back(ChannelData{name, type, {}});
+          for (const vec3& p : image.pixels()) channel.values.push_back(name == "Y" ? p.g : p.r);
+        }
+        const auto path = dir.file("y" + std::to_string(n++) + ".exr");
+        write_openexr(path, 7, 20, channels, {compression, {0, 0}, {}});
+        const Framebuffer gray = read_exr(path);
+        ASSERT_EQ(gray.width(), 7u);
+        ASSERT_EQ(gray.height(), 20u);
+        for (std::size_t i = 0; i < image.pixel_count(); ++i) {
+          ASSERT_EQ(gray.pixels()[i], vec3(stored(type, image.pixels()[i].g))) << path << " " << i;
+        }
+      }
+    }
+  }
+}
+
 TEST(Exr, MultiPartAndDeepFilesAreUnsupported) {
   TempDir dir;
   std::array<Imf::Header, 2> headers = {Imf::Header(2, 2), Imf::Header(2, 2)};
