@@ -4,7 +4,8 @@
 #   2. the `ci-native` preset: the same without the optional backends (SPECULA_WITH_EMBREE=OFF,
 #      SPECULA_WITH_VULKAN=OFF), so the engine builds, renders and passes its tests on the native
 #      CPU backend alone (the Vulkan tests, which run on Specula's own structures whatever the CPU
-#      backends, run in the other two presets);
+#      backends, run in the other two presets, and so do the tests of the modules no backend
+#      option touches: core, ecs, geometry, image, scene; SPECULA_TEST_TRACER_FREE_MODULES);
 #   3. the `asan` preset: Clang 15, AddressSanitizer and UBSan, assertions on, so the death tests
 #      compiled out of optimised builds run, and memory errors and leaks fail the run; then each
 #      libFuzzer harness of tests/fuzz/ (built in the same preset) fuzzes for
@@ -17,7 +18,9 @@
 # three link with lld; the asan preset's brute-force tests trace a quarter of the rays, and it
 # skips the install test (label "install": packaging, checked by the other two presets). Measured
 # on a clean clone here: 43.8 min with 30 s of fuzzing (2026-11-24); 26.2 min on 2026-11-25 (same
-# tree size, a faster machine that day: the time varies with the machine lent).
+# tree size, a faster machine that day: the time varies with the machine lent); CI's own run of
+# 2026-11-27 took 47.6 min, after which ci-native stopped building the tracer-free modules' tests
+# and the subcommands are compiled once (a library) instead of once more per test using them.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/deps.sh
