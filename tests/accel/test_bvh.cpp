@@ -452,8 +452,8 @@ TEST(Bvh, RestructureRebuildsOnlyDegradedSubtrees) {
   EXPECT_FLOAT_EQ(rs.sah_after, bvh.sah_cost());
   const TriangleView view = m.view();
   check_structure(bvh, view.count, 4, &view);
-  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 8000, 62, false)), 0);
-  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 8000, 63, true)), 0);
+  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 8000 / kBruteForceDivisor, 62, false)), 0);
+  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 8000 / kBruteForceDivisor, 63, true)), 0);
 
   // Old and new trees side by side: where they differ is a rebuilt subtree, and every rebuilt
   // subtree holds deformed triangles; the root was not rebuilt.
@@ -521,12 +521,12 @@ TEST(Bvh, RestructureAfterGlobalScramble) {
   EXPECT_LT(rs.sah_after, rs.sah_before);
   const TriangleView view = m.view();
   check_structure(bvh, view.count, 4, &view);
-  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 6000, 72, false)), 0);
+  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 6000 / kBruteForceDivisor, 72, false)), 0);
   // Refit still works on the restructured layout.
   for (vec3& p : m.positions) p *= 1.5f;
   bvh.refit(m.view());
   check_structure(bvh, view.count, 4, &view);
-  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 3000, 73, false)), 0);
+  EXPECT_EQ(mismatches(bvh, view, make_rays(mesh_bounds(m), 3000 / kBruteForceDivisor, 73, false)), 0);
 }
 
 TEST(Bvh, LazyTreeEqualsEagerTree) {
