@@ -448,8 +448,9 @@ void check_exr_chunks(std::span<const std::uint8_t> bytes, const std::filesystem
       if (channel.width < 0 || channel.height < 0) fail(path, "corrupt EXR: inconsistent chunk");
       samples += static_cast<std::size_t>(channel.width) * static_cast<std::size_t>(channel.height);
     }
-    // At most twice the chunk's decompressed size (2-byte HALF samples become floats), which
-    // Core has already allocated: no new bound needed.
+    // At most twice the chunk's decompressed size (2-byte HALF samples become floats), the
+    // buffer Core allocates for the same chunk in exr_decoding_run. Neither is checked against
+    // the memory budget, which only the framebuffer is: a chunk grows with the channel count.
     scratch.assign(std::max<std::size_t>(samples, 1), 0.0f);
     std::size_t at = 0;
     for (int c = 0; c < decode.channel_count; ++c) {
