@@ -371,6 +371,13 @@ TEST(KdTree, StructuralInvariants) {
       for (std::uint32_t k = 0; k < count; ++k) {
         const std::uint32_t prim = tree.indices()[n.first + k];
         ASSERT_LT(prim, tris.count);
+        // A leaf holds only triangles that reach its cell (a clipped box padded past its
+        // triangle once let a sliver's triangle through a plane beyond it, into both children).
+        const Aabb tb = tris.bounds(prim);
+        EXPECT_TRUE(glm::all(glm::lessThanEqual(tb.min, box.max)) &&
+                    glm::all(glm::lessThanEqual(box.min, tb.max)))
+            << mesh.name << ": leaf " << node << " references triangle " << prim
+            << ", which lies outside its cell";
         leaves_of[prim].push_back(std::uint32_t(leaf_boxes.size()));
       }
       leaf_boxes.push_back(box);

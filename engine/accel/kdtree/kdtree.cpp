@@ -218,7 +218,7 @@ struct Subtree {
 
 /// The bounds of triangle (p0, p1, p2) clipped to `box`: Sutherland–Hodgman against the six
 /// planes, then widened by a few ulp on its non-flat axes (the clipped vertices are rounded) and
-/// cut back to the box. False when nothing is left.
+/// cut back to the box and to the triangle's own box. False when nothing is left.
 bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& whole,
                     const Aabb& box, Aabb& out) {
   std::array<vec3, 9> poly_a, poly_b; // a triangle clipped by six planes has at most 9 vertices
@@ -268,8 +268,11 @@ bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& 
       b.max[axis] += pad;
     }
   }
-  b.min = glm::max(b.min, box.min);
-  b.max = glm::min(b.max, box.max);
+  // Cut back to the triangle's own box too: the padding must not reach past the triangle (its
+  // box is exact), or a later plane between the two could find the triangle on both sides of it
+  // and its box in a child inverted.
+  b.min = glm::max(b.min, glm::max(box.min, whole.min));
+  b.max = glm::min(b.max, glm::min(box.max, whole.max));
   if (b.empty()) return false;
   out = b;
   return true;
