@@ -27,9 +27,9 @@
 namespace {
 
 /// `auto` and every backend name any build knows (a missing one exits 2 with the reason).
-std::vector<std::string> backend_names() {
+std::vector<std::string> backend_choices() {
   std::vector<std::string> names = {"auto"};
-  for (const specula::BackendInfo& b : specula::backends()) names.emplace_back(b.name);
+  for (const std::string_view name : specula::backend_names()) names.emplace_back(name);
   return names;
 }
 
@@ -136,7 +136,7 @@ int main(int argc, char** argv) {
       ->check(non_empty_path());
   render_cmd
       ->add_option("--backend", render.backend, "Tracing backend (auto: the best one available)")
-      ->check(one_of(backend_names()))
+      ->check(one_of(backend_choices()))
       ->capture_default_str();
   render_cmd
       ->add_option("--gpu-execution", render.gpu_execution,

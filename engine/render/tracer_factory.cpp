@@ -6,6 +6,8 @@
 
 #include "specula/accel/native/native_tracer.h"
 
+#include <algorithm>
+#include <array>
 #include <cctype>
 #include <cstdlib>
 #include <mutex>
@@ -87,10 +89,16 @@ VulkanProbe vulkan_probe() {
 
 } // namespace
 
-std::vector<BackendInfo> backends() {
-  std::vector<BackendInfo> list;
+std::span<const std::string_view> backend_names() {
   // The order is auto's preference: a real GPU first (lavapipe, the software Vulkan device, is
   // slower than the CPU backends), then the CPU backends.
+  static constexpr std::array<std::string_view, 6> names = {
+      "vulkan", "vulkan-grid", "embree", "native", "native-bvh", "native-grid"};
+  return names;
+}
+
+std::vector<BackendInfo> backends() {
+  std::vector<BackendInfo> list;
   const VulkanProbe vk = vulkan_probe();
   list.push_back({"vulkan", vk.device, vk.reason, true});
   list.push_back({"vulkan-grid", vk.device, vk.reason, true});
@@ -104,7 +112,7 @@ std::vector<BackendInfo> backends() {
   list.push_back({"native", true, "", true});
   list.push_back({"native-bvh", true, "", true});
   list.push_back({"native-grid", true, "", true});
-  return list;
+  return list; // in backend_names()'s order (TracerFactory.BackendNamesAreThoseOfBackends)
 }
 
 BackendInfo backend_info(std::string_view name) {
@@ -115,9 +123,8 @@ BackendInfo backend_info(std::string_view name) {
 
 bool is_backend_name(std::string_view name) {
   if (name == "auto") return true;
-  for (const BackendInfo& b : backends())
-    if (b.name == name) return true;
-  return false;
+  const std::span<const std::string_view> names = backend_names();
+  return std::find(names.begin(), names.end(), name) != names.end();
 }
 
 const char* scene_kind_name(SceneKind kind) {

@@ -10,6 +10,7 @@
 #include <exception>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -30,6 +31,10 @@ struct BackendInfo {
 /// Every backend name `--backend` accepts besides `auto`, in the order `auto` prefers them
 /// (a real GPU first, then the CPU backends), with their availability.
 [[nodiscard]] std::vector<BackendInfo> backends();
+
+/// The names of backends(), in its order, without finding out which are available (that creates
+/// a Vulkan instance, which loads every installed driver: a tenth of a second per process).
+[[nodiscard]] std::span<const std::string_view> backend_names();
 
 /// The entry of backends() with this name; throws specula::Error for a name no build knows.
 [[nodiscard]] BackendInfo backend_info(std::string_view name);

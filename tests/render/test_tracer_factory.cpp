@@ -45,6 +45,19 @@ TEST(TracerFactory, AutoTakesTheFirstAvailableCpuBackendInTheKindsOrder) {
   }
 }
 
+// The CLI checks --backend against backend_names(), which does not create a Vulkan instance to
+// find out what is available; it must list what backends() lists, in the same order.
+TEST(TracerFactory, BackendNamesAreThoseOfBackends) {
+  const std::vector<BackendInfo> all = backends();
+  const std::span<const std::string_view> names = backend_names();
+  ASSERT_EQ(all.size(), names.size());
+  for (std::size_t i = 0; i < all.size(); ++i) EXPECT_EQ(all[i].name, names[i]) << i;
+  for (const std::string_view name : names) EXPECT_TRUE(is_backend_name(name)) << name;
+  EXPECT_TRUE(is_backend_name("auto"));
+  EXPECT_FALSE(is_backend_name("optix"));
+  EXPECT_FALSE(is_backend_name(""));
+}
+
 TEST(TracerFactory, EveryAvailableBackendMakesATracerOfThatName) {
   for (const BackendInfo& b : backends()) {
     if (!b.available) {
