@@ -444,6 +444,35 @@ TEST(KdTree, TrianglesLyingInAFaceOfTheBoxGetAFlatCell) {
   check_against_brute_force<TriangleTest::watertight>(scene, make_rays(scene.bounds(), 4000, 41));
 }
 
+// Far from the origin a sphere of radius 1 spans ~128 ulps, and a plane a fraction of an ulp from
+// a vertex clips off a corner of its triangles thinner than an ulp. Its clipped box then rounds to
+// a flat box in the cell's face; it used to go to a flat cell of its own, and rays crossing the
+// sliver inside the cell missed the triangle (found by the robustness suite at 1e5: a ray passed
+// through the sphere's top). Rays aimed at the vertices, where the slivers are, against brute force.
+TEST(KdTree, SliversThinnerThanAnUlpStayInTheirCells) {
+  for (const float offset : {1e4f, 1e5f, 1e6f}) {
+    const vec3 centre(offset, offset, -offset);
+    Mesh mesh = uv_sphere(24, 48, 1.0f, centre);
+    mesh.name = "sphere at " + std::to_string(offset);
+    std::mt19937 rng(23);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+    std::uniform_int_distribution<std::size_t> vertex(0, mesh.positions.size() - 1);
+    std::vector<PreparedRay> rays;
+    const int count = 20000 / kBruteForceDivisor;
+    for (int i = 0; i < count; ++i) {
+      vec3 d(0.0f);
+      while (glm::length(d) < 0.1f) {
+        const float x = unit(rng), y = unit(rng), z = unit(rng);
+        d = vec3(x, y, z);
+      }
+      const vec3 origin = centre + 4.0f * glm::normalize(d);
+      const vec3 target = mesh.positions[vertex(rng)];
+      rays.push_back(PreparedRay::make(origin, target - origin, 0.0f, kInf));
+    }
+    check_against_brute_force<TriangleTest::watertight>(mesh, rays);
+  }
+}
+
 TEST(KdTree, BuildIsDeterministicForAnyThreadCount) {
   const Mesh mesh = soup(40000, 0.03f, 3);
   KdTree one, two, sequential;

@@ -217,7 +217,8 @@ struct Subtree {
 }
 
 /// The bounds of triangle (p0, p1, p2) clipped to `box`: Sutherland–Hodgman against the six
-/// planes, then widened by a few ulp on its non-flat axes (the clipped vertices are rounded) and
+/// planes, then widened by a few ulp on the triangle's non-flat axes (the clipped vertices are
+/// rounded) and
 /// cut back to the box and to the triangle's own box. False when nothing is left.
 bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& whole,
                     const Aabb& box, Aabb& out) {
@@ -261,7 +262,12 @@ bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& 
   Aabb b;
   for (int i = 0; i < n; ++i) b.grow(in[i]);
   for (int axis = 0; axis < 3; ++axis) {
-    if (b.max[axis] > b.min[axis]) {
+    // Every axis the triangle has extent on, flat or not after rounding: a sliver thinner than an
+    // ulp (a triangle's corner clipped by a plane a fraction of an ulp from its vertex, far from
+    // the origin) rounds to a flat box in the cell's face, and would then go to a flat cell of its
+    // own, leaving the cell it cuts through without it. Only a triangle lying in an axis plane is
+    // flat there exactly.
+    if (whole.max[axis] > whole.min[axis]) {
       const float pad = 4.0f * std::numeric_limits<float>::epsilon() *
                         std::max(std::abs(b.min[axis]), std::abs(b.max[axis]));
       b.min[axis] -= pad;
