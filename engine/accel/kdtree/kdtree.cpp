@@ -218,8 +218,7 @@ struct Subtree {
 
 /// The bounds of triangle (p0, p1, p2) clipped to `box`: Sutherland–Hodgman against the six
 /// planes, then widened by a few ulp on the triangle's non-flat axes (the clipped vertices are
-/// rounded) and
-/// cut back to the box and to the triangle's own box. False when nothing is left.
+/// rounded) and cut back to the box and to the triangle's own box. False when nothing is left.
 bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& whole,
                     const Aabb& box, Aabb& out) {
   std::array<vec3, 9> poly_a, poly_b; // a triangle clipped by six planes has at most 9 vertices
