@@ -79,16 +79,4 @@ void EmitterTable::build(const SceneTables& tables) {
   features_.area_lights = true;
 }
 
-std::uint32_t EmitterTable::pick(float u) const {
-  // The first triangle whose cdf exceeds u; zero-power triangles have an empty interval and are
-  // never returned (their cdf equals their predecessor's).
-  const auto it = std::upper_bound(triangles_.begin(), triangles_.end(), u,
-                                   [](float v, const EmitterTriangle& e) { return v < e.cdf; });
-  if (it == triangles_.end()) {
-    for (std::size_t k = triangles_.size(); k-- > 0;)
-      if (triangles_[k].pick > 0.0f) return std::uint32_t(k);
-  }
-  return std::uint32_t(it - triangles_.begin());
-}
-
 } // namespace specula

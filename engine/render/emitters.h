@@ -9,6 +9,7 @@
 
 #include "specula/core/math.h"
 
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -64,5 +65,25 @@ private:
   double total_power_ = 0.0;
   SceneFeatures features_;
 };
+
+inline std::uint32_t EmitterTable::pick(float u) const {
+  // The first triangle whose cdf exceeds u; zero-power triangles have an empty interval and are
+  // never returned (their cdf equals their predecessor's). A branch-free binary search, inline:
+  // u is random, so a branch on it would be mispredicted half the time.
+  const EmitterTriangle* first = triangles_.data();
+  std::size_t n = triangles_.size();
+  while (n > 1) {
+    const std::size_t half = n / 2;
+    first = u < first[half].cdf ? first : first + half;
+    n -= half;
+  }
+  if (n == 1 && !(u < first->cdf)) ++first; // past the end: u at or above every cdf
+  const auto k = std::size_t(first - triangles_.data());
+  if (k == triangles_.size()) {
+    for (std::size_t j = triangles_.size(); j-- > 0;)
+      if (triangles_[j].pick > 0.0f) return std::uint32_t(j);
+  }
+  return std::uint32_t(k);
+}
 
 } // namespace specula

@@ -10,6 +10,7 @@
 #include "specula/trace/radiance_hook.h"
 #include "specula/trace/shading.h"
 #include "specula/trace/render_frame.h"
+#include "specula/trace/shadow_samples.h"
 #include "specula/trace/stats.h"
 #include "specula/trace/tracer.h"
 
@@ -157,6 +158,9 @@ struct TileScratch {
   std::vector<std::uint32_t> confirm_node;
   std::vector<std::uint8_t> confirm_blocked;
   PathWave path;
+  // The shadow caster's lit pixels and one area-light sample of each.
+  ShadowSurfaces surfaces;
+  ShadowLightRays light_rays;
 };
 
 /// What a pixel (or a sample) receives: the radiance, or 0 when it is Inf or NaN, counted in

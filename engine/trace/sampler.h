@@ -67,24 +67,42 @@ constexpr std::array<std::array<std::array<std::uint32_t, 256>, 4>, 4> byte_tabl
 
 inline constexpr auto kByteTables = byte_tables();
 
+/// The bytes swapped by one instruction, then the bits within each byte in three steps.
 constexpr std::uint32_t reverse_bits(std::uint32_t x) {
-  x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
-  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+  x = __builtin_bswap32(x);
   x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);
-  x = ((x >> 8) & 0x00FF00FFu) | ((x & 0x00FF00FFu) << 8);
-  return (x >> 16) | (x << 16);
+  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+  return ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
 }
 
-/// Burley's nested uniform scramble: a hash that only propagates bits upwards, applied to the
-/// bit-reversed value, permutes every dyadic interval within its parent (Owen scrambling).
+/// kByteTables with every entry bit-reversed. Reversal commutes with XOR, so a lookup in these
+/// gives the reversed Sobol value directly: the scramble below starts from it and saves one
+/// reversal per dimension (the CPU's; the device reads kByteTables).
+constexpr std::array<std::array<std::array<std::uint32_t, 256>, 4>, 4> reversed_byte_tables() {
+  std::array<std::array<std::array<std::uint32_t, 256>, 4>, 4> t = byte_tables();
+  for (auto& dimension : t)
+    for (auto& byte : dimension)
+      for (std::uint32_t& v : byte) v = reverse_bits(v);
+  return t;
+}
+
+inline constexpr auto kReversedByteTables = reversed_byte_tables();
+
+/// Burley's nested uniform scramble of a value given bit-reversed (rx = reverse_bits(x)): the
+/// hash only propagates bits upwards in the reversed value, so it permutes every dyadic interval
+/// of x within its parent (Owen scrambling). Returns the scrambled x, in normal bit order.
+constexpr std::uint32_t owen_scramble_reversed(std::uint32_t rx, std::uint32_t seed) {
+  rx ^= rx * 0x3d20adeau;
+  rx += seed;
+  rx *= (seed >> 16) | 1u;
+  rx ^= rx * 0x05526c56u;
+  rx ^= rx * 0x53a22864u;
+  return reverse_bits(rx);
+}
+
+/// The same scramble of x in normal bit order.
 constexpr std::uint32_t owen_scramble(std::uint32_t x, std::uint32_t seed) {
-  x = reverse_bits(x);
-  x ^= x * 0x3d20adeau;
-  x += seed;
-  x *= (seed >> 16) | 1u;
-  x ^= x * 0x05526c56u;
-  x ^= x * 0x53a22864u;
-  return reverse_bits(x);
+  return owen_scramble_reversed(reverse_bits(x), seed);
 }
 
 } // namespace sobol_detail
@@ -110,6 +128,13 @@ constexpr std::uint32_t owen_scramble(std::uint32_t x, std::uint32_t seed) {
          t[3][index >> 24];
 }
 
+/// reverse_bits(sobol_u32(index, d)), from the reversed tables.
+[[nodiscard]] constexpr std::uint32_t sobol_reversed_u32(std::uint32_t index, std::uint32_t d) {
+  const auto& t = sobol_detail::kReversedByteTables[d];
+  return t[0][index & 0xFFu] ^ t[1][(index >> 8) & 0xFFu] ^ t[2][(index >> 16) & 0xFFu] ^
+         t[3][index >> 24];
+}
+
 /// A 32-bit fraction as a float in [0, 1) (24 bits: never rounds up to 1).
 [[nodiscard]] constexpr float to_unit_float(std::uint32_t x) {
   return float(x >> 8) * (1.0f / 16777216.0f);
@@ -122,8 +147,8 @@ public:
   constexpr SampleSet(std::uint32_t set_seed, std::uint32_t shuffled)
       : set_seed_(set_seed), shuffled_(shuffled) {}
   [[nodiscard]] constexpr float dim(std::uint32_t d) const {
-    return to_unit_float(
-        sobol_detail::owen_scramble(sobol_u32(shuffled_, d), hash_combine(set_seed_, d + 1)));
+    return to_unit_float(sobol_detail::owen_scramble_reversed(sobol_reversed_u32(shuffled_, d),
+                                                              hash_combine(set_seed_, d + 1)));
   }
 
 private:
@@ -155,6 +180,34 @@ public:
   [[nodiscard]] constexpr vec2 get2(std::uint32_t index, std::uint32_t set) const {
     const SampleSet s = this->set(index, set);
     return vec2(s.dim(0), s.dim(1));
+  }
+
+  /// Dimensions 4·set and 4·set+1 of many samples of one set (get2(index, set) for every index),
+  /// with the set's seeds hashed once rather than per sample.
+  class Stream2 {
+  public:
+    constexpr explicit Stream2(std::uint32_t set_seed)
+        : set_seed_(set_seed), seed0_(hash_combine(set_seed, 1)),
+          seed1_(hash_combine(set_seed, 2)) {}
+    /// From its three seeds (set_seed(), seed0(), seed1() of another).
+    constexpr Stream2(std::uint32_t set_seed, std::uint32_t seed0, std::uint32_t seed1)
+        : set_seed_(set_seed), seed0_(seed0), seed1_(seed1) {}
+    [[nodiscard]] constexpr vec2 get(std::uint32_t index) const {
+      const std::uint32_t shuffled = sobol_detail::owen_scramble(index, set_seed_);
+      return vec2(
+          to_unit_float(sobol_detail::owen_scramble_reversed(sobol_reversed_u32(shuffled, 0), seed0_)),
+          to_unit_float(sobol_detail::owen_scramble_reversed(sobol_reversed_u32(shuffled, 1), seed1_)));
+    }
+
+    [[nodiscard]] constexpr std::uint32_t set_seed() const { return set_seed_; }
+    [[nodiscard]] constexpr std::uint32_t seed0() const { return seed0_; }
+    [[nodiscard]] constexpr std::uint32_t seed1() const { return seed1_; }
+
+  private:
+    std::uint32_t set_seed_, seed0_, seed1_;
+  };
+  [[nodiscard]] constexpr Stream2 stream2(std::uint32_t set) const {
+    return Stream2(hash_combine(seed_, set));
   }
 
 private:

@@ -4,7 +4,6 @@
 // pixel (soft shadows). No secondary rays: mirrors and glass show their diffuse part and emission.
 // Every shadow ray of a tile is traced in one batch.
 
-#include "specula/trace/area_lights.h"
 #include "specula/trace/integrators.h"
 #include "specula/trace/sampler.h"
 #include "specula/trace/shading.h"
@@ -12,6 +11,8 @@
 #include <algorithm>
 #include <limits>
 #include <numbers>
+#include <span>
+#include <vector>
 
 namespace specula::detail {
 namespace {
@@ -22,15 +23,6 @@ namespace {
 /// CDF's order of triangles and within them: over the whole area for a light of a few triangles
 /// (a quad), over rows of triangles for one of many (docs/design/shadow-caster.md).
 constexpr std::uint32_t kAreaLightSet = 0;
-
-/// A light point from one sample (sample_area_light, with the pick dimension reused).
-AreaLightSample area_light_point(const EmitterTable& table, const vec3& p, const vec2& u) {
-  const std::uint32_t k = table.pick(u.x);
-  const EmitterTriangle& e = table.triangles()[k];
-  const float below = e.cdf - e.pick;
-  const float reused = std::clamp((u.x - below) / e.pick, 0.0f, 0x1.fffffep-1f);
-  return sample_emitter_triangle(table, k, p, reused, u.y);
-}
 
 template <bool kAreaLights>
 void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s,
@@ -43,11 +35,29 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
   const std::uint32_t samples = kAreaLights ? settings.shadow_samples : 0u;
   const float inv_samples = samples > 0 ? 1.0f / float(samples) : 0.0f;
   counts[RayKind::Primary] += primary.size();
-  s.shadow_rays.clear();
-  s.shadow_node.clear(); // here: the image index of the pixel a shadow ray serves
-  s.shadow_value.clear();
 
-  // Emission (or background) into the pixels, and every shadow ray into one batch.
+  // The shadow rays by slot: one slot per punctual light (table order), then one per area-light
+  // sample (sample order); slot k's rays are at [k · pixels, k · pixels + filled[k]), in pixel
+  // order. A 16-wide packet then holds one slot of 16 neighbouring pixels (one light, or one
+  // sample index towards the light), not the five rays of three pixels in turn.
+  const std::size_t pixels = primary.size();
+  const std::size_t lights = tables.lights.size();
+  const std::size_t slots = lights + samples;
+  s.shadow_rays.resize(pixels * slots);
+  s.shadow_node.resize(pixels * slots); // here: the image index of the pixel a shadow ray serves
+  s.shadow_value.resize(pixels * slots);
+  std::vector<std::uint32_t>& filled = s.rays_of_pixel; // here: the rays of each slot
+  filled.assign(slots, 0u);
+  const auto emit = [&](std::size_t slot, const Ray& ray, std::uint32_t pixel, const vec3& value) {
+    const std::size_t r = slot * pixels + filled[slot]++;
+    s.shadow_rays[r] = ray;
+    s.shadow_node[r] = pixel;
+    s.shadow_value[r] = value;
+  };
+
+  // Emission (or background) into the pixels, the punctual lights' shadow rays into their slots,
+  // and each lit pixel's surface for its area-light samples.
+  s.surfaces.clear();
   std::size_t i = 0;
   tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
     const std::size_t k = i++;
@@ -66,52 +76,55 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
     if (!(diffuse > 0.0f)) return;
     const vec3 albedo = m.base_color * (diffuse * kInvPi);
     const vec3 origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
-    for (const gpu::GpuLight& light : tables.lights) {
+    for (std::size_t l = 0; l < lights; ++l) {
       const std::optional<PunctualShadowRay> shadow =
-          punctual_shadow_ray(light, sp, origin, albedo);
-      if (!shadow) continue;
-      s.shadow_rays.push_back(shadow->ray);
-      s.shadow_node.push_back(pixel);
-      s.shadow_value.push_back(shadow->value);
+          punctual_shadow_ray(tables.lights[l], sp, origin, albedo);
+      if (shadow) emit(l, shadow->ray, pixel, shadow->value);
     }
-    if constexpr (kAreaLights) {
-      const PixelSampler sampler(pixel, settings.seed);
-      for (std::uint32_t j = 0; j < samples; ++j) {
-        const vec2 u = sampler.get2(settings.sample_offset + j, kAreaLightSet);
-        // Sampled from the shadow ray's own origin, so that the sample's direction and distance
-        // are the ray's (one normalisation, not two); the density is the solid angle there.
-        const AreaLightSample ls = area_light_point(*frame.emitters, origin, u);
-        if (!(ls.pdf > 0.0f)) continue;
-        if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) continue; // behind the surface
-        const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
-        if (cos_theta <= 0.0f) continue;
-        // Aimed at the light point itself and stopped just short of it, so that the emitting
-        // triangle never shadows its own sample.
-        s.shadow_rays.push_back(Ray{origin, 0.0f, ls.to_light, ls.distance * (1.0f - 1e-5f)});
-        s.shadow_node.push_back(pixel);
-        s.shadow_value.push_back(albedo * ls.emission * (cos_theta / ls.pdf * inv_samples));
-      }
-    }
+    if constexpr (kAreaLights)
+      s.surfaces.push(origin, sp.geometric_normal, sp.shading_normal, albedo, pixel,
+                      PixelSampler(pixel, settings.seed).stream2(kAreaLightSet));
   });
 
-  // One batch; what is not blocked is added in emission order (lights in table order, then the
-  // area samples in sample order), so a pixel's sum never depends on the tile.
-  s.blocked.resize(s.shadow_rays.size());
-  if (settings.shadows && !s.shadow_rays.empty()) {
-    counts[RayKind::Shadow] += s.shadow_rays.size();
-    frame.tracer.occluded_coherent(s.shadow_rays, s.blocked);
-  } else {
-    std::fill(s.blocked.begin(), s.blocked.end(), std::uint8_t{0});
+  // The area-light samples: sample after sample, every lit pixel's at once (eight at a time where
+  // the CPU has AVX2), then its shadow ray into the sample's slot.
+  if constexpr (kAreaLights) {
+    const ShadowSurfaces& lit = s.surfaces;
+    const ShadowLightRays& out = s.light_rays;
+    for (std::uint32_t j = 0; j < samples; ++j) {
+      shadow_light_rays(*frame.emitters, lit, settings.sample_offset + j, inv_samples,
+                        s.light_rays);
+      for (std::size_t n = 0; n < lit.size(); ++n)
+        if (out.valid[n] != 0)
+          emit(lights + j,
+               Ray{vec3(lit.ox[n], lit.oy[n], lit.oz[n]), 0.0f,
+                   vec3(out.dx[n], out.dy[n], out.dz[n]), out.tfar[n]},
+               lit.pixel[n], vec3(out.vr[n], out.vg[n], out.vb[n]));
+    }
   }
-  for (std::size_t r = 0; r < s.shadow_rays.size(); ++r)
-    if (s.blocked[r] == 0) frame.pixels[s.shadow_node[r]] += s.shadow_value[r];
+
+  // Each slot is one batch; what is not blocked is added slot after slot, so that every pixel
+  // sums its lights in table order, then its area samples in sample order: a pixel's sum never
+  // depends on the tile.
+  s.blocked.resize(pixels * slots);
+  for (std::size_t slot = 0; slot < slots; ++slot) {
+    const std::size_t first = slot * pixels, n = filled[slot];
+    if (n == 0) continue;
+    const std::span<const Ray> rays(s.shadow_rays.data() + first, n);
+    const std::span<std::uint8_t> blocked(s.blocked.data() + first, n);
+    if (settings.shadows) {
+      counts[RayKind::Shadow] += n;
+      frame.tracer.occluded_coherent(rays, blocked);
+    } else {
+      std::fill(blocked.begin(), blocked.end(), std::uint8_t{0});
+    }
+    for (std::size_t r = first; r < first + n; ++r)
+      if (s.blocked[r] == 0) frame.pixels[s.shadow_node[r]] += s.shadow_value[r];
+  }
   tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
     vec3& p = frame.pixels[y * frame.width + x];
     p = finite_or_counted(p, counts);
   });
-  s.shadow_rays.clear();
-  s.shadow_node.clear();
-  s.shadow_value.clear();
 }
 
 } // namespace

@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <optional>
@@ -68,6 +69,35 @@ TEST(Emitters, PickingFrequenciesFollowPower) {
   // The ends of [0, 1) pick the first and the last triangle.
   EXPECT_EQ(table.pick(0.0f), 0u);
   EXPECT_EQ(table.pick(0x1.fffffep-1f), 3u);
+}
+
+TEST(Emitters, PickIsTheFirstTriangleWhoseCdfExceedsU) {
+  // pick's branch-free search against its definition, for tables of 1 to 7 emitters (2 to 14
+  // triangles) of unequal power: at random u, at every cdf and one ulp either side of it, at the
+  // ends of [0, 1).
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<float> uniform(0.0f, 1.0f);
+  for (int emitters = 1; emitters <= 7; ++emitters) {
+    ecs::Registry reg;
+    for (int e = 0; e < emitters; ++e)
+      test::add_mesh(reg, quad(0.5f + 0.37f * float(e)), test::at(vec3(2.0f * float(e), 2, 0)),
+                     emitting(vec3(1.0f + float(e % 3))));
+    const test::TracedWorld w(reg);
+    const EmitterTable& table = w.layer.emitters();
+    const std::vector<EmitterTriangle>& t = table.triangles();
+    ASSERT_EQ(t.size(), std::size_t(2 * emitters));
+    const auto expected = [&](float u) {
+      const auto it = std::upper_bound(t.begin(), t.end(), u,
+                                       [](float v, const EmitterTriangle& e) { return v < e.cdf; });
+      return std::uint32_t(it == t.end() ? t.size() - 1 : std::size_t(it - t.begin()));
+    };
+    std::vector<float> us{0.0f, 0x1.fffffep-1f};
+    for (const EmitterTriangle& e : t)
+      for (const float u : {std::nextafter(e.cdf, 0.0f), e.cdf, std::nextafter(e.cdf, 2.0f)})
+        if (u < 1.0f) us.push_back(u);
+    for (int i = 0; i < 1000; ++i) us.push_back(uniform(rng));
+    for (const float u : us) ASSERT_EQ(table.pick(u), expected(u)) << emitters << " emitters, u " << u;
+  }
 }
 
 /// Where the ray from p along unit d meets triangle e (Möller–Trumbore, in double), if it does.

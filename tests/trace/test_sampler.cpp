@@ -72,6 +72,19 @@ TEST(Sampler, TheSameArgumentsGiveTheSameSamples) {
     const vec4 u = a.get4(k, 3);
     EXPECT_EQ(a.get2(k, 3), vec2(u.x, u.y)) << "get2 is get4's first two dimensions";
   }
+  // A set's stream (its seeds hashed once) draws get2's points.
+  const PixelSampler::Stream2 stream = a.stream2(5);
+  for (std::uint32_t k = 0; k < 4096; k += 7) EXPECT_EQ(stream.get(k), a.get2(k, 5)) << k;
+}
+
+TEST(Sampler, TheReversedTablesGiveTheReversedSobolValues) {
+  std::mt19937 rng(31);
+  for (int i = 0; i < 20000; ++i) {
+    const std::uint32_t index = i < 256 ? std::uint32_t(i) : std::uint32_t(rng());
+    for (std::uint32_t d = 0; d < 4; ++d)
+      ASSERT_EQ(sobol_reversed_u32(index, d), sobol_detail::reverse_bits(sobol_u32(index, d)))
+          << "index " << index << " dimension " << d;
+  }
 }
 
 TEST(Sampler, PixelsSetsAndSeedsGetDifferentSequences) {

@@ -1,5 +1,6 @@
 // The shadow caster (--mode shadow): soft shadows of area lights against the analytic penumbra,
-// point-light shadows identical to Whitted's, determinism, and the gain of stratified samples.
+// point-light shadows identical to Whitted's, determinism, the gain of stratified samples, and the
+// vectorised area-light samples against the scalar ones.
 
 #include "scene_builder.h"
 #include "specula/render/render_job.h"
@@ -7,11 +8,14 @@
 #include "specula/trace/camera_rays.h"
 #include "specula/trace/render_frame.h"
 #include "specula/trace/shading.h"
+#include "specula/trace/shadow_samples.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <random>
 #include <numbers>
 #include <vector>
 
@@ -323,6 +327,74 @@ TEST(Shadow, StratifiedSamplesBeatIndependentOnes) {
   // Least-squares slope of log error against log N over 4, 16, 64.
   const double slope = (std::log(errors[2]) - std::log(errors[0])) / std::log(16.0);
   EXPECT_LT(slope, -1.0);
+}
+
+TEST(Shadow, VectorisedLightSamplesEqualTheScalarOnesBitForBit) {
+  if (!detail::shadow_light_rays_vectorised()) GTEST_SKIP() << "this CPU has no AVX2";
+  // Emitters of unequal power and orientation, a few to hundreds of triangles each, and surfaces anywhere around them: in front of and behind the lights and themselves,
+  // on a light's plane (cos 0 at the light), on its corner (distance 0), and far enough for the
+  // distance to overflow.
+  ecs::Registry reg;
+  const auto emitter = [&](const MeshSource& mesh, const vec3& at, const quat& rotation,
+                           const vec3& emission) {
+    Material m;
+    m.base_color = vec3(0.0f);
+    m.emission = emission;
+    test::add_mesh(reg, mesh, test::at(at, vec3(1.0f), rotation), m);
+  };
+  emitter(test::primitive("plane", 1.0f, vec3(0.7f)), vec3(0, 2, 0), quat(0, 1, 0, 0),
+          vec3(4, 3, 2));
+  emitter(test::primitive("plane", 1.0f, vec3(0.3f)), vec3(1.5f, 1, -1),
+          glm::angleAxis(0.7f, glm::normalize(vec3(1, 0, 1))), vec3(1));
+  emitter(test::primitive("box", 1.0f, vec3(0.4f, 0.2f, 0.6f)), vec3(-2, 0.5f, 0.3f),
+          glm::angleAxis(1.9f, vec3(0, 0, 1)), vec3(0.5f, 2, 1));
+  emitter(test::primitive("sphere", 0.3f, vec3(1.0f), 8, 8), vec3(0.2f, -1.5f, 2), quat(1, 0, 0, 0),
+          vec3(7, 7, 7));
+  emitter(test::primitive("plane", 1.0f, vec3(2.0f)), vec3(3, 3, 3),
+          glm::angleAxis(2.5f, glm::normalize(vec3(1, 1, 0))), vec3(0.1f));
+  const test::TracedWorld w(reg);
+  const EmitterTable& table = w.layer.emitters();
+  ASSERT_GE(table.triangles().size(), 1024u); // the pick's search runs 10 steps and more
+
+  std::mt19937 rng(41);
+  std::uniform_real_distribution<float> coordinate(-4.0f, 4.0f), unit(0.0f, 1.0f);
+  std::normal_distribution<float> gauss;
+  const auto direction = [&] {
+    return glm::normalize(vec3(gauss(rng), gauss(rng), gauss(rng)));
+  };
+  detail::ShadowSurfaces surfaces;
+  constexpr std::size_t kSurfaces = 8 * 125 + 5; // a tail past the last group of eight
+  for (std::size_t n = 0; n < kSurfaces; ++n) {
+    vec3 origin(coordinate(rng), coordinate(rng), coordinate(rng));
+    const EmitterTriangle& e = table.triangles()[n % table.triangles().size()];
+    if (n % 11 == 0) origin = e.p0 + unit(rng) * 0.5f * e.e1 + unit(rng) * 0.5f * e.e2;
+    if (n % 13 == 0) origin = e.p0;
+    if (n % 17 == 0) origin = vec3(3e19f, -2e19f, 1e19f);
+    const vec3 normal = direction();
+    // The shading normal tilted off the geometric one, sometimes past the horizon.
+    const vec3 shading = glm::normalize(normal + 0.8f * direction());
+    surfaces.push(origin, normal, shading, vec3(unit(rng), unit(rng), unit(rng)),
+                  std::uint32_t(n * 7), PixelSampler(std::uint32_t(n * 7), 3).stream2(0));
+  }
+  detail::ShadowLightRays vector, scalar;
+  std::size_t valid = 0;
+  for (const std::uint32_t index : {0u, 1u, 2u, 3u, 17u, 255u, 4096u, 0xFFFFFFF0u}) {
+    detail::shadow_light_rays(table, surfaces, index, 0.25f, vector, true);
+    detail::shadow_light_rays(table, surfaces, index, 0.25f, scalar, false);
+    for (std::size_t n = 0; n < kSurfaces; ++n) {
+      ASSERT_EQ(vector.valid[n], scalar.valid[n]) << "surface " << n << " sample " << index;
+      if (scalar.valid[n] == 0) continue;
+      ++valid;
+      const float a[7] = {vector.dx[n], vector.dy[n], vector.dz[n], vector.tfar[n],
+                          vector.vr[n], vector.vg[n], vector.vb[n]};
+      const float b[7] = {scalar.dx[n], scalar.dy[n], scalar.dz[n], scalar.tfar[n],
+                          scalar.vr[n], scalar.vg[n], scalar.vb[n]};
+      ASSERT_EQ(std::memcmp(a, b, sizeof(a)), 0) << "surface " << n << " sample " << index;
+    }
+  }
+  // Both kinds occur: the comparison covers lit samples and each early exit.
+  EXPECT_GT(valid, 8 * kSurfaces / 5);
+  EXPECT_LT(valid, 8 * kSurfaces * 4 / 5);
 }
 
 } // namespace
