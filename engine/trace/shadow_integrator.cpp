@@ -36,16 +36,20 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
   const float inv_samples = samples > 0 ? 1.0f / float(samples) : 0.0f;
   counts[RayKind::Primary] += primary.size();
 
-  // The shadow rays by slot: one slot per punctual light (table order), then one per area-light
-  // sample (sample order); slot k's rays are at [k · pixels, k · pixels + filled[k]), in pixel
-  // order. A 16-wide packet then holds one slot of 16 neighbouring pixels (one light, or one
-  // sample index towards the light), not the five rays of three pixels in turn.
+  // The shadow rays by slot: one slot per punctual light (table order), then one for the area-light
+  // sample being taken; slot k's rays are at [k · pixels, k · pixels + filled[k]), in pixel order.
+  // A 16-wide packet then holds one slot of 16 neighbouring pixels (one light, or one sample
+  // index towards the light), not the five rays of three pixels in turn. Each slot is traced as
+  // one batch and what is not blocked is added: the punctual lights' slots in table order, then
+  // the sample slot once per sample, so that every pixel sums its lights in table order, then its
+  // area samples in sample order, and a pixel's sum never depends on the tile.
   const std::size_t pixels = primary.size();
   const std::size_t lights = tables.lights.size();
-  const std::size_t slots = lights + samples;
+  const std::size_t slots = lights + (samples > 0 ? 1 : 0);
   s.shadow_rays.resize(pixels * slots);
   s.shadow_node.resize(pixels * slots); // here: the image index of the pixel a shadow ray serves
   s.shadow_value.resize(pixels * slots);
+  s.blocked.resize(pixels * slots);
   std::vector<std::uint32_t>& filled = s.rays_of_pixel; // here: the rays of each slot
   filled.assign(slots, 0u);
   const auto emit = [&](std::size_t slot, const Ray& ray, std::uint32_t pixel, const vec3& value) {
@@ -53,6 +57,21 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
     s.shadow_rays[r] = ray;
     s.shadow_node[r] = pixel;
     s.shadow_value[r] = value;
+  };
+  const auto trace_slot = [&](std::size_t slot) {
+    const std::size_t first = slot * pixels, n = filled[slot];
+    filled[slot] = 0;
+    if (n == 0) return;
+    const std::span<const Ray> rays(s.shadow_rays.data() + first, n);
+    const std::span<std::uint8_t> blocked(s.blocked.data() + first, n);
+    if (settings.shadows) {
+      counts[RayKind::Shadow] += n;
+      frame.tracer.occluded_coherent(rays, blocked);
+    } else {
+      std::fill(blocked.begin(), blocked.end(), std::uint8_t{0});
+    }
+    for (std::size_t r = first; r < first + n; ++r)
+      if (s.blocked[r] == 0) frame.pixels[s.shadow_node[r]] += s.shadow_value[r];
   };
 
   // Emission (or background) into the pixels, the punctual lights' shadow rays into their slots,
@@ -86,8 +105,10 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
                       PixelSampler(pixel, settings.seed).stream2(kAreaLightSet));
   });
 
+  for (std::size_t slot = 0; slot < lights; ++slot) trace_slot(slot);
+
   // The area-light samples: sample after sample, every lit pixel's at once (eight at a time where
-  // the CPU has AVX2), then its shadow ray into the sample's slot.
+  // the CPU has AVX2), their shadow rays into the sample slot, traced.
   if constexpr (kAreaLights) {
     const ShadowSurfaces& lit = s.surfaces;
     const ShadowLightRays& out = s.light_rays;
@@ -96,30 +117,12 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
                         s.light_rays);
       for (std::size_t n = 0; n < lit.size(); ++n)
         if (out.valid[n] != 0)
-          emit(lights + j,
+          emit(lights,
                Ray{vec3(lit.ox[n], lit.oy[n], lit.oz[n]), 0.0f,
                    vec3(out.dx[n], out.dy[n], out.dz[n]), out.tfar[n]},
                lit.pixel[n], vec3(out.vr[n], out.vg[n], out.vb[n]));
+      trace_slot(lights);
     }
-  }
-
-  // Each slot is one batch; what is not blocked is added slot after slot, so that every pixel
-  // sums its lights in table order, then its area samples in sample order: a pixel's sum never
-  // depends on the tile.
-  s.blocked.resize(pixels * slots);
-  for (std::size_t slot = 0; slot < slots; ++slot) {
-    const std::size_t first = slot * pixels, n = filled[slot];
-    if (n == 0) continue;
-    const std::span<const Ray> rays(s.shadow_rays.data() + first, n);
-    const std::span<std::uint8_t> blocked(s.blocked.data() + first, n);
-    if (settings.shadows) {
-      counts[RayKind::Shadow] += n;
-      frame.tracer.occluded_coherent(rays, blocked);
-    } else {
-      std::fill(blocked.begin(), blocked.end(), std::uint8_t{0});
-    }
-    for (std::size_t r = first; r < first + n; ++r)
-      if (s.blocked[r] == 0) frame.pixels[s.shadow_node[r]] += s.shadow_value[r];
   }
   tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
     vec3& p = frame.pixels[y * frame.width + x];
