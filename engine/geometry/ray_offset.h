@@ -12,7 +12,9 @@
 #include "specula/core/math.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 namespace specula {
@@ -132,6 +134,18 @@ struct SpawnPoint {
   return {q, error_at(b, q)};
 }
 
+/// std::nextafter(x, +inf) without the library call (it was a call per coordinate of every
+/// spawned ray): the next float up; +inf and NaN stay, both zeros give the smallest denormal.
+[[nodiscard]] constexpr float next_float_up(float x) {
+  if (x != x || x == std::numeric_limits<float>::infinity()) return x;
+  if (x == 0.0f) return std::numeric_limits<float>::denorm_min();
+  const auto bits = std::bit_cast<std::uint32_t>(x);
+  return std::bit_cast<float>(x > 0.0f ? bits + 1u : bits - 1u);
+}
+
+/// std::nextafter(x, −inf) likewise.
+[[nodiscard]] constexpr float next_float_down(float x) { return -next_float_up(-x); }
+
 /// p moved off the surface along the unit geometric normal n, by enough to clear p_error, and
 /// rounded away from the surface. n must point to the side the new ray leaves towards (pass −n to
 /// leave through the back, e.g. for refraction).
@@ -141,8 +155,8 @@ struct SpawnPoint {
   vec3 po = p + offset;
   // Round away by the normal's sign, so the origin leaves even an exact (zero-error) plane.
   for (int i = 0; i < 3; ++i) {
-    if (n[i] > 0.0f) po[i] = std::nextafter(po[i], std::numeric_limits<float>::infinity());
-    else if (n[i] < 0.0f) po[i] = std::nextafter(po[i], -std::numeric_limits<float>::infinity());
+    if (n[i] > 0.0f) po[i] = next_float_up(po[i]);
+    else if (n[i] < 0.0f) po[i] = next_float_down(po[i]);
   }
   return po;
 }

@@ -9,8 +9,8 @@
 #include "specula/trace/packet_tile.h"
 #include "specula/trace/radiance_hook.h"
 #include "specula/trace/shading.h"
-#include "specula/trace/render_frame.h"
 #include "specula/trace/shadow_samples.h"
+#include "specula/trace/render_frame.h"
 #include "specula/trace/stats.h"
 #include "specula/trace/tracer.h"
 

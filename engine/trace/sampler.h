@@ -194,9 +194,10 @@ public:
         : set_seed_(set_seed), seed0_(seed0), seed1_(seed1) {}
     [[nodiscard]] constexpr vec2 get(std::uint32_t index) const {
       const std::uint32_t shuffled = sobol_detail::owen_scramble(index, set_seed_);
-      return vec2(
-          to_unit_float(sobol_detail::owen_scramble_reversed(sobol_reversed_u32(shuffled, 0), seed0_)),
-          to_unit_float(sobol_detail::owen_scramble_reversed(sobol_reversed_u32(shuffled, 1), seed1_)));
+      return vec2(to_unit_float(sobol_detail::owen_scramble_reversed(
+                      sobol_reversed_u32(shuffled, 0), seed0_)),
+                  to_unit_float(sobol_detail::owen_scramble_reversed(
+                      sobol_reversed_u32(shuffled, 1), seed1_)));
     }
 
     [[nodiscard]] constexpr std::uint32_t set_seed() const { return set_seed_; }

@@ -36,13 +36,13 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
   const float inv_samples = samples > 0 ? 1.0f / float(samples) : 0.0f;
   counts[RayKind::Primary] += primary.size();
 
-  // The shadow rays by slot: one slot per punctual light (table order), then one for the area-light
-  // sample being taken; slot k's rays are at [k · pixels, k · pixels + filled[k]), in pixel order.
-  // A 16-wide packet then holds one slot of 16 neighbouring pixels (one light, or one sample
-  // index towards the light), not the five rays of three pixels in turn. Each slot is traced as
-  // one batch and what is not blocked is added: the punctual lights' slots in table order, then
-  // the sample slot once per sample, so that every pixel sums its lights in table order, then its
-  // area samples in sample order, and a pixel's sum never depends on the tile.
+  // The shadow rays by slot: one slot per punctual light (table order), then one for the
+  // area-light sample being taken; slot k's rays are at [k · pixels, k · pixels + filled[k]), in
+  // pixel order. A 16-wide packet then holds one slot of 16 neighbouring pixels (one light, or
+  // one sample index towards the light), not the five rays of three pixels in turn. Each slot is
+  // traced as one batch and what is not blocked is added: the punctual lights' slots in table
+  // order, then the sample slot once per sample, so that every pixel sums its lights in table
+  // order, then its area samples in sample order, and a pixel's sum never depends on the tile.
   const std::size_t pixels = primary.size();
   const std::size_t lights = tables.lights.size();
   const std::size_t slots = lights + (samples > 0 ? 1 : 0);

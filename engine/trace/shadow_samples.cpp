@@ -25,8 +25,8 @@ void ShadowSurfaces::clear() {
 }
 
 void ShadowSurfaces::push(const vec3& origin, const vec3& geometric_normal,
-                          const vec3& shading_normal, const vec3& albedo,
-                          std::uint32_t image_pixel, const PixelSampler::Stream2& stream) {
+                          const vec3& shading_normal, const vec3& albedo, std::uint32_t image_pixel,
+                          const PixelSampler::Stream2& stream) {
   ox.push_back(origin.x);
   oy.push_back(origin.y);
   oz.push_back(origin.z);
@@ -52,7 +52,8 @@ void ShadowLightRays::resize(std::size_t n) {
 
 namespace {
 
-static_assert(std::is_standard_layout_v<EmitterTriangle> && sizeof(EmitterTriangle) % sizeof(float) == 0,
+static_assert(std::is_standard_layout_v<EmitterTriangle> &&
+                  sizeof(EmitterTriangle) % sizeof(float) == 0,
               "the vector code gathers EmitterTriangle fields as floats");
 
 /// A light point from one sample: dimension 0 picks the triangle and, rescaled to its interval of
@@ -68,8 +69,8 @@ AreaLightSample area_light_point(const EmitterTable& table, const vec3& p, const
 }
 
 /// Surface n's sample, one at a time.
-void one_ray(const EmitterTable& table, const ShadowSurfaces& s, std::size_t n,
-             std::uint32_t index, float inv_samples, ShadowLightRays& out) {
+void one_ray(const EmitterTable& table, const ShadowSurfaces& s, std::size_t n, std::uint32_t index,
+             float inv_samples, ShadowLightRays& out) {
   out.valid[n] = 0;
   const vec2 u = PixelSampler::Stream2(s.set_seed[n], s.seed0[n], s.seed1[n]).get(index);
   // Sampled from the shadow ray's own origin, so that the sample's direction and distance are
@@ -79,8 +80,8 @@ void one_ray(const EmitterTable& table, const ShadowSurfaces& s, std::size_t n,
   if (glm::dot(ls.to_light, vec3(s.gx[n], s.gy[n], s.gz[n])) <= 0.0f) return; // behind it
   const float cos_theta = glm::dot(ls.to_light, vec3(s.sx[n], s.sy[n], s.sz[n]));
   if (cos_theta <= 0.0f) return;
-  const vec3 value = vec3(s.ar[n], s.ag[n], s.ab[n]) * ls.emission *
-                     (cos_theta / ls.pdf * inv_samples);
+  const vec3 value =
+      vec3(s.ar[n], s.ag[n], s.ab[n]) * ls.emission * (cos_theta / ls.pdf * inv_samples);
   out.valid[n] = 1;
   out.dx[n] = ls.to_light.x;
   out.dy[n] = ls.to_light.y;
@@ -96,8 +97,8 @@ void one_ray(const EmitterTable& table, const ShadowSurfaces& s, std::size_t n,
 #define SPECULA_AVX2 __attribute__((target("avx2")))
 
 SPECULA_AVX2 inline __m256i reverse_bits8(__m256i x) {
-  const __m256i bswap = _mm256_setr_epi8(3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12, 3,
-                                         2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12);
+  const __m256i bswap = _mm256_setr_epi8(3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12, 3, 2,
+                                         1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12);
   const __m256i m4 = _mm256_set1_epi32(0x0F0F0F0F);
   const __m256i m2 = _mm256_set1_epi32(0x33333333);
   const __m256i m1 = _mm256_set1_epi32(0x55555555);
@@ -144,8 +145,7 @@ SPECULA_AVX2 inline __m256 unit8(__m256i x) {
                        _mm256_set1_ps(1.0f / 16777216.0f));
 }
 
-SPECULA_AVX2 inline __m256 dot8(__m256 ax, __m256 ay, __m256 az, __m256 bx, __m256 by,
-                                __m256 bz) {
+SPECULA_AVX2 inline __m256 dot8(__m256 ax, __m256 ay, __m256 az, __m256 bx, __m256 by, __m256 bz) {
   // glm::dot of vec3: the products, then (x + y) + z.
   return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
                        _mm256_mul_ps(az, bz));
@@ -190,16 +190,15 @@ SPECULA_AVX2 void eight_rays(const EmitterTable& table, const ShadowSurfaces& s,
   while (count > 1) {
     const std::size_t half = count / 2;
     const __m256i ahead = _mm256_add_epi32(first, _mm256_set1_epi32(int(half) * kStride));
-    const __m256 below = _mm256_cmp_ps(u0, field8(base, ahead, offsetof(EmitterTriangle, cdf)),
-                                       _CMP_LT_OQ);
+    const __m256 below =
+        _mm256_cmp_ps(u0, field8(base, ahead, offsetof(EmitterTriangle, cdf)), _CMP_LT_OQ);
     first = _mm256_blendv_epi8(ahead, first, _mm256_castps_si256(below));
     count -= half;
   }
   {
-    const __m256 below = _mm256_cmp_ps(u0, field8(base, first, offsetof(EmitterTriangle, cdf)),
-                                       _CMP_LT_OQ);
-    first = _mm256_blendv_epi8(_mm256_add_epi32(first, stride), first,
-                               _mm256_castps_si256(below));
+    const __m256 below =
+        _mm256_cmp_ps(u0, field8(base, first, offsetof(EmitterTriangle, cdf)), _CMP_LT_OQ);
+    first = _mm256_blendv_epi8(_mm256_add_epi32(first, stride), first, _mm256_castps_si256(below));
   }
   const __m256i past = _mm256_cmpeq_epi32(
       first, _mm256_set1_epi32(int(triangles.size()) * kStride)); // at or above every cdf
@@ -226,25 +225,27 @@ SPECULA_AVX2 void eight_rays(const EmitterTable& table, const ShadowSurfaces& s,
   constexpr std::size_t kE2 = offsetof(EmitterTriangle, e2);
   constexpr std::size_t kF = sizeof(float);
   const __m256 dx = _mm256_sub_ps(point8(base, k, b1, b2, kP0, kE1, kE2), load8(s.ox, n0));
-  const __m256 dy = _mm256_sub_ps(point8(base, k, b1, b2, kP0 + kF, kE1 + kF, kE2 + kF), load8(s.oy, n0));
-  const __m256 dz = _mm256_sub_ps(point8(base, k, b1, b2, kP0 + 2 * kF, kE1 + 2 * kF, kE2 + 2 * kF), load8(s.oz, n0));
+  const __m256 dy =
+      _mm256_sub_ps(point8(base, k, b1, b2, kP0 + kF, kE1 + kF, kE2 + kF), load8(s.oy, n0));
+  const __m256 dz = _mm256_sub_ps(point8(base, k, b1, b2, kP0 + 2 * kF, kE1 + 2 * kF, kE2 + 2 * kF),
+                                  load8(s.oz, n0));
   const __m256 dist = _mm256_sqrt_ps(dot8(dx, dy, dz, dx, dy, dz));
   const __m256 inf = _mm256_set1_ps(std::numeric_limits<float>::infinity());
-  __m256 ok = _mm256_and_ps(_mm256_cmp_ps(dist, zero, _CMP_GT_OQ),
-                            _mm256_cmp_ps(dist, inf, _CMP_LT_OQ));
+  __m256 ok =
+      _mm256_and_ps(_mm256_cmp_ps(dist, zero, _CMP_GT_OQ), _mm256_cmp_ps(dist, inf, _CMP_LT_OQ));
   const __m256 tx = _mm256_div_ps(dx, dist);
   const __m256 ty = _mm256_div_ps(dy, dist);
   const __m256 tz = _mm256_div_ps(dz, dist);
   constexpr std::size_t kN = offsetof(EmitterTriangle, normal);
-  const __m256 cos_l = _mm256_andnot_ps(
-      _mm256_set1_ps(-0.0f),
-      dot8(field8(base, k, kN), field8(base, k, kN + kF), field8(base, k, kN + 2 * kF), tx, ty, tz));
+  const __m256 cos_l =
+      _mm256_andnot_ps(_mm256_set1_ps(-0.0f), dot8(field8(base, k, kN), field8(base, k, kN + kF),
+                                                   field8(base, k, kN + 2 * kF), tx, ty, tz));
   ok = _mm256_and_ps(ok, _mm256_cmp_ps(cos_l, zero, _CMP_GT_OQ));
   const __m256 area = field8(base, k, offsetof(EmitterTriangle, area));
   const __m256 pdf =
       _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(_mm256_div_ps(pick, area), dist), dist), cos_l);
-  ok = _mm256_and_ps(ok, _mm256_and_ps(_mm256_cmp_ps(pdf, zero, _CMP_GT_OQ),
-                                       _mm256_cmp_ps(pdf, inf, _CMP_LT_OQ)));
+  ok = _mm256_and_ps(
+      ok, _mm256_and_ps(_mm256_cmp_ps(pdf, zero, _CMP_GT_OQ), _mm256_cmp_ps(pdf, inf, _CMP_LT_OQ)));
 
   // The integrator's tests: in front of the surface, lit side of the shading normal.
   const __m256 facing = dot8(tx, ty, tz, load8(s.gx, n0), load8(s.gy, n0), load8(s.gz, n0));
@@ -258,9 +259,12 @@ SPECULA_AVX2 void eight_rays(const EmitterTable& table, const ShadowSurfaces& s,
   _mm256_storeu_ps(out.dy.data() + n0, ty);
   _mm256_storeu_ps(out.dz.data() + n0, tz);
   _mm256_storeu_ps(out.tfar.data() + n0, _mm256_mul_ps(dist, _mm256_set1_ps(1.0f - 1e-5f)));
-  _mm256_storeu_ps(out.vr.data() + n0, _mm256_mul_ps(_mm256_mul_ps(load8(s.ar, n0), field8(base, k, kEm)), w));
-  _mm256_storeu_ps(out.vg.data() + n0, _mm256_mul_ps(_mm256_mul_ps(load8(s.ag, n0), field8(base, k, kEm + kF)), w));
-  _mm256_storeu_ps(out.vb.data() + n0, _mm256_mul_ps(_mm256_mul_ps(load8(s.ab, n0), field8(base, k, kEm + 2 * kF)), w));
+  _mm256_storeu_ps(out.vr.data() + n0,
+                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ar, n0), field8(base, k, kEm)), w));
+  _mm256_storeu_ps(out.vg.data() + n0,
+                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ag, n0), field8(base, k, kEm + kF)), w));
+  _mm256_storeu_ps(out.vb.data() + n0,
+                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ab, n0), field8(base, k, kEm + 2 * kF)), w));
   const int mask = _mm256_movemask_ps(ok);
   for (int lane = 0; lane < 8; ++lane) out.valid[n0 + std::size_t(lane)] = (mask >> lane) & 1;
 }
@@ -281,7 +285,11 @@ void shadow_light_rays(const EmitterTable& table, const ShadowSurfaces& surfaces
     return;
   }
   std::size_t first = 0;
-  if (simd && shadow_light_rays_vectorised())
+  // The gathers index the triangles' floats with 32-bit offsets.
+  constexpr std::size_t kMostTriangles = std::size_t(std::numeric_limits<std::int32_t>::max()) /
+                                             sizeof(EmitterTriangle) * sizeof(float) -
+                                         1;
+  if (simd && shadow_light_rays_vectorised() && table.triangles().size() <= kMostTriangles)
     for (; first + 8 <= n; first += 8) eight_rays(table, surfaces, first, index, inv_samples, out);
   for (; first < n; ++first) one_ray(table, surfaces, first, index, inv_samples, out);
 }

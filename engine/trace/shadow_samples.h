@@ -17,12 +17,12 @@ namespace specula::detail {
 
 /// A tile's lit pixels (those with a diffuse part), a column per quantity.
 struct ShadowSurfaces {
-  std::vector<float> ox, oy, oz; ///< the shadow rays' origin (offset off the surface)
-  std::vector<float> gx, gy, gz; ///< geometric normal
-  std::vector<float> sx, sy, sz; ///< shading normal
-  std::vector<float> ar, ag, ab; ///< diffuse colour over π
-  std::vector<std::uint32_t> pixel;                    ///< image index
-  std::vector<std::uint32_t> set_seed, seed0, seed1;  ///< its light-point stream's seeds
+  std::vector<float> ox, oy, oz;    ///< the shadow rays' origin (offset off the surface)
+  std::vector<float> gx, gy, gz;    ///< geometric normal
+  std::vector<float> sx, sy, sz;    ///< shading normal
+  std::vector<float> ar, ag, ab;    ///< diffuse colour over π
+  std::vector<std::uint32_t> pixel; ///< image index
+  std::vector<std::uint32_t> set_seed, seed0, seed1; ///< its light-point stream's seeds
 
   [[nodiscard]] std::size_t size() const { return pixel.size(); }
   void clear();

@@ -96,7 +96,8 @@ TEST(Emitters, PickIsTheFirstTriangleWhoseCdfExceedsU) {
       for (const float u : {std::nextafter(e.cdf, 0.0f), e.cdf, std::nextafter(e.cdf, 2.0f)})
         if (u < 1.0f) us.push_back(u);
     for (int i = 0; i < 1000; ++i) us.push_back(uniform(rng));
-    for (const float u : us) ASSERT_EQ(table.pick(u), expected(u)) << emitters << " emitters, u " << u;
+    for (const float u : us)
+      ASSERT_EQ(table.pick(u), expected(u)) << emitters << " emitters, u " << u;
   }
 }
 

@@ -6,7 +6,12 @@
 
 #include <gtest/gtest.h>
 
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <limits>
 #include <random>
+#include <vector>
 
 namespace specula {
 namespace {
@@ -75,6 +80,33 @@ Counts spawn_rays(float size, const vec3& center, std::uint32_t seed) {
     counts.self_hits_without_offset += hit.hit() ? 1 : 0;
   }
   return counts;
+}
+
+TEST(RayOffset, NextFloatIsNextafterBitForBit) {
+  // next_float_up/down against std::nextafter towards ±inf: the edge cases (zeros, denormals,
+  // the largest finite floats, infinities, NaN) and a million seeded random bit patterns.
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  std::vector<float> xs{0.0f,     -0.0f, std::numeric_limits<float>::denorm_min(),
+                        -std::numeric_limits<float>::denorm_min(),
+                        std::numeric_limits<float>::min(), -std::numeric_limits<float>::min(),
+                        std::numeric_limits<float>::max(), -std::numeric_limits<float>::max(),
+                        kInf,     -kInf, 1.0f, -1.0f, 1e-30f, -3e30f,
+                        std::numeric_limits<float>::quiet_NaN()};
+  std::mt19937 rng(61);
+  for (int i = 0; i < 1000000; ++i) xs.push_back(std::bit_cast<float>(std::uint32_t(rng())));
+  for (const float x : xs) {
+    const float up = next_float_up(x), down = next_float_down(x);
+    if (std::isnan(x)) {
+      EXPECT_TRUE(std::isnan(up) && std::isnan(down));
+      continue;
+    }
+    ASSERT_EQ(std::bit_cast<std::uint32_t>(up),
+              std::bit_cast<std::uint32_t>(std::nextafter(x, kInf)))
+        << x;
+    ASSERT_EQ(std::bit_cast<std::uint32_t>(down),
+              std::bit_cast<std::uint32_t>(std::nextafter(x, -kInf)))
+        << x;
+  }
 }
 
 TEST(RayOffset, NoSelfIntersectionAtUnitScale) {

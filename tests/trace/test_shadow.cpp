@@ -331,9 +331,10 @@ TEST(Shadow, StratifiedSamplesBeatIndependentOnes) {
 
 TEST(Shadow, VectorisedLightSamplesEqualTheScalarOnesBitForBit) {
   if (!detail::shadow_light_rays_vectorised()) GTEST_SKIP() << "this CPU has no AVX2";
-  // Emitters of unequal power and orientation, a few to hundreds of triangles each, and surfaces anywhere around them: in front of and behind the lights and themselves,
-  // on a light's plane (cos 0 at the light), on its corner (distance 0), and far enough for the
-  // distance to overflow.
+  // Emitters of unequal power and orientation, a few to hundreds of triangles each, and surfaces
+  // anywhere around them: in front of and behind the lights and themselves, on a light's plane
+  // (cos 0 at the light), on its corner (distance 0), and far enough for the distance to
+  // overflow.
   ecs::Registry reg;
   const auto emitter = [&](const MeshSource& mesh, const vec3& at, const quat& rotation,
                            const vec3& emission) {
