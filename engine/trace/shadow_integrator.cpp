@@ -2,7 +2,8 @@
 // local shading with shadow rays only — every punctual light once, exactly as Whitted mode does
 // (punctual_shadow_ray), and the area lights with settings.shadow_samples stratified samples per
 // pixel (soft shadows). No secondary rays: mirrors and glass show their diffuse part and emission.
-// Every shadow ray of a tile is traced in one batch.
+// A tile's shadow rays are traced in batches: each punctual light's, then each area-light
+// sample's (the samples taken over all the tile's lit pixels at once: shadow_samples.h).
 
 #include "specula/trace/integrators.h"
 #include "specula/trace/sampler.h"
