@@ -2,7 +2,7 @@
 
 #include "specula/render/scene_layer.h"
 
-#include <algorithm>
+#include <cmath>
 
 namespace specula {
 
