@@ -59,6 +59,9 @@ struct Options {
   double denoise_sigma_normal = std::numeric_limits<double>::quiet_NaN();
   double denoise_sigma_depth = std::numeric_limits<double>::quiet_NaN();
   std::uint32_t denoise_levels = 0;
+  double denoise_sigma_variance = std::numeric_limits<double>::quiet_NaN();
+  /// The fixed colour weight (DenoiseSettings::sigma_color) instead of the variance-guided one.
+  bool denoise_fixed = false;
 };
 
 /// Wall-clock milliseconds of f().

@@ -187,8 +187,13 @@ public:
         ++hits_[i];
       }
     }
+    if (frames_ == 0) moments_.reset(colour_.size());
+    moments_.add(frame, guides);
     ++frames_;
   }
+  /// The variance of each pixel's mean, for the variance-guided colour weight (empty before two
+  /// frames).
+  [[nodiscard]] std::vector<float> variance() const { return moments_.variance_of_mean(); }
   [[nodiscard]] Framebuffer mean() const {
     Framebuffer out(width_, height_);
     const double inv = 1.0 / double(std::max<std::uint32_t>(1, frames_));
@@ -215,6 +220,7 @@ private:
   std::vector<vec3> albedo_, normal_;
   std::vector<float> depth_;
   std::vector<std::uint32_t> hits_;
+  LuminanceMoments moments_;
   std::uint32_t frames_ = 0;
 };
 
@@ -350,7 +356,14 @@ DenoiseSettings denoise_settings(const Options& o) {
   if (!std::isnan(o.denoise_sigma_normal)) d.sigma_normal = float(o.denoise_sigma_normal);
   if (!std::isnan(o.denoise_sigma_depth)) d.sigma_depth = float(o.denoise_sigma_depth);
   if (o.denoise_levels > 0) d.iterations = o.denoise_levels;
+  if (!std::isnan(o.denoise_sigma_variance)) d.sigma_variance = float(o.denoise_sigma_variance);
   return d;
+}
+
+/// The mean's per-pixel variance for the denoiser: none (the fixed colour weight) with
+/// --denoise-fixed.
+std::vector<float> denoise_variance(const Options& o, const Accumulator& acc) {
+  return o.denoise_fixed ? std::vector<float>{} : acc.variance();
 }
 
 /// Accumulates 1-spp frames up to `max_spp`, measuring at every power of two.
@@ -380,7 +393,10 @@ Run measure(const Options& o, PathScene& scene, const Framebuffer& ref, LightSam
     c.ms = elapsed;
     Framebuffer denoised(1, 1);
     c.denoise_ms =
-        time_ms([&] { atrous_denoise(mean, acc.guides(), denoise_settings(o), denoised); });
+        time_ms([&] {
+          atrous_denoise(mean, acc.guides(), denoise_settings(o), denoised,
+                         denoise_variance(o, acc));
+        });
     c.rmse = rmse(ref, mean);
     c.flip = flip(ref, mean).mean;
     c.rmse_denoised = rmse(ref, denoised);
@@ -514,8 +530,13 @@ void target_check(const Options& o, PathScene& scene, const Framebuffer& ref,
   }
   elapsed += time_ms([&] { mean = acc.mean(); });
   Framebuffer denoised(1, 1);
-  const double dn =
-      time_ms([&] { atrous_denoise(mean, acc.guides(), denoise_settings(o), denoised); });
+  const GuideBuffers mean_guides = acc.guides();
+  const double dn = time_ms([&] {
+    atrous_denoise(mean, mean_guides, denoise_settings(o), denoised, denoise_variance(o, acc));
+  });
+  // The fixed colour weight on the same mean, for comparison.
+  Framebuffer fixed_weight(1, 1);
+  atrous_denoise(mean, mean_guides, denoise_settings(o), fixed_weight);
   const double fps = 1000.0 / median(frame_ms);
   const std::string stem = "path-" + scene.name() + "-";
   write_png(ref, dir / (stem + "reference.png"));
@@ -523,11 +544,12 @@ void target_check(const Options& o, PathScene& scene, const Framebuffer& ref,
   write_png(denoised, dir / (stem + "1s-denoised.png"));
   out("\n**Target check, %s %ux%u, MIS, %u threads.** 1 spp per frame: median %.1f ms, **%.1f "
       "frames/s** (target ≥ 15). After %.0f ms of accumulation (%u spp): mean FLIP **%.4f with "
-      "the à-trous denoiser** (%.1f ms more; target ≤ 0.05), %.4f without; RMSE %.3e with, %.3e "
-      "without.\n",
+      "the à-trous denoiser** (%s colour weight; %.1f ms more; target ≤ 0.05), %.4f with the "
+      "fixed colour σ, %.4f without; RMSE %.3e with, %.3e without.\n",
       scene.name().c_str(), scene.width(), scene.height(), o.threads, median(frame_ms), fps,
-      elapsed, acc.frames(), flip(ref, denoised).mean, dn, flip(ref, mean).mean,
-      rmse(ref, denoised), rmse(ref, mean));
+      elapsed, acc.frames(), flip(ref, denoised).mean,
+      o.denoise_fixed ? "fixed" : "variance-guided", dn, flip(ref, fixed_weight).mean,
+      flip(ref, mean).mean, rmse(ref, denoised), rmse(ref, mean));
   out("\n| reference | after 1 s, raw | after 1 s, à-trous |\n|---|---|---|\n| "
       "![](%sreference.png) "
       "| ![](%s1s-raw.png) | ![](%s1s-denoised.png) |\n",

@@ -380,6 +380,10 @@ int main(int argc, char** argv) {
   app.add_option("--denoise-sigma-depth", o.denoise_sigma_depth, "À-trous relative depth σ");
   app.add_option("--denoise-levels", o.denoise_levels, "À-trous levels (0: the default)")
       ->check(CLI::Range(0u, 12u));
+  app.add_option("--denoise-sigma-variance", o.denoise_sigma_variance,
+                 "À-trous variance-guided colour σ (in standard deviations)");
+  app.add_flag("--denoise-fixed", o.denoise_fixed,
+               "The fixed colour σ instead of the variance-guided colour weight");
   app.add_option("--cache-max-resolution", o.cache_max_resolution,
                  "Largest cube face resolution the cache sections try")
       ->check(CLI::Range(1u, 4096u));

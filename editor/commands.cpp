@@ -388,6 +388,7 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
     stats.settings.denoise_sigma_color = denoise->sigma_color;
     stats.settings.denoise_sigma_normal = denoise->sigma_normal;
     stats.settings.denoise_sigma_depth = denoise->sigma_depth;
+    stats.settings.denoise_sigma_variance = denoise->sigma_variance;
   }
   if (tracer_dev) {
     stats.settings.gpu_device = tracer_dev->name;

@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <string>
 #include <thread>
 #include <utility>
@@ -85,8 +86,10 @@ struct Planes {
   /// 1 / (σ_depth · depth): depth differences are relative to the centre's depth.
   Plane inv_depth_scale;
   std::array<Plane, 3> colour, next;
+  /// Variance-guided only: the variance of each pixel's current estimate, and the next level's.
+  Plane variance, next_variance;
 
-  void allocate(std::size_t w, std::size_t h, std::size_t padding) {
+  void allocate(std::size_t w, std::size_t h, std::size_t padding, bool with_variance) {
     width = w;
     height = h;
     pad = padding;
@@ -94,6 +97,8 @@ struct Planes {
     for (Plane* p : {&usable, &nx, &ny, &nz, &depth, &slope_x, &slope_y, &inv_depth_scale,
                      &colour[0], &colour[1], &colour[2], &next[0], &next[1], &next[2]})
       p->data.assign(stride * h, 0.0f);
+    if (with_variance)
+      for (Plane* p : {&variance, &next_variance}) p->data.assign(stride * h, 0.0f);
   }
   float& at(Plane& p, std::size_t x, std::size_t y) const { return p.row(y, stride, pad)[x]; }
   [[nodiscard]] float at(const Plane& p, std::size_t x, std::size_t y) const {
@@ -121,14 +126,27 @@ inline __m128 exp_neg(__m128 e) {
 
 inline __m128 square(__m128 a) { return _mm_mul_ps(a, a); }
 
+/// The largest variance the planes hold: an unknown one (+inf) is stored as this, so the
+/// weighted sums of variances stay finite (a weight of 0 times it is 0, never NaN) and its colour
+/// weight is 1 to float precision.
+constexpr float kUnknownVariance = 1e30f;
+
+/// Added to σ_v²·Var before it is inverted: a converged pixel (Var 0) takes only taps of its
+/// exact colour, and the inverse stays finite.
+constexpr float kVarianceFloor = 1e-30f;
+
 /// One level of the edge-avoiding à-trous transform over rows [y0, y1): taps `step` pixels
 /// apart, four pixels at a time. Every lane does the same operations in the same order, so a
-/// pixel's value does not depend on which rows a thread was given.
+/// pixel's value does not depend on which rows a thread was given. kVariance: the colour weight
+/// scales with each centre's variance (`inv_sigma_color2` is then 1/σ_v²), and the level writes
+/// the variance of its result, Σw²·Var / (Σw)².
+template <bool kVariance>
 void filter_level(Planes& px, std::uint32_t step, float inv_sigma_color2, float inv_sigma_normal2,
                   std::size_t y0, std::size_t y1) {
   const std::size_t stride = px.stride, pad = px.pad;
   const auto s = std::ptrdiff_t(step);
   const __m128 ic = _mm_set1_ps(inv_sigma_color2);
+  const __m128 sigma_v2 = _mm_set1_ps(1.0f / inv_sigma_color2); // kVariance: σ_v²
   const __m128 in = _mm_set1_ps(inv_sigma_normal2);
   const __m128 max_exponent = _mm_set1_ps(kMaxExponent);
   // The centre weighs its kernel weight alone (all distances 0), so the weight sum ≥ 9/64.
@@ -146,6 +164,14 @@ void filter_level(Planes& px, std::uint32_t step, float inv_sigma_color2, float 
       const __m128 cgx = _mm_loadu_ps(row(px.slope_x) + x);
       const __m128 cgy = _mm_loadu_ps(row(px.slope_y) + x);
       const __m128 cis = _mm_loadu_ps(row(px.inv_depth_scale) + x);
+      __m128 ic_pixel = ic;
+      __m128 sv = _mm_setzero_ps();
+      if constexpr (kVariance) {
+        const __m128 cv = _mm_loadu_ps(row(px.variance) + x);
+        const __m128 scaled = _mm_add_ps(_mm_mul_ps(cv, sigma_v2), _mm_set1_ps(kVarianceFloor));
+        ic_pixel = _mm_div_ps(_mm_set1_ps(1.0f), scaled);
+        sv = _mm_mul_ps(_mm_mul_ps(centre_weight, centre_weight), cv);
+      }
       __m128 sr = _mm_mul_ps(centre_weight, cr);
       __m128 sg = _mm_mul_ps(centre_weight, cg);
       __m128 sb = _mm_mul_ps(centre_weight, cb);
@@ -164,6 +190,7 @@ void filter_level(Planes& px, std::uint32_t step, float inv_sigma_color2, float 
         const float* tnz = tap_row(px.nz);
         const float* td = tap_row(px.depth);
         const float* tu = tap_row(px.usable);
+        const float* tv = kVariance ? tap_row(px.variance) : nullptr;
         // The depth the centre's slope predicts at the tap, row part.
         const __m128 cd_row = _mm_add_ps(cd, _mm_mul_ps(cgy, _mm_set1_ps(float(j * s))));
         for (std::ptrdiff_t i = -2; i <= 2; ++i) {
@@ -183,7 +210,7 @@ void filter_level(Planes& px, std::uint32_t step, float inv_sigma_color2, float 
           const __m128 predicted = _mm_add_ps(cd_row, _mm_mul_ps(cgx, _mm_set1_ps(float(ox))));
           const __m128 dd = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(td + ox), predicted), cis);
           const __m128 e =
-              _mm_add_ps(_mm_add_ps(_mm_mul_ps(dc, ic), _mm_mul_ps(dn, in)), square(dd));
+              _mm_add_ps(_mm_add_ps(_mm_mul_ps(dc, ic_pixel), _mm_mul_ps(dn, in)), square(dd));
           // NaN (∞ · 0 from a weight turned off) compares false: weight 0, as beyond the cut-off.
           const __m128 near = _mm_cmplt_ps(e, max_exponent);
           const __m128 kernel = _mm_set1_ps(kB3[std::size_t(i + 2)] * kB3[std::size_t(j + 2)]);
@@ -194,14 +221,42 @@ void filter_level(Planes& px, std::uint32_t step, float inv_sigma_color2, float 
           sg = _mm_add_ps(sg, _mm_mul_ps(wgt, qg));
           sb = _mm_add_ps(sb, _mm_mul_ps(wgt, qb));
           sw = _mm_add_ps(sw, wgt);
+          if constexpr (kVariance) sv = _mm_add_ps(sv, _mm_mul_ps(square(wgt), _mm_loadu_ps(tv + ox)));
         }
       }
       const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), sw);
+      if constexpr (kVariance)
+        _mm_storeu_ps(px.next_variance.row(y, stride, pad) + x, _mm_mul_ps(sv, square(inv)));
       _mm_storeu_ps(px.next[0].row(y, stride, pad) + x, _mm_mul_ps(sr, inv));
       _mm_storeu_ps(px.next[1].row(y, stride, pad) + x, _mm_mul_ps(sg, inv));
       _mm_storeu_ps(px.next[2].row(y, stride, pad) + x, _mm_mul_ps(sb, inv));
     }
   }
+}
+
+/// The variance plane from the caller's variances: each usable pixel gets the 3×3 binomial mean
+/// (1 2 1 per axis) of its usable neighbours' variances — an estimate from a few frames is itself
+/// noisy — with unknown ones (+inf, NaN, negative) clamped to kUnknownVariance.
+void prefilter_variance(Planes& px, const std::vector<std::uint8_t>& usable,
+                        std::span<const float> variance) {
+  const std::size_t w = px.width, h = px.height;
+  const auto known = [](float v) { return v >= 0.0f ? std::min(v, kUnknownVariance) : kUnknownVariance; };
+  for (std::size_t y = 0; y < h; ++y)
+    for (std::size_t x = 0; x < w; ++x) {
+      if (usable[y * w + x] == 0) continue;
+      double sum = 0.0, weights = 0.0;
+      for (std::ptrdiff_t j = -1; j <= 1; ++j)
+        for (std::ptrdiff_t i = -1; i <= 1; ++i) {
+          const std::ptrdiff_t qx = std::ptrdiff_t(x) + i, qy = std::ptrdiff_t(y) + j;
+          if (qx < 0 || qy < 0 || qx >= std::ptrdiff_t(w) || qy >= std::ptrdiff_t(h)) continue;
+          const std::size_t q = std::size_t(qy) * w + std::size_t(qx);
+          if (usable[q] == 0) continue;
+          const double k = double((2 - std::abs(i)) * (2 - std::abs(j)));
+          sum += k * double(known(variance[q]));
+          weights += k;
+        }
+      px.at(px.variance, x, y) = float(sum / weights);
+    }
 }
 
 /// Of the one-sided depth differences towards usable neighbours, the smaller in magnitude.
@@ -211,10 +266,55 @@ float slope(float before, bool has_before, float centre, float after, bool has_a
   return has_before ? b : has_after ? a : 0.0f;
 }
 
+/// Rec. 709 luminance.
+float luminance(const vec3& c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
+
 } // namespace
 
+void LuminanceMoments::reset(std::size_t pixels) {
+  sum_.assign(pixels, 0.0);
+  sum2_.assign(pixels, 0.0);
+  count_.assign(pixels, 0);
+  frames_ = 0;
+}
+
+void LuminanceMoments::add(const Framebuffer& frame, const GuideBuffers& guides) {
+  const std::size_t n = sum_.size();
+  if (frame.pixel_count() != n || guides.albedo.size() != n)
+    throw Error("luminance moments: a frame of " + std::to_string(frame.pixel_count()) +
+                " pixels with guides of " + std::to_string(guides.albedo.size()) +
+                ", reset() was given " + std::to_string(n));
+  const std::span<const vec3> c = frame.pixels();
+  for (std::size_t i = 0; i < n; ++i) {
+    const float l = luminance(c[i] / demodulator(guides.albedo[i]));
+    if (!std::isfinite(l)) continue;
+    sum_[i] += double(l);
+    sum2_[i] += double(l) * double(l);
+    ++count_[i];
+  }
+  ++frames_;
+}
+
+std::vector<float> LuminanceMoments::variance_of_mean() const {
+  if (frames_ < 2) return {};
+  std::vector<float> out(sum_.size());
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const double k = double(count_[i]);
+    if (count_[i] < 2) {
+      out[i] = std::numeric_limits<float>::infinity();
+      continue;
+    }
+    const double mean = sum_[i] / k;
+    // The sample variance (k − 1 in the denominator), of the mean: over k once more.
+    const double var = std::max(0.0, (sum2_[i] - k * mean * mean) / (k - 1.0));
+    out[i] = float(var / k);
+  }
+  return out;
+}
+
 void atrous_denoise(const Framebuffer& noisy, const GuideBuffers& guides,
-                    const DenoiseSettings& settings, Framebuffer& out) {
+                    const DenoiseSettings& settings, Framebuffer& out,
+                    std::span<const float> variance) {
   const std::uint32_t width = noisy.width();
   const std::uint32_t height = noisy.height();
   const std::size_t n = noisy.pixel_count();
@@ -233,6 +333,13 @@ void atrous_denoise(const Framebuffer& noisy, const GuideBuffers& guides,
   check_sigma(settings.sigma_color, "sigma_color");
   check_sigma(settings.sigma_normal, "sigma_normal");
   check_sigma(settings.sigma_depth, "sigma_depth");
+  const bool guided = !variance.empty();
+  if (guided) {
+    check_size(variance.size(), "variance");
+    if (!(settings.sigma_variance > 0.0f) || !std::isfinite(settings.sigma_variance))
+      throw Error("atrous_denoise: sigma_variance must be positive and finite, got " +
+                  std::to_string(settings.sigma_variance));
+  }
 
   // Everything is read out of `noisy` before `out` is written, so the two may be one image.
   // Padding: the widest level's farthest tap (2 · 2^(levels−1)), rounded up to whole lanes;
@@ -240,7 +347,8 @@ void atrous_denoise(const Framebuffer& noisy, const GuideBuffers& guides,
   const std::size_t reach =
       settings.iterations == 0 ? 0 : std::size_t(2) << (settings.iterations - 1);
   Planes px;
-  px.allocate(width, height, (std::min<std::size_t>(reach, width) + kLanes - 1) / kLanes * kLanes);
+  px.allocate(width, height, (std::min<std::size_t>(reach, width) + kLanes - 1) / kLanes * kLanes,
+              guided);
   const std::span<const vec3> colour = noisy.pixels();
   std::vector<vec3> demodulators(n);
   std::vector<std::uint8_t> usable(n);
@@ -276,21 +384,31 @@ void atrous_denoise(const Framebuffer& noisy, const GuideBuffers& guides,
                                       down ? guides.depth[p + width] : 0.0f, down);
     }
 
+  if (guided) prefilter_variance(px, usable, variance);
+
   const float inv_sigma_normal2 = 1.0f / (settings.sigma_normal * settings.sigma_normal);
   const int workers = settings.threads > 0 ? int(settings.threads)
                                            : int(std::max(1u, std::thread::hardware_concurrency()));
   tbb::task_arena arena(workers);
   for (std::uint32_t level = 0; level < settings.iterations; ++level) {
-    const float sigma_color = std::ldexp(settings.sigma_color, -int(level));
+    // The fixed weight's σ is halved per level; the variance-guided one shrinks with the
+    // variance it carries.
+    const float sigma_color =
+        guided ? settings.sigma_variance : std::ldexp(settings.sigma_color, -int(level));
     const float inv_sigma_color2 = 1.0f / (sigma_color * sigma_color);
     arena.execute([&] {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, height, 4),
                         [&](const tbb::blocked_range<std::size_t>& rows) {
-                          filter_level(px, 1u << level, inv_sigma_color2, inv_sigma_normal2,
-                                       rows.begin(), rows.end());
+                          if (guided)
+                            filter_level<true>(px, 1u << level, inv_sigma_color2,
+                                               inv_sigma_normal2, rows.begin(), rows.end());
+                          else
+                            filter_level<false>(px, 1u << level, inv_sigma_color2,
+                                                inv_sigma_normal2, rows.begin(), rows.end());
                         });
     });
     px.colour.swap(px.next);
+    std::swap(px.variance, px.next_variance);
   }
 
   Framebuffer result(width, height);

@@ -10,6 +10,7 @@
 #include "specula/image/framebuffer.h"
 
 #include <cstdint>
+#include <span>
 #include <vector>
 
 namespace specula {
@@ -42,7 +43,40 @@ struct DenoiseSettings {
   /// Depth weight scale, relative to the centre's depth: the tap's depth is compared with what the
   /// centre's depth gradient predicts at the tap's offset, so slanted planes are not cut apart.
   float sigma_depth = 0.1f;
+  /// With a per-pixel variance (atrous_denoise's `variance`), the colour weight is
+  /// exp(−|Δc|²/(σ_v²·Var)) instead (Schied et al., "Spatiotemporal Variance-Guided Filtering",
+  /// HPG 2017, in the Gaussian form of the other weights): Var is the variance of the centre's
+  /// estimate (demodulated luminance), 3×3-prefiltered before the first level and carried through
+  /// the levels as the variance of each level's weighted mean. A noisy pixel (a firefly) then
+  /// mixes with its neighbours while a converged one keeps its value, whatever the image's scale;
+  /// sigma_color is not used. The variance shrinks level by level as the estimate is averaged, so
+  /// σ_v is large: 12 gave the lowest FLIP after 8–16 samples of both path-traced sample scenes
+  /// among 1…32 (docs/PERFORMANCE.md §8).
+  float sigma_variance = 12.0f;
   std::uint32_t threads = 0; ///< 0: every hardware thread
+};
+
+/// The per-pixel variance of a running mean of frames, for the variance-guided colour weight:
+/// each frame adds its pixels' demodulated luminance (the colour divided by that frame's albedo
+/// guide, as the filter divides it), and the variance of the mean is the sample variance of the
+/// frames' values over their count.
+class LuminanceMoments {
+public:
+  /// Forgets every frame; the next add() starts a new mean over `pixels` pixels.
+  void reset(std::size_t pixels);
+  /// Folds one frame in (its guides, written with it). Non-finite values are left out of that
+  /// pixel's sums. Throws specula::Error when the sizes are not reset()'s.
+  void add(const Framebuffer& frame, const GuideBuffers& guides);
+  [[nodiscard]] std::uint32_t frames() const { return frames_; }
+  /// Per pixel, the variance of the mean of its frames' values; empty while fewer than two frames
+  /// were added (a variance needs two), so the caller falls back to the fixed colour weight. A
+  /// pixel with fewer than two finite values gets +inf (unknown: its colour weight is off).
+  [[nodiscard]] std::vector<float> variance_of_mean() const;
+
+private:
+  std::vector<double> sum_, sum2_;
+  std::vector<std::uint32_t> count_;
+  std::uint32_t frames_ = 0;
 };
 
 /// Filters `noisy` into `out` (assigned noisy's size; `out` may be `noisy` itself). The colour
@@ -51,8 +85,12 @@ struct DenoiseSettings {
 /// smoothed. Guides must have noisy's pixel count. Pixels without a hit (depth +inf or NaN) or
 /// with a non-finite colour or normal are copied through and never used as taps; taps outside the
 /// image are left out. Every level reads only the previous one, so the result is the same whatever
-/// the thread count. Throws specula::Error on mismatched sizes or settings out of range.
+/// the thread count. `variance`, when not empty, is each pixel's estimate variance
+/// (LuminanceMoments::variance_of_mean) and selects the variance-guided colour weight; negative or
+/// NaN entries are taken as +inf. Throws specula::Error on mismatched sizes or settings out of
+/// range.
 void atrous_denoise(const Framebuffer& noisy, const GuideBuffers& guides,
-                    const DenoiseSettings& settings, Framebuffer& out);
+                    const DenoiseSettings& settings, Framebuffer& out,
+                    std::span<const float> variance = {});
 
 } // namespace specula

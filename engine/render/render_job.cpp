@@ -34,7 +34,12 @@ FrameStats render_job_frame(RenderJob& job, const Tracer& tracer, const SceneLay
       const auto start = std::chrono::steady_clock::now();
       DenoiseSettings denoise = *job.denoise;
       if (denoise.threads == 0) denoise.threads = job.settings.threads;
-      atrous_denoise(job.noisy, job.guides, denoise, job.image);
+      // Each frame's pixels are one draw of the pixel's estimate: their spread over the
+      // accumulated frames gives the variance of the mean (none while there is one frame, or
+      // when frames are shown on their own).
+      if (next.restarted || !job.accumulate) job.moments.reset(target.pixel_count());
+      job.moments.add(target, job.guides);
+      atrous_denoise(job.noisy, job.guides, denoise, job.image, job.moments.variance_of_mean());
       stats.denoise_ms = std::chrono::duration<double, std::milli>(
                              std::chrono::steady_clock::now() - start)
                              .count();

@@ -45,7 +45,8 @@ struct RenderJob {
   /// frame is shown on its own (its sample offset still advances: new noise each frame).
   bool accumulate = true;
   /// Path and shadow modes: filter the shown mean with the à-trous denoiser (image/denoise.h),
-  /// guided by the primary hits of the latest frame; threads 0 takes settings.threads.
+  /// guided by the primary hits of the latest frame and, from the second accumulated frame on, by
+  /// each pixel's variance over the frames (`moments`); threads 0 takes settings.threads.
   std::optional<DenoiseSettings> denoise;
   /// Ray-cache cubes: with a policy other than off, prepare_rendering creates the cache store
   /// (the cache::RayCaches resource) and makes it the hook.
@@ -64,6 +65,8 @@ struct RenderJob {
   Framebuffer noisy{1, 1};
   /// The latest frame's primary-hit guides, filled when denoising.
   GuideBuffers guides;
+  /// When denoising: the accumulated frames' per-pixel moments (restarted with the mean).
+  LuminanceMoments moments;
 
   /// The undenoised image: the mean of the accumulated frames in path and shadow modes (for
   /// measuring error), the frame otherwise.

@@ -117,7 +117,8 @@ std::string stats_to_json(const RunStats& stats) {
                    {"denoise", s.denoise ? json{{"iterations", s.denoise_iterations},
                                                 {"sigma_color", s.denoise_sigma_color},
                                                 {"sigma_normal", s.denoise_sigma_normal},
-                                                {"sigma_depth", s.denoise_sigma_depth}}
+                                                {"sigma_depth", s.denoise_sigma_depth},
+                                                {"sigma_variance", s.denoise_sigma_variance}}
                                          : json(false)}};
   if (!s.gpu_device.empty())
     settings["gpu"] = {{"device", s.gpu_device},
@@ -253,6 +254,8 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
       s.denoise_sigma_color = read<float>(denoise, "sigma_color", name, at);
       s.denoise_sigma_normal = read<float>(denoise, "sigma_normal", name, at);
       s.denoise_sigma_depth = read<float>(denoise, "sigma_depth", name, at);
+      // Arrived with the variance-guided colour weight (2026-11-28).
+      read_optional(denoise, "sigma_variance", s.denoise_sigma_variance, name, at);
     } else if (denoise != json(false)) {
       throw Error(name, "settings.denoise", "must be false or an object");
     }

@@ -157,6 +157,7 @@ struct RunSettings {
   float denoise_sigma_color = 0.6f;
   float denoise_sigma_normal = 0.1f;
   float denoise_sigma_depth = 0.1f;
+  float denoise_sigma_variance = 12.0f; ///< from the second accumulated frame on
   // The Vulkan backends' device and options (empty gpu_device: a CPU backend; files from before
   // the Vulkan path have none).
   std::string gpu_device = {};      ///< the device's name

@@ -209,8 +209,10 @@ TEST(Denoise, MissesAreCopiedThroughAndNeverTaps) {
 
 /// The filter written the plain way, a pixel at a time with std::exp, as Dammertz et al. describe
 /// it: what the vectorised implementation must match (up to its exponential's 2·10⁻⁴).
-Framebuffer plain_atrous(const Framebuffer& noisy, const GuideBuffers& g,
-                         const DenoiseSettings& s) {
+/// With `variance`, the variance-guided colour weight: the 3×3 binomial prefilter of the
+/// variances, exp(−|Δc|²/(σ_v²·Var)) per tap, and each level's variance Σw²·Var / (Σw)².
+Framebuffer plain_atrous(const Framebuffer& noisy, const GuideBuffers& g, const DenoiseSettings& s,
+                         const std::vector<float>& variance = {}) {
   const int w = int(noisy.width()), h = int(noisy.height());
   const auto index = [&](int x, int y) { return std::size_t(y) * std::size_t(w) + std::size_t(x); };
   const auto usable = [&](int x, int y) {
@@ -230,16 +232,32 @@ Framebuffer plain_atrous(const Framebuffer& noisy, const GuideBuffers& g,
     if (before && after) return std::abs(b) <= std::abs(a) ? b : a;
     return before ? b : a;
   };
+  std::vector<float> var(c.size(), 0.0f);
+  if (!variance.empty())
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (!usable(x, y)) continue;
+        double sum = 0.0, weights = 0.0;
+        for (int j = -1; j <= 1; ++j)
+          for (int i = -1; i <= 1; ++i) {
+            if (!usable(x + i, y + j)) continue;
+            const double k = double((2 - std::abs(i)) * (2 - std::abs(j)));
+            sum += k * double(std::min(variance[index(x + i, y + j)], 1e30f));
+            weights += k;
+          }
+        var[index(x, y)] = float(sum / weights);
+      }
   for (std::uint32_t level = 0; level < s.iterations; ++level) {
     const int step = 1 << level;
     const float sc = s.sigma_color / float(1 << level);
     std::vector<vec3> next = c;
+    std::vector<float> next_var = var;
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         if (!usable(x, y)) continue;
         const std::size_t p = index(x, y);
         vec3 sum(0.0f);
-        float weights = 0.0f;
+        float weights = 0.0f, var_sum = 0.0f;
         for (int j = -2; j <= 2; ++j)
           for (int i = -2; i <= 2; ++i) {
             const int qx = x + i * step, qy = y + j * step;
@@ -249,15 +267,21 @@ Framebuffer plain_atrous(const Framebuffer& noisy, const GuideBuffers& g,
             const float predicted = g.depth[p] + slope(x, y, 1, 0) * float(i * step) +
                                     slope(x, y, 0, 1) * float(j * step);
             const float dd = (g.depth[q] - predicted) / (s.sigma_depth * g.depth[p]);
-            const float e = glm::dot(dc, dc) / (sc * sc) +
+            const float colour_scale = variance.empty()
+                                           ? sc * sc
+                                           : s.sigma_variance * s.sigma_variance * var[p] + 1e-30f;
+            const float e = glm::dot(dc, dc) / colour_scale +
                             glm::dot(dn, dn) / (s.sigma_normal * s.sigma_normal) + dd * dd;
             const float weight = e < 30.0f ? b3[i + 2] * b3[j + 2] * std::exp(-e) : 0.0f;
             sum += weight * c[q];
             weights += weight;
+            var_sum += weight * weight * var[q];
           }
         next[p] = sum / weights;
+        next_var[p] = var_sum / (weights * weights);
       }
     c = next;
+    var = next_var;
   }
   Framebuffer out(noisy.width(), noisy.height());
   for (std::size_t i = 0; i < c.size(); ++i)
@@ -302,6 +326,112 @@ TEST(Denoise, MatchesTheFilterWrittenPlainly) {
   }
 }
 
+TEST(Denoise, VarianceGuidedMatchesTheFilterWrittenPlainly) {
+  for (const auto& [w, h, levels] : {std::tuple{37u, 23u, 5u}, std::tuple{13u, 9u, 5u},
+                                     std::tuple{1u, 1u, 3u}, std::tuple{6u, 40u, 4u}}) {
+    const GuideBuffers guides = varied_guides(w, h, w + 1);
+    const Framebuffer image = noisy_image(w, h, 0.6f, 0.5f, h + 1);
+    // Variances over four decades, some pixels converged (0) and some unknown (+inf).
+    std::mt19937 rng(w * h);
+    std::uniform_real_distribution<float> decade(-4.0f, 0.0f);
+    std::vector<float> variance(image.pixel_count());
+    for (std::size_t i = 0; i < variance.size(); ++i)
+      variance[i] = i % 11 == 3 ? 0.0f : i % 17 == 5 ? kInf : std::pow(10.0f, decade(rng));
+    DenoiseSettings settings;
+    settings.iterations = levels;
+    Framebuffer out(1, 1);
+    atrous_denoise(image, guides, settings, out, variance);
+    const Framebuffer expected = plain_atrous(image, guides, settings, variance);
+    for (std::size_t i = 0; i < out.pixel_count(); ++i)
+      for (int c = 0; c < 3; ++c)
+        ASSERT_NEAR(out.pixels()[i][c], expected.pixels()[i][c],
+                    2e-3f * std::abs(expected.pixels()[i][c]) + 1e-6f)
+            << w << "x" << h << " pixel " << i << " channel " << c;
+  }
+}
+
+/// A flat wall lit 0.5 with noise ±0.05, one pixel (a firefly) at 40, with the variances a few
+/// frames would show: the firefly's far above the rest. Returns the firefly's denoised value.
+float denoised_firefly(bool variance_guided) {
+  const std::uint32_t w = 32, h = 32, fx = 16, fy = 16;
+  const GuideBuffers guides = flat_guides(w, h);
+  Framebuffer image = noisy_image(w, h, 0.5f, 0.05f, 9);
+  image.at(fx, fy) = vec3(40.0f);
+  std::vector<float> variance(image.pixel_count(), 0.05f * 0.05f / 3.0f / 8.0f);
+  variance[fy * w + fx] = 40.0f * 40.0f / 8.0f; // one sample of 8 was that bright
+  Framebuffer out(1, 1);
+  atrous_denoise(image, guides, DenoiseSettings{}, out,
+                 variance_guided ? variance : std::vector<float>{});
+  return out.at(fx, fy).x;
+}
+
+TEST(Denoise, VarianceGuidedWeightSpreadsAFireflyTheFixedOneKeeps) {
+  // The fixed colour weight sees the firefly as an edge and keeps it (the test has teeth)...
+  EXPECT_GT(denoised_firefly(false), 30.0f);
+  // ...its variance lets the variance-guided weight average it with the wall.
+  EXPECT_LT(denoised_firefly(true), 2.0f);
+}
+
+TEST(Denoise, VarianceGuidedWeightKeepsAConvergedStepAndSmoothsANoisyOne) {
+  // A shadow's edge on one flat wall (the guides cannot see it): lighting 0.2 | 0.8 plus noise.
+  const std::uint32_t w = 64, h = 32;
+  const GuideBuffers guides = flat_guides(w, h);
+  Framebuffer image = noisy_image(w, h, 0.0f, 0.01f, 10);
+  for (std::uint32_t y = 0; y < h; ++y)
+    for (std::uint32_t x = 0; x < w; ++x) image.at(x, y) += vec3(x < w / 2 ? 0.2f : 0.8f);
+  const auto beside_edge = [&](float var) {
+    Framebuffer out(1, 1);
+    atrous_denoise(image, guides, DenoiseSettings{}, out,
+                   std::vector<float>(image.pixel_count(), var));
+    return std::pair{red_moments(out, w / 2 - 2, w / 2).mean,
+                     red_moments(out, w / 2, w / 2 + 2).mean};
+  };
+  // Converged (the noise is within its small variance): the edge stays where it is.
+  const auto [left, right] = beside_edge(0.01f * 0.01f / 3.0f);
+  EXPECT_NEAR(left, 0.2, 0.01);
+  EXPECT_NEAR(right, 0.8, 0.01);
+  // Estimates that could be off by the step itself are averaged across it.
+  const auto [left_noisy, right_noisy] = beside_edge(0.25f);
+  EXPECT_GT(left_noisy, 0.3);
+  EXPECT_LT(right_noisy, 0.7);
+}
+
+TEST(Denoise, LuminanceMomentsGiveTheVarianceOfTheMean) {
+  // Two pixels: one seeing 1, 2, 3, 6 (under albedo 0.5: lighting twice that), one a constant 4
+  // under albedo 1 with a NaN frame left out.
+  GuideBuffers guides;
+  guides.resize(2);
+  guides.albedo = {vec3(0.5f), vec3(1.0f)};
+  LuminanceMoments moments;
+  moments.reset(2);
+  const float values[] = {1.0f, 2.0f, 3.0f, 6.0f};
+  for (int k = 0; k < 4; ++k) {
+    Framebuffer frame(2, 1);
+    frame.at(0, 0) = vec3(values[k]);
+    frame.at(1, 0) = k == 2 ? vec3(std::numeric_limits<float>::quiet_NaN()) : vec3(4.0f);
+    moments.add(frame, guides);
+    if (k == 0) {
+      EXPECT_TRUE(moments.variance_of_mean().empty()) << "one frame has no variance";
+    }
+  }
+  EXPECT_EQ(moments.frames(), 4u);
+  const std::vector<float> v = moments.variance_of_mean();
+  ASSERT_EQ(v.size(), 2u);
+  // Lighting 2, 4, 6, 12: mean 6, sample variance (16 + 4 + 0 + 36) / 3, of the mean / 4.
+  EXPECT_NEAR(v[0], 56.0 / 3.0 / 4.0, 1e-4);
+  EXPECT_EQ(v[1], 0.0f);
+  // A pixel with one finite value has an unknown variance.
+  moments.reset(2);
+  for (int k = 0; k < 2; ++k) {
+    Framebuffer frame(2, 1);
+    frame.at(0, 0) = vec3(k == 0 ? 1.0f : kInf);
+    moments.add(frame, guides);
+  }
+  EXPECT_EQ(moments.variance_of_mean()[0], kInf);
+  // Sizes other than reset()'s are refused.
+  EXPECT_THROW(moments.add(Framebuffer(3, 1), guides), Error);
+}
+
 TEST(Denoise, OutputMayBeTheInput) {
   const std::uint32_t w = 40, h = 24;
   const GuideBuffers guides = flat_guides(w, h);
@@ -325,6 +455,14 @@ TEST(Denoise, IdenticalForOneAndTwoThreads) {
   atrous_denoise(image, guides, settings, two);
   EXPECT_EQ(one, two);
   EXPECT_NE(one, image); // it did filter
+  // The variance-guided weight too.
+  std::vector<float> variance(image.pixel_count());
+  for (std::size_t i = 0; i < variance.size(); ++i) variance[i] = 0.01f * float(1 + i % 7);
+  atrous_denoise(image, guides, settings, two, variance);
+  settings.threads = 1;
+  atrous_denoise(image, guides, settings, one, variance);
+  EXPECT_EQ(one, two);
+  EXPECT_NE(one, image);
 }
 
 TEST(Denoise, MismatchedSizesAndBadSettingsThrow) {
@@ -345,6 +483,16 @@ TEST(Denoise, MismatchedSizesAndBadSettingsThrow) {
     if (which == 2) settings.sigma_normal = -1.0f;
     if (which == 3) settings.sigma_depth = std::numeric_limits<float>::quiet_NaN();
     EXPECT_THROW(atrous_denoise(image, guides, settings, out), Error) << which;
+  }
+  // A variance of the wrong size, or a σ_v that is not a positive finite number.
+  EXPECT_THROW(atrous_denoise(image, guides, DenoiseSettings{}, out, std::vector<float>(127, 1.0f)),
+               Error);
+  for (const float sigma : {0.0f, -2.0f, kInf, std::numeric_limits<float>::quiet_NaN()}) {
+    DenoiseSettings settings;
+    settings.sigma_variance = sigma;
+    EXPECT_THROW(atrous_denoise(image, guides, settings, out, std::vector<float>(128, 1.0f)),
+                 Error)
+        << sigma;
   }
   // The message names the guide and both sizes.
   GuideBuffers short_depth = flat_guides(16, 8);
