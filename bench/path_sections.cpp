@@ -360,6 +360,13 @@ DenoiseSettings denoise_settings(const Options& o) {
   return d;
 }
 
+/// `x` as printf's %g writes it.
+std::string shortest(float x) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", double(x));
+  return buf;
+}
+
 /// The mean's per-pixel variance for the denoiser: none (the fixed colour weight) with
 /// --denoise-fixed.
 std::vector<float> denoise_variance(const Options& o, const Accumulator& acc) {
@@ -584,10 +591,15 @@ void path_error(const Options& o) {
       "estimate is the mean of the frames). *ms*: wall time up to that sample count — tracing "
       "and accumulation (the guides' mean included); the à-trous columns add the filter's own "
       "time (last column). RMSE (linear) and mean FLIP against the cached %u-spp MIS reference "
-      "(a different seed). À-trous: %u levels, σ colour %g (halved per level), σ normal %g, σ "
-      "depth %g, on the mean's guides.\n\n",
-      o.reference_spp, d.iterations, double(d.sigma_color), double(d.sigma_normal),
-      double(d.sigma_depth));
+      "(a different seed). À-trous: %u levels, σ normal %g, σ depth %g, on the mean's guides; "
+      "colour weight %s.\n\n",
+      o.reference_spp, d.iterations, double(d.sigma_normal), double(d.sigma_depth),
+      o.denoise_fixed
+          ? ("fixed, σ colour " + shortest(d.sigma_color) + " (halved per level)").c_str()
+          : ("variance-guided from 2 spp on, σ_v " + shortest(d.sigma_variance) +
+             " (the per-pixel variance of the mean; at 1 spp the fixed σ colour " +
+             shortest(d.sigma_color) + ", halved per level)")
+                .c_str());
   std::vector<std::string> summary_rows;
   for (const std::string& name : scene_names(o.path_scenes)) {
     PathScene scene(o, name);
