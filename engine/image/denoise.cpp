@@ -6,7 +6,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
-#include <emmintrin.h>
+#include <immintrin.h>
 
 #include <algorithm>
 #include <array>
@@ -36,8 +36,8 @@ constexpr float kMaxExponent = 30.0f;
 constexpr std::array<float, 5> kB3 = {1.0f / 16.0f, 1.0f / 4.0f, 3.0f / 8.0f, 1.0f / 4.0f,
                                       1.0f / 16.0f};
 
-/// Pixels per SIMD step (SSE2, the x86-64 baseline).
-constexpr std::uint32_t kLanes = 4;
+/// Pixels per SIMD step of the widest kernel (AVX2): rows are padded to a multiple of it.
+constexpr std::uint32_t kRowLanes = 8;
 
 bool finite(const vec3& v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
@@ -93,7 +93,7 @@ struct Planes {
     width = w;
     height = h;
     pad = padding;
-    stride = pad + (w + kLanes - 1) / kLanes * kLanes + pad;
+    stride = pad + (w + kRowLanes - 1) / kRowLanes * kRowLanes + pad;
     for (Plane* p : {&usable, &nx, &ny, &nz, &depth, &slope_x, &slope_y, &inv_depth_scale,
                      &colour[0], &colour[1], &colour[2], &next[0], &next[1], &next[2]})
       p->data.assign(stride * h, 0.0f);
@@ -106,26 +106,6 @@ struct Planes {
   }
 };
 
-/// exp(−e) for e in [0, kMaxExponent], within 2·10⁻⁴ relative: 2^t split into an integer power
-/// (written into the float's exponent) and 2^g, g in (0, 1], by its degree-5 Taylor polynomial.
-/// The weights need a smooth fall-off, not libm's last bit; this is what makes them cheap.
-inline __m128 exp_neg(__m128 e) {
-  const __m128 t = _mm_mul_ps(e, _mm_set1_ps(-1.44269504f)); // log2(e) · −e, in [−43.3, 0]
-  const __m128i n = _mm_cvttps_epi32(t);                     // toward zero: t − n in (−1, 0]
-  const __m128 g = _mm_add_ps(_mm_sub_ps(t, _mm_cvtepi32_ps(n)), _mm_set1_ps(1.0f));
-  __m128 p = _mm_set1_ps(1.3333558e-3f);
-  p = _mm_add_ps(_mm_mul_ps(p, g), _mm_set1_ps(9.6181291e-3f));
-  p = _mm_add_ps(_mm_mul_ps(p, g), _mm_set1_ps(5.5504109e-2f));
-  p = _mm_add_ps(_mm_mul_ps(p, g), _mm_set1_ps(2.4022651e-1f));
-  p = _mm_add_ps(_mm_mul_ps(p, g), _mm_set1_ps(6.9314718e-1f));
-  p = _mm_add_ps(_mm_mul_ps(p, g), _mm_set1_ps(1.0f));
-  // 2^(n − 1): the exponent field n − 1 + 127 ≥ 83, a normal float.
-  const __m128i bits = _mm_slli_epi32(_mm_add_epi32(n, _mm_set1_epi32(126)), 23);
-  return _mm_mul_ps(p, _mm_castsi128_ps(bits));
-}
-
-inline __m128 square(__m128 a) { return _mm_mul_ps(a, a); }
-
 /// The largest variance the planes hold: an unknown one (+inf) is stored as this, so the
 /// weighted sums of variances stay finite (a weight of 0 times it is 0, never NaN) and its colour
 /// weight is 1 to float precision.
@@ -135,104 +115,58 @@ constexpr float kUnknownVariance = 1e30f;
 /// exact colour, and the inverse stays finite.
 constexpr float kVarianceFloor = 1e-30f;
 
-/// One level of the edge-avoiding à-trous transform over rows [y0, y1): taps `step` pixels
-/// apart, four pixels at a time. Every lane does the same operations in the same order, so a
-/// pixel's value does not depend on which rows a thread was given. kVariance: the colour weight
-/// scales with each centre's variance (`inv_sigma_color2` is then 1/σ_v²), and the level writes
-/// the variance of its result, Σw²·Var / (Σw)².
-template <bool kVariance>
-void filter_level(Planes& px, std::uint32_t step, float inv_sigma_color2, float inv_sigma_normal2,
-                  std::size_t y0, std::size_t y1) {
-  const std::size_t stride = px.stride, pad = px.pad;
-  const auto s = std::ptrdiff_t(step);
-  const __m128 ic = _mm_set1_ps(inv_sigma_color2);
-  const __m128 sigma_v2 = _mm_set1_ps(1.0f / inv_sigma_color2); // kVariance: σ_v²
-  const __m128 in = _mm_set1_ps(inv_sigma_normal2);
-  const __m128 max_exponent = _mm_set1_ps(kMaxExponent);
-  // The centre weighs its kernel weight alone (all distances 0), so the weight sum ≥ 9/64.
-  const __m128 centre_weight = _mm_set1_ps(kB3[2] * kB3[2]);
-  for (std::size_t y = y0; y < y1; ++y) {
-    const auto row = [&](const Plane& p) { return p.row(y, stride, pad); };
-    for (std::size_t x = 0; x < px.width; x += kLanes) {
-      const __m128 cr = _mm_loadu_ps(row(px.colour[0]) + x);
-      const __m128 cg = _mm_loadu_ps(row(px.colour[1]) + x);
-      const __m128 cb = _mm_loadu_ps(row(px.colour[2]) + x);
-      const __m128 cnx = _mm_loadu_ps(row(px.nx) + x);
-      const __m128 cny = _mm_loadu_ps(row(px.ny) + x);
-      const __m128 cnz = _mm_loadu_ps(row(px.nz) + x);
-      const __m128 cd = _mm_loadu_ps(row(px.depth) + x);
-      const __m128 cgx = _mm_loadu_ps(row(px.slope_x) + x);
-      const __m128 cgy = _mm_loadu_ps(row(px.slope_y) + x);
-      const __m128 cis = _mm_loadu_ps(row(px.inv_depth_scale) + x);
-      __m128 ic_pixel = ic;
-      __m128 sv = _mm_setzero_ps();
-      if constexpr (kVariance) {
-        const __m128 cv = _mm_loadu_ps(row(px.variance) + x);
-        const __m128 scaled = _mm_add_ps(_mm_mul_ps(cv, sigma_v2), _mm_set1_ps(kVarianceFloor));
-        ic_pixel = _mm_div_ps(_mm_set1_ps(1.0f), scaled);
-        sv = _mm_mul_ps(_mm_mul_ps(centre_weight, centre_weight), cv);
-      }
-      __m128 sr = _mm_mul_ps(centre_weight, cr);
-      __m128 sg = _mm_mul_ps(centre_weight, cg);
-      __m128 sb = _mm_mul_ps(centre_weight, cb);
-      __m128 sw = centre_weight;
-      for (std::ptrdiff_t j = -2; j <= 2; ++j) {
-        const std::ptrdiff_t qy = std::ptrdiff_t(y) + j * s;
-        if (qy < 0 || qy >= std::ptrdiff_t(px.height)) continue;
-        const auto tap_row = [&](const Plane& p) {
-          return p.row(std::size_t(qy), stride, pad) + std::ptrdiff_t(x);
-        };
-        const float* tr = tap_row(px.colour[0]);
-        const float* tg = tap_row(px.colour[1]);
-        const float* tb = tap_row(px.colour[2]);
-        const float* tnx = tap_row(px.nx);
-        const float* tny = tap_row(px.ny);
-        const float* tnz = tap_row(px.nz);
-        const float* td = tap_row(px.depth);
-        const float* tu = tap_row(px.usable);
-        const float* tv = kVariance ? tap_row(px.variance) : nullptr;
-        // The depth the centre's slope predicts at the tap, row part.
-        const __m128 cd_row = _mm_add_ps(cd, _mm_mul_ps(cgy, _mm_set1_ps(float(j * s))));
-        for (std::ptrdiff_t i = -2; i <= 2; ++i) {
-          if (i == 0 && j == 0) continue;
-          const std::ptrdiff_t ox = i * s;
-          // A tap beyond the padding is farther than the image is wide: outside for every lane.
-          if (ox > std::ptrdiff_t(pad) || -ox > std::ptrdiff_t(pad)) continue;
-          const __m128 qr = _mm_loadu_ps(tr + ox);
-          const __m128 qg = _mm_loadu_ps(tg + ox);
-          const __m128 qb = _mm_loadu_ps(tb + ox);
-          const __m128 dc =
-              _mm_add_ps(_mm_add_ps(square(_mm_sub_ps(qr, cr)), square(_mm_sub_ps(qg, cg))),
-                         square(_mm_sub_ps(qb, cb)));
-          const __m128 dn = _mm_add_ps(_mm_add_ps(square(_mm_sub_ps(_mm_loadu_ps(tnx + ox), cnx)),
-                                                  square(_mm_sub_ps(_mm_loadu_ps(tny + ox), cny))),
-                                       square(_mm_sub_ps(_mm_loadu_ps(tnz + ox), cnz)));
-          const __m128 predicted = _mm_add_ps(cd_row, _mm_mul_ps(cgx, _mm_set1_ps(float(ox))));
-          const __m128 dd = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(td + ox), predicted), cis);
-          const __m128 e =
-              _mm_add_ps(_mm_add_ps(_mm_mul_ps(dc, ic_pixel), _mm_mul_ps(dn, in)), square(dd));
-          // NaN (∞ · 0 from a weight turned off) compares false: weight 0, as beyond the cut-off.
-          const __m128 near = _mm_cmplt_ps(e, max_exponent);
-          const __m128 kernel = _mm_set1_ps(kB3[std::size_t(i + 2)] * kB3[std::size_t(j + 2)]);
-          const __m128 wgt =
-              _mm_mul_ps(_mm_and_ps(near, _mm_mul_ps(kernel, exp_neg(_mm_min_ps(e, max_exponent)))),
-                         _mm_loadu_ps(tu + ox));
-          sr = _mm_add_ps(sr, _mm_mul_ps(wgt, qr));
-          sg = _mm_add_ps(sg, _mm_mul_ps(wgt, qg));
-          sb = _mm_add_ps(sb, _mm_mul_ps(wgt, qb));
-          sw = _mm_add_ps(sw, wgt);
-          if constexpr (kVariance) sv = _mm_add_ps(sv, _mm_mul_ps(square(wgt), _mm_loadu_ps(tv + ox)));
-        }
-      }
-      const __m128 inv = _mm_div_ps(_mm_set1_ps(1.0f), sw);
-      if constexpr (kVariance)
-        _mm_storeu_ps(px.next_variance.row(y, stride, pad) + x, _mm_mul_ps(sv, square(inv)));
-      _mm_storeu_ps(px.next[0].row(y, stride, pad) + x, _mm_mul_ps(sr, inv));
-      _mm_storeu_ps(px.next[1].row(y, stride, pad) + x, _mm_mul_ps(sg, inv));
-      _mm_storeu_ps(px.next[2].row(y, stride, pad) + x, _mm_mul_ps(sb, inv));
-    }
-  }
+// One level of the filter (denoise_level.inl), written once over a few vector operations and
+// compiled twice: for SSE2 (the x86-64 baseline, 4 pixels a step) and, in functions with the avx2
+// target attribute, for AVX2 (8 pixels), chosen at run time. Every lane runs the same IEEE
+// operations in the same order (no FMA), so both give the same bits.
+namespace sse {
+constexpr std::size_t kLanes = 4;
+using Vf = __m128;
+#define SPECULA_SIMD_TARGET
+SPECULA_SIMD_TARGET inline Vf vset1(float x) { return _mm_set1_ps(x); }
+SPECULA_SIMD_TARGET inline Vf vzero() { return _mm_setzero_ps(); }
+SPECULA_SIMD_TARGET inline Vf vload(const float* p) { return _mm_loadu_ps(p); }
+SPECULA_SIMD_TARGET inline void vstore(float* p, Vf a) { _mm_storeu_ps(p, a); }
+SPECULA_SIMD_TARGET inline Vf vadd(Vf a, Vf b) { return _mm_add_ps(a, b); }
+SPECULA_SIMD_TARGET inline Vf vsub(Vf a, Vf b) { return _mm_sub_ps(a, b); }
+SPECULA_SIMD_TARGET inline Vf vmul(Vf a, Vf b) { return _mm_mul_ps(a, b); }
+SPECULA_SIMD_TARGET inline Vf vdiv(Vf a, Vf b) { return _mm_div_ps(a, b); }
+SPECULA_SIMD_TARGET inline Vf vmin(Vf a, Vf b) { return _mm_min_ps(a, b); }
+SPECULA_SIMD_TARGET inline Vf vlt(Vf a, Vf b) { return _mm_cmplt_ps(a, b); }
+SPECULA_SIMD_TARGET inline Vf vand(Vf a, Vf b) { return _mm_and_ps(a, b); }
+/// 2^(n − 1) of t's integer part n (toward zero) and t − n + 1 ∈ (0, 1], for exp_neg.
+SPECULA_SIMD_TARGET inline void vsplit(Vf t, Vf& power, Vf& g) {
+  const __m128i n = _mm_cvttps_epi32(t);
+  g = _mm_add_ps(_mm_sub_ps(t, _mm_cvtepi32_ps(n)), _mm_set1_ps(1.0f));
+  power = _mm_castsi128_ps(_mm_slli_epi32(_mm_add_epi32(n, _mm_set1_epi32(126)), 23));
 }
+#include "denoise_level.inl"
+#undef SPECULA_SIMD_TARGET
+} // namespace sse
+
+namespace avx2 {
+constexpr std::size_t kLanes = 8;
+using Vf = __m256;
+#define SPECULA_SIMD_TARGET __attribute__((target("avx2")))
+SPECULA_SIMD_TARGET inline Vf vset1(float x) { return _mm256_set1_ps(x); }
+SPECULA_SIMD_TARGET inline Vf vzero() { return _mm256_setzero_ps(); }
+SPECULA_SIMD_TARGET inline Vf vload(const float* p) { return _mm256_loadu_ps(p); }
+SPECULA_SIMD_TARGET inline void vstore(float* p, Vf a) { _mm256_storeu_ps(p, a); }
+SPECULA_SIMD_TARGET inline Vf vadd(Vf a, Vf b) { return _mm256_add_ps(a, b); }
+SPECULA_SIMD_TARGET inline Vf vsub(Vf a, Vf b) { return _mm256_sub_ps(a, b); }
+SPECULA_SIMD_TARGET inline Vf vmul(Vf a, Vf b) { return _mm256_mul_ps(a, b); }
+SPECULA_SIMD_TARGET inline Vf vdiv(Vf a, Vf b) { return _mm256_div_ps(a, b); }
+SPECULA_SIMD_TARGET inline Vf vmin(Vf a, Vf b) { return _mm256_min_ps(a, b); }
+SPECULA_SIMD_TARGET inline Vf vlt(Vf a, Vf b) { return _mm256_cmp_ps(a, b, _CMP_LT_OQ); }
+SPECULA_SIMD_TARGET inline Vf vand(Vf a, Vf b) { return _mm256_and_ps(a, b); }
+SPECULA_SIMD_TARGET inline void vsplit(Vf t, Vf& power, Vf& g) {
+  const __m256i n = _mm256_cvttps_epi32(t);
+  g = _mm256_add_ps(_mm256_sub_ps(t, _mm256_cvtepi32_ps(n)), _mm256_set1_ps(1.0f));
+  power = _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_add_epi32(n, _mm256_set1_epi32(126)), 23));
+}
+#include "denoise_level.inl"
+#undef SPECULA_SIMD_TARGET
+} // namespace avx2
 
 /// The variance plane from the caller's variances: each usable pixel gets the 3×3 binomial mean
 /// (1 2 1 per axis) of its usable neighbours' variances — an estimate from a few frames is itself
@@ -257,6 +191,22 @@ void prefilter_variance(Planes& px, const std::vector<std::uint8_t>& usable,
         }
       px.at(px.variance, x, y) = float(sum / weights);
     }
+}
+
+/// One level over rows [y0, y1) with the kernel of `lanes` (4: SSE2, 8: AVX2).
+void filter_rows(Planes& px, std::uint32_t lanes, bool guided, std::uint32_t step,
+                 float inv_sigma_color2, float inv_sigma_normal2, std::size_t y0, std::size_t y1) {
+  if (lanes == 8) {
+    if (guided)
+      avx2::filter_level<true>(px, step, inv_sigma_color2, inv_sigma_normal2, y0, y1);
+    else
+      avx2::filter_level<false>(px, step, inv_sigma_color2, inv_sigma_normal2, y0, y1);
+  } else {
+    if (guided)
+      sse::filter_level<true>(px, step, inv_sigma_color2, inv_sigma_normal2, y0, y1);
+    else
+      sse::filter_level<false>(px, step, inv_sigma_color2, inv_sigma_normal2, y0, y1);
+  }
 }
 
 /// Of the one-sided depth differences towards usable neighbours, the smaller in magnitude.
@@ -333,6 +283,12 @@ void atrous_denoise(const Framebuffer& noisy, const GuideBuffers& guides,
   check_sigma(settings.sigma_color, "sigma_color");
   check_sigma(settings.sigma_normal, "sigma_normal");
   check_sigma(settings.sigma_depth, "sigma_depth");
+  if (settings.lanes != 0 && settings.lanes != 4 && settings.lanes != 8)
+    throw Error("atrous_denoise: lanes must be 0, 4 or 8, got " + std::to_string(settings.lanes));
+  static const bool has_avx2 = __builtin_cpu_supports("avx2");
+  if (settings.lanes == 8 && !has_avx2)
+    throw Error("atrous_denoise: 8 lanes need AVX2, which this CPU does not have");
+  const std::uint32_t lanes = settings.lanes != 0 ? settings.lanes : has_avx2 ? 8u : 4u;
   const bool guided = !variance.empty();
   if (guided) {
     check_size(variance.size(), "variance");
@@ -347,7 +303,7 @@ void atrous_denoise(const Framebuffer& noisy, const GuideBuffers& guides,
   const std::size_t reach =
       settings.iterations == 0 ? 0 : std::size_t(2) << (settings.iterations - 1);
   Planes px;
-  px.allocate(width, height, (std::min<std::size_t>(reach, width) + kLanes - 1) / kLanes * kLanes,
+  px.allocate(width, height, (std::min<std::size_t>(reach, width) + kRowLanes - 1) / kRowLanes * kRowLanes,
               guided);
   const std::span<const vec3> colour = noisy.pixels();
   std::vector<vec3> demodulators(n);
@@ -399,12 +355,8 @@ void atrous_denoise(const Framebuffer& noisy, const GuideBuffers& guides,
     arena.execute([&] {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, height, 4),
                         [&](const tbb::blocked_range<std::size_t>& rows) {
-                          if (guided)
-                            filter_level<true>(px, 1u << level, inv_sigma_color2,
-                                               inv_sigma_normal2, rows.begin(), rows.end());
-                          else
-                            filter_level<false>(px, 1u << level, inv_sigma_color2,
-                                                inv_sigma_normal2, rows.begin(), rows.end());
+                          filter_rows(px, lanes, guided, 1u << level, inv_sigma_color2,
+                                      inv_sigma_normal2, rows.begin(), rows.end());
                         });
     });
     px.colour.swap(px.next);

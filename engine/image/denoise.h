@@ -54,6 +54,9 @@ struct DenoiseSettings {
   /// among 1…32 (docs/PERFORMANCE.md §8).
   float sigma_variance = 12.0f;
   std::uint32_t threads = 0; ///< 0: every hardware thread
+  /// Pixels per vector step: 0 the widest this CPU runs (8 with AVX2, else 4), 4 (SSE2) or 8
+  /// (AVX2; an error on a CPU without it). The result is the same bits for either.
+  std::uint32_t lanes = 0;
 };
 
 /// The per-pixel variance of a running mean of frames, for the variance-guided colour weight:

@@ -465,6 +465,28 @@ TEST(Denoise, IdenticalForOneAndTwoThreads) {
   EXPECT_NE(one, image);
 }
 
+TEST(Denoise, EightLanesGiveTheBitsOfFour) {
+  if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "this CPU has no AVX2";
+  // Widths that leave every remainder of a group of eight, both colour weights.
+  for (const std::uint32_t w : {1u, 5u, 8u, 13u, 37u}) {
+    const std::uint32_t h = 19;
+    const GuideBuffers guides = varied_guides(w, h, w + 2);
+    const Framebuffer image = noisy_image(w, h, 0.6f, 0.5f, w + 3);
+    std::vector<float> variance(image.pixel_count());
+    for (std::size_t i = 0; i < variance.size(); ++i) variance[i] = 0.003f * float(1 + i % 5);
+    for (const bool guided : {false, true}) {
+      DenoiseSettings settings;
+      settings.lanes = 4;
+      Framebuffer four(1, 1), eight(1, 1);
+      atrous_denoise(image, guides, settings, four, guided ? variance : std::vector<float>{});
+      settings.lanes = 8;
+      atrous_denoise(image, guides, settings, eight, guided ? variance : std::vector<float>{});
+      EXPECT_EQ(four, eight) << w << (guided ? " variance-guided" : " fixed");
+      EXPECT_NE(four, image);
+    }
+  }
+}
+
 TEST(Denoise, MismatchedSizesAndBadSettingsThrow) {
   const Framebuffer image(16, 8);
   Framebuffer out(1, 1);
@@ -483,6 +505,11 @@ TEST(Denoise, MismatchedSizesAndBadSettingsThrow) {
     if (which == 2) settings.sigma_normal = -1.0f;
     if (which == 3) settings.sigma_depth = std::numeric_limits<float>::quiet_NaN();
     EXPECT_THROW(atrous_denoise(image, guides, settings, out), Error) << which;
+  }
+  for (const std::uint32_t lanes : {1u, 2u, 16u}) {
+    DenoiseSettings settings;
+    settings.lanes = lanes;
+    EXPECT_THROW(atrous_denoise(image, guides, settings, out), Error) << lanes;
   }
   // A variance of the wrong size, or a σ_v that is not a positive finite number.
   EXPECT_THROW(atrous_denoise(image, guides, DenoiseSettings{}, out, std::vector<float>(127, 1.0f)),
