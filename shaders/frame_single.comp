@@ -64,6 +64,20 @@ uint walk_trace(uint f, uint local, vec3 org, vec3 dir, float tfar, bool any_hit
   return status;
 }
 
+// Whether a child leaving `leaves` may be looked up now. A march-mode lookup runs up to
+// kCubeMarchIterations loop iterations, drawn from the traversal budget like a trace's (lavapipe's
+// loop cap); with too little left the walk stops and the next dispatch retries with a fresh
+// budget, where the march always runs (even beyond a budget smaller than the march: at most one
+// march past it per dispatch).
+bool march_fits(uint leaves, inout uint budget) {
+  if (!kCache || leaves == kNoIndex) return true;
+  GpuCube c = cubes[leaves];
+  if ((c.flags & kCubeEnabled) == 0u || c.mode != kCubeMarch) return true;
+  if (budget < kCubeMarchIterations && budget != params.budget) return false;
+  budget -= min(budget, kCubeMarchIterations);
+  return true;
+}
+
 // Pushes a child of frame f when its throughput passes min_weight; false when none was pushed.
 // A child leaving a cached object is looked up first (the CPU asks the store before tracing it):
 // served, it returns at once; a cached miss confirms with an occlusion ray first.
@@ -206,12 +220,21 @@ void main() {
       }
       stack[f].light = l + 1u;
     } else if (state == kFrameRefract) {
+      if (kDielectrics && stack[f].refract_weight > 0.0 &&
+          !march_fits(stack[f].refract_leaves, budget)) {
+        stopped = true;
+        break;
+      }
       stack[f].state = kFrameReflect;
       if (kDielectrics && stack[f].refract_weight > 0.0 &&
           push_child(base, top, stack[f].refract_origin, stack[f].refract_direction,
                      stack[f].refract_weight, kKindRefraction, stack[f].refract_leaves))
         ++top;
     } else if (state == kFrameReflect) {
+      if (stack[f].reflect_weight > 0.0 && !march_fits(stack[f].reflect_leaves, budget)) {
+        stopped = true;
+        break;
+      }
       stack[f].state = kFrameReturn;
       if (stack[f].reflect_weight > 0.0 &&
           push_child(base, top, stack[f].reflect_origin, stack[f].reflect_direction,

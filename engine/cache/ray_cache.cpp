@@ -4,6 +4,7 @@
 #include "specula/core/error.h"
 #include "specula/scene/components/material.h"
 #include "specula/scene/components/ray_cache_cube.h"
+#include "specula/shared/cache_layout.h"
 #include "specula/trace/lights.h"
 
 #include <glm/gtc/packing.hpp>
@@ -96,8 +97,8 @@ namespace {
 /// from run to run.
 constexpr double kLookupRayCost = 0.05;    // one texel fetch and its acceptance test
 constexpr double kMarchStepRayCost = 0.02; // one step of the distance march
-constexpr std::uint32_t kMaxMarchSteps = 96;
-constexpr std::uint32_t kRefineSteps = 6;
+constexpr std::uint32_t kMaxMarchSteps = gpu::kCubeMarchSteps; // the device marches alike
+constexpr std::uint32_t kRefineSteps = gpu::kCubeRefineSteps;
 constexpr std::uint64_t kMinErrorSamples = 64;
 /// The auto policy's error estimate: each frame's verified errors weigh this much of the next
 /// frame's (about the last two frames count).
@@ -691,7 +692,7 @@ static Answer march(const std::vector<Texel>& texels, std::uint32_t res, const v
     const float D = texel_distance(tx);
     if (std::isinf(D)) {
       // Nothing stored this way. Once q's direction is within a texel of d, it never leaves it.
-      if (r > 0.0f && glm::dot(q, d) >= r * std::cos(0.5f * texel_angle)) {
+      if (r > 0.0f && glm::dot(q, d) >= r * march_cos_half_texel(res)) {
         const std::uint32_t td = texel_of(d, res);
         if (!texels[td].valid()) {
           a.outdated = true;

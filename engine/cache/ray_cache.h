@@ -22,6 +22,7 @@
 #include "specula/trace/stats.h"
 
 #include <atomic>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -112,6 +113,14 @@ struct CubeView {
   const std::uint32_t h = hash_combine(
       hash_combine(hash_combine(hash_u32(pixel), depth | (sample << 8)), frame), cube);
   return every != 0 && h % every == 0;
+}
+
+/// The march's test that a point's direction from the centre lies within half a texel of the
+/// ray's (its cosine) on a cube of `resolution`: one expression for the store and for the device
+/// kernels, which take the value from the host (GpuCube::cos_half_texel).
+[[nodiscard]] inline float march_cos_half_texel(std::uint32_t resolution) {
+  const float texel_angle = 2.0f / float(resolution);
+  return std::cos(0.5f * texel_angle);
 }
 
 /// What a lookup found in its texel (RayCacheStore::lookup_log).

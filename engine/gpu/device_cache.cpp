@@ -16,20 +16,13 @@ cache::RayCacheStore* DeviceCache::store_of(RadianceHook* hook) {
   if (store == nullptr) return nullptr;
   const cache::CacheSettings& s = store->settings();
   if (s.policy != cache::CachePolicy::On && s.policy != cache::CachePolicy::Auto) return nullptr;
-  if (s.policy == cache::CachePolicy::On && s.lookup == cache::LookupMode::March) return nullptr;
-  // The kernels look up in direction and tau modes; a frame in which some cube marches stays
-  // with the CPU integrators (under auto, while that cube's march is on trial).
-  for (std::size_t i = 0; i < store->cube_count(); ++i) {
-    const cache::CubeView v = store->cube(i);
-    if (v.enabled && v.mode == cache::LookupMode::March) return nullptr;
-  }
-  return store;
+  return store; // every lookup mode runs in the kernels (direction, tau, march)
 }
 
 void DeviceCache::upload(const cache::RayCacheStore& store, std::uint32_t slots, bool lookups) {
   const VkDeviceSize range = context_.info().max_storage_buffer_range;
   std::vector<GpuCube> table(std::max(1u, slots));
-  for (GpuCube& c : table) c = GpuCube{vec3(0.0f), 0, 0, kCubeNone, 1.0f, 0, 0, 0, 0, 0};
+  for (GpuCube& c : table) c = GpuCube{vec3(0.0f), 0, 0, kCubeNone, 1.0f, 0, 0, 0, 0, 1.0f};
   std::uint64_t total = 0;
   for (std::size_t i = 0; i < store.cube_count(); ++i) total += store.cube(i).texels.size();
   if (total * sizeof(cache::Texel) > range)
@@ -52,14 +45,16 @@ void DeviceCache::upload(const cache::RayCacheStore& store, std::uint32_t slots,
     c.resolution = v.resolution;
     c.first_texel = first;
     // An off cube (auto) is neither looked up nor handed its leaving rays, as on the CPU.
-    c.mode = !v.enabled                         ? kCubeNone
-             : v.mode == cache::LookupMode::Tau ? kCubeTau
-                                                : kCubeDirection;
+    c.mode = !v.enabled                           ? kCubeNone
+             : v.mode == cache::LookupMode::Tau   ? kCubeTau
+             : v.mode == cache::LookupMode::March ? kCubeMarch
+                                                  : kCubeDirection;
     c.cos_tau = v.cos_tau;
     c.flags = lookups && v.enabled ? kCubeEnabled : 0u;
     c.verify_every = v.verify_every;
     c.index = std::uint32_t(i);
     c.frame = store.verify_frame();
+    c.cos_half_texel = cache::march_cos_half_texel(v.resolution);
     const Uploaded u{v.owner.index, first, v.resolution, v.generation};
     const bool same = i < uploaded_.size() && uploaded_[i].owner == u.owner &&
                       uploaded_[i].first == u.first && uploaded_[i].resolution == u.resolution &&

@@ -8,9 +8,9 @@
 /// the store's lookup() does (shaders/include/frame_cache.glsl) and record each ray they traced
 /// or served for a cube; deliver() replays the lookups on the store (its counters) and hands it
 /// the records as leaving(), so the store stays authoritative: its write rule, fill budget and
-/// counters apply unchanged. --cache on in Direction or Tau mode and --cache auto run on the
-/// device (auto's verified lookups chosen by the same hash, cache::verify_chosen), but for a
-/// frame in which a cube marches.
+/// counters apply unchanged. --cache on in every lookup mode (direction, tau, march) and --cache
+/// auto run on the device (auto's verified lookups chosen by the same hash,
+/// cache::verify_chosen).
 
 #include "specula/gpu/vk_context.h"
 
@@ -31,8 +31,8 @@ class DeviceCache {
 public:
   explicit DeviceCache(Context& context) : context_(context) {}
 
-  /// The store behind `hook` when device frames can serve it (a RayCacheStore, policy on or auto,
-  /// no enabled cube in march mode this frame), else nullptr.
+  /// The store behind `hook` when device frames can serve it (a RayCacheStore, policy on or
+  /// auto), else nullptr.
   [[nodiscard]] static cache::RayCacheStore* store_of(RadianceHook* hook);
 
   /// Brings the device copy up to date with `store` for a layer of `slots` instance slots;

@@ -42,6 +42,82 @@ bool cache_verify(GpuCube c, uint pixel, uint depth) {
   return c.verify_every != 0u && h % c.verify_every == 0u;
 }
 
+// ray_cache.cpp's march, operation for operation: where the ray origin + t·direction first goes
+// beyond the stored surface (|q − c| ≥ the texel's distance), stepping about a texel of angle (or
+// the gap to the surface) at a time, then bisecting; the texel found is used if its stored hit
+// lies within τ of the ray. A ray whose direction from the centre converges on its own without
+// crossing anything sees what the texel of its direction saw: a miss, confirmed by an occlusion
+// ray (kAnswerUseIfClear). Returns kAnswerTrace (outdated, rejected, out of steps), kAnswerUse or
+// kAnswerUseIfClear, with the texel's index in `texel`. At most kCubeMarchIterations iterations.
+uint cache_march(GpuCube c, vec3 p, vec3 d, out uint texel) {
+  texel = 0u;
+  uint res = c.resolution;
+  precise vec3 pc = p - c.centre;
+  precise float texel_angle = 2.0 / float(res);
+  float scale = max(length3(pc), 1e-6);
+  precise float least = 1e-4 * scale;
+  float t = 0.0;
+  float t_inside = 0.0;
+  for (uint step = 0u; step < kCubeMarchSteps; ++step) {
+    precise vec3 q = pc + t * d;
+    float r = length3(q);
+    uint ti = cube_texel(r > 0.0 ? q : d, res);
+    uvec4 tx = texels[c.first_texel + ti];
+    if (!texel_valid(tx)) return kAnswerTrace;
+    float D = texel_distance(tx);
+    if (isinf(D)) {
+      precise float bound = r * c.cos_half_texel;
+      if (r > 0.0 && dot3(q, d) >= bound) {
+        uint td = cube_texel(d, res);
+        uvec4 own = texels[c.first_texel + td];
+        if (!texel_valid(own) || !isinf(texel_distance(own))) return kAnswerTrace;
+        texel = td;
+        return kAnswerUseIfClear;
+      }
+    } else if (r >= D) {
+      // Crossed between t_inside and t: bisect.
+      float lo = t_inside, hi = t;
+      uint found = ti;
+      for (uint k = 0u; k < kCubeRefineSteps; ++k) {
+        precise float mid = 0.5 * (lo + hi);
+        precise vec3 qm = pc + mid * d;
+        float rm = length3(qm);
+        uint tm = cube_texel(rm > 0.0 ? qm : d, res);
+        uvec4 mx = texels[c.first_texel + tm];
+        if (!texel_valid(mx)) return kAnswerTrace;
+        float Dm = texel_distance(mx);
+        if (!isinf(Dm) && rm >= Dm) {
+          hi = mid;
+          found = tm;
+        } else {
+          lo = mid;
+        }
+      }
+      precise vec3 q_hit = pc + hi * d;
+      float r_hit = length3(q_hit);
+      precise vec3 s = r_hit > 0.0 ? q_hit / r_hit : d;
+      if (!cache_within_tau(c.centre, s, texel_distance(texels[c.first_texel + found]), p, d,
+                            c.cos_tau))
+        return kAnswerTrace;
+      texel = found;
+      return kAnswerUse;
+    }
+    t_inside = t;
+    // About one texel of angle as seen from the centre, never past the surface when the stored
+    // distance does not change.
+    precise float perp = r > 0.0 ? length3(cross3(d, q)) / r : 0.0;
+    precise float dt = perp > 1e-12 ? texel_angle * r * r / perp : kInfinity;
+    if (!isinf(D)) {
+      precise float gap = max(D - r, 0.0) + least;
+      dt = min(dt, gap);
+    }
+    precise float next = t + max(dt, least);
+    t = next;
+    if (isinf(t) || isnan(t)) break;
+  }
+  return kAnswerTrace; // ran out of steps: trace
+}
+
 // RayCacheStore::lookup for one ray leaving `slot` (a cube's) from `pixel` at `depth`:
 // kAnswerTrace, or kAnswerUse / kAnswerUseIfClear with the texel's radiance and seen mask, or
 // kAnswerVerify (traced as kAnswerTrace, its radiance and mask left 0: the host takes the cached
@@ -52,9 +128,13 @@ uint cache_lookup(uint slot, uint pixel, uint depth, vec3 origin, vec3 direction
   seen = 0u;
   GpuCube c = cubes[slot];
   if ((c.flags & kCubeEnabled) == 0u) return kAnswerTrace;
-  uvec4 t = texels[c.first_texel + cube_texel(direction, c.resolution)];
+  uint texel = cube_texel(direction, c.resolution);
   uint answer = kAnswerTrace;
-  if (texel_valid(t)) {
+  if (c.mode == kCubeMarch) {
+    answer = cache_march(c, origin, direction, texel);
+  }
+  uvec4 t = texels[c.first_texel + texel];
+  if (c.mode != kCubeMarch && texel_valid(t)) {
     if (c.mode == kCubeDirection) {
       answer = kAnswerUse;
     } else {

@@ -23,9 +23,16 @@ SPECULA_CONST uint kCacheTexelsBinding = 21u;
 SPECULA_CONST uint kCacheRecordsBinding = 22u;
 SPECULA_CONST uint kCacheBindings = 23u;
 
-/// GpuCube::mode: cache::LookupMode (Direction, Tau); kCubeNone: the slot has no cube.
+/// GpuCube::mode: cache::LookupMode (Direction, Tau, March); kCubeNone: the slot has no cube.
 SPECULA_CONST uint kCubeDirection = 0u;
 SPECULA_CONST uint kCubeTau = 1u;
+SPECULA_CONST uint kCubeMarch = 2u;
+/// The march's bounds (ray_cache.cpp): steps along the ray, then bisection steps. A lookup in
+/// march mode runs at most kCubeMarchIterations loop iterations (the single kernel charges them
+/// to its traversal budget: lavapipe's loop cap).
+SPECULA_CONST uint kCubeMarchSteps = 96u;
+SPECULA_CONST uint kCubeRefineSteps = 6u;
+SPECULA_CONST uint kCubeMarchIterations = kCubeMarchSteps + kCubeRefineSteps;
 SPECULA_CONST uint kCubeNone = 0xFFFFFFFFu;
 /// GpuCube::flags.
 SPECULA_CONST uint kCubeEnabled = 1u; ///< looked up (else only its leaving rays are recorded)
@@ -47,7 +54,7 @@ struct GpuCube {
   uint verify_every; ///< auto: cache::verify_chosen's period (0: no lookup is verified)
   uint index;        ///< the cube's index in the store (verify_chosen hashes it)
   uint frame;        ///< the store's verify_frame()
-  uint _pad0;
+  float cos_half_texel; ///< March: cos(½ · 2/resolution), the march's "within a texel of d"
 };
 
 /// A ray that left a cached object (the CPU's LeavingRadiance, for the cube's rays only):
