@@ -1,5 +1,6 @@
 #include "specula/accel/embree/embree_tracer.h"
 
+#include "specula/accel/bvh/bvh.h"
 #include "specula/accel/common/traceable_instance.h"
 #include "specula/core/assert.h"
 #include "specula/core/error.h"
@@ -39,7 +40,21 @@ void EmbreeTracer::on_error(void* user, RTCError code, const char* message) {
   self->last_error_ = "Embree error " + std::to_string(int(code)) + ": " + (message ? message : "");
 }
 
-EmbreeTracer::EmbreeTracer(std::uint32_t packet_width) : packet_width_(packet_width) {
+/// A deforming mesh's stand-in tree: the mesh's object-space triangles and Specula's binned-SAH
+/// BVH over them, refitted as Embree's BLAS is, whose SAH cost against its cost when built says
+/// how far the BLAS's (unseen) topology has degraded.
+struct EmbreeTracer::DegradationProbe {
+  std::vector<vec3> positions;
+  std::vector<uvec3> triangles;
+  accel::Bvh bvh;
+  float built_cost = 0.0f;
+  [[nodiscard]] accel::TriangleView view() const {
+    return {positions.data(), triangles.data(), std::uint32_t(triangles.size())};
+  }
+};
+
+EmbreeTracer::EmbreeTracer(std::uint32_t packet_width, float restructure_threshold)
+    : packet_width_(packet_width), restructure_threshold_(restructure_threshold) {
   set_packet_width(packet_width);
   // SPECULA_EMBREE_CONFIG adds to Embree's device configuration, e.g. "isa=avx2" to run the
   // kernels another CPU would pick (the golden tests' tolerance is about that).
@@ -106,6 +121,26 @@ RTCGeometry EmbreeTracer::make_triangles(const SceneTables& tables, std::uint32_
   rtcSetGeometryBuildQuality(geom, quality);
   rtcCommitGeometry(geom);
   return geom;
+}
+
+void EmbreeTracer::build_deforming(const SceneTables& tables, std::uint32_t slot, Dynamic& d) {
+  const std::uint32_t mesh = tables.instances[slot].mesh;
+  d.own_blas = rtcNewScene(device_);
+  rtcSetSceneFlags(d.own_blas, RTC_SCENE_FLAG_DYNAMIC | RTC_SCENE_FLAG_ROBUST);
+  d.own_mesh = make_triangles(tables, mesh, RTC_BUILD_QUALITY_REFIT);
+  rtcAttachGeometry(d.own_blas, d.own_mesh);
+  rtcReleaseGeometry(d.own_mesh); // the scene keeps it
+  rtcCommitScene(d.own_blas);
+  check("building a deforming mesh's structure");
+  const gpu::GpuMesh& m = tables.meshes[mesh];
+  auto probe = std::make_shared<DegradationProbe>();
+  probe->positions.assign(tables.positions.begin() + m.first_vertex,
+                          tables.positions.begin() + m.first_vertex + m.vertex_count);
+  probe->triangles.assign(tables.triangles.begin() + m.first_triangle,
+                          tables.triangles.begin() + m.first_triangle + m.triangle_count);
+  probe->bvh.build(probe->view());
+  probe->built_cost = probe->bvh.sah_cost();
+  d.probe = std::move(probe);
 }
 
 void EmbreeTracer::rebuild_static(const SceneTables& tables) {
@@ -217,13 +252,7 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     Dynamic d;
     RTCScene blas = nullptr;
     if ((inst.flags & gpu::kInstanceDeforming) != 0) {
-      d.own_blas = rtcNewScene(device_);
-      rtcSetSceneFlags(d.own_blas, RTC_SCENE_FLAG_DYNAMIC | RTC_SCENE_FLAG_ROBUST);
-      d.own_mesh = make_triangles(tables, inst.mesh, RTC_BUILD_QUALITY_REFIT);
-      rtcAttachGeometry(d.own_blas, d.own_mesh);
-      rtcReleaseGeometry(d.own_mesh); // the scene keeps it
-      rtcCommitScene(d.own_blas);
-      check("building a deforming mesh's structure");
+      build_deforming(tables, slot, d);
       ++last_.blas_builds;
       last_.triangles_rebuilt += tables.meshes[inst.mesh].triangle_count;
       blas = d.own_blas;
@@ -253,17 +282,37 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     auto* vertices =
         static_cast<float*>(rtcGetGeometryBufferData(d.own_mesh, RTC_BUFFER_TYPE_VERTEX, 0));
     std::memcpy(vertices, tables.positions.data() + m.first_vertex, m.vertex_count * sizeof(vec3));
-    rtcUpdateGeometryBuffer(d.own_mesh, RTC_BUFFER_TYPE_VERTEX, 0);
-    rtcCommitGeometry(d.own_mesh);
-    rtcCommitScene(d.own_blas); // refit: the topology is unchanged
+    // The probe follows the vertices; past the threshold the BLAS is rebuilt instead of refitted.
+    DegradationProbe& probe = *d.probe;
+    std::memcpy(probe.positions.data(), tables.positions.data() + m.first_vertex,
+                m.vertex_count * sizeof(vec3));
+    probe.bvh.refit(probe.view());
+    const float cost = probe.bvh.sah_cost();
+    ++last_.blas_refits; // as on the native backend: refitted, then rebuilt if degraded
+    last_.refit_ms += ms_since(start);
+    const auto rebuild_start = Clock::now();
+    if (cost > restructure_threshold_ * probe.built_cost) {
+      // A fresh BLAS (Embree keeps the topology of a REFIT-quality build): the instance now
+      // points at a new scene.
+      rtcReleaseScene(d.own_blas);
+      build_deforming(tables, slot, d);
+      d.blas = d.own_blas;
+      rtcSetGeometryInstancedScene(d.instance, d.blas);
+      ++last_.blas_restructures;
+      last_.triangles_rebuilt += m.triangle_count;
+      last_.restructure_ms += ms_since(rebuild_start);
+    } else {
+      rtcUpdateGeometryBuffer(d.own_mesh, RTC_BUFFER_TYPE_VERTEX, 0);
+      rtcCommitGeometry(d.own_mesh);
+      rtcCommitScene(d.own_blas); // refit: the topology is unchanged
+      last_.triangles_refit += m.triangle_count; // Embree refits whole (RTC_BUILD_QUALITY_REFIT)
+      last_.refit_ms += ms_since(rebuild_start);
+    }
     // The instance caches its scene's bounds: without this commit the top level keeps the old
     // ones, and rays miss whatever moved outside them (found by tests/accel/test_differential).
     rtcCommitGeometry(d.instance);
     place(slot, d, tables.instances[slot].world_from_object); // the mesh may have collapsed
     check("refitting a deforming mesh");
-    ++last_.blas_refits;
-    last_.triangles_refit += m.triangle_count; // Embree refits whole (RTC_BUILD_QUALITY_REFIT)
-    last_.refit_ms += ms_since(start);
     top_dirty = true; // the instance's bounds changed
   }
   for (const std::uint32_t mesh : delta.meshes_removed) {

@@ -8,7 +8,12 @@
 ///   - each object-space mesh the layer shares between dynamic instances gets one scene (BLAS);
 ///     moving an instance only rewrites its transform;
 ///   - a deforming instance owns a BLAS built with RTC_BUILD_QUALITY_REFIT and refitted when the
-///     layer reports its vertices rewritten;
+///     layer reports its vertices rewritten; Embree does not expose its tree, so a binned-SAH
+///     BVH of Specula's own over the same triangles (refitted alike, never traced) stands in for
+///     it: when that tree's SAH cost has grown past `restructure_threshold` of its cost when
+///     built, the topology has degraded (triangles scattered away from their build neighbours)
+///     and the BLAS is rebuilt from scratch, with its stand-in (selective restructuring, whole
+///     meshes: Embree rebuilds no subtree alone);
 ///   - the top level holds the static scene (geometry id 0) and one instance per dynamic instance
 ///     slot s (geometry id s + 1), and is recommitted only when one of them changed.
 /// Only the layer's delta causes work; last_update() counts what was done.
@@ -18,6 +23,7 @@
 #include <embree3/rtcore.h>
 
 #include <cstdint>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <unordered_map>
@@ -30,7 +36,9 @@ struct SceneTables;
 class EmbreeTracer final : public Tracer {
 public:
   /// packet_width: 1, 4, 8 or 16. Throws specula::Error when Embree cannot create a device.
-  explicit EmbreeTracer(std::uint32_t packet_width = 16);
+  /// restructure_threshold: a deforming mesh's BLAS is rebuilt once its stand-in tree's SAH cost
+  /// exceeds this times its cost when built (the native backend's default; +inf: never).
+  explicit EmbreeTracer(std::uint32_t packet_width = 16, float restructure_threshold = 1.3f);
   ~EmbreeTracer() override;
   EmbreeTracer(const EmbreeTracer&) = delete;
   EmbreeTracer& operator=(const EmbreeTracer&) = delete;
@@ -56,6 +64,7 @@ public:
   [[nodiscard]] RTCScene scene() const { return top_; }
 
 private:
+  struct DegradationProbe; // embree_tracer.cpp
   struct Dynamic {
     RTCGeometry instance = nullptr;
     RTCScene blas = nullptr;     ///< the scene it instances (shared or own_blas)
@@ -63,7 +72,13 @@ private:
     RTCScene own_blas = nullptr; ///< deforming instances only
     RTCGeometry own_mesh = nullptr;
     std::uint32_t triangles = 0; ///< in its mesh (the update stats' triangle counts)
+    /// Deforming instances: the stand-in tree whose SAH cost tells when to rebuild own_blas.
+    std::shared_ptr<DegradationProbe> probe;
   };
+
+  /// Builds instance `slot`'s own BLAS (a deforming mesh) and its degradation probe into `d`,
+  /// replacing any it had.
+  void build_deforming(const SceneTables& tables, std::uint32_t slot, Dynamic& d);
 
   /// The scene single rays are traced in: the static scene when it is the whole scene, else the
   /// top level.
@@ -87,6 +102,7 @@ private:
   static void on_error(void* user, RTCError code, const char* message);
 
   std::uint32_t packet_width_;
+  float restructure_threshold_;
   RTCDevice device_ = nullptr;
   RTCScene top_ = nullptr;
   RTCScene static_scene_ = nullptr;
