@@ -68,7 +68,6 @@ constexpr std::uint32_t kReferenceFrameSpp = 16;
 /// files are not taken for new ones. Integrator bug fixes need `rm -r <build>/references`.
 constexpr const char* kReferenceVersion = "specula-path-reference-1";
 
-
 // --- Scenes ------------------------------------------------------------------------------------
 
 /// The names of a comma-separated list (--path-scenes, --path-cache-scenes).
@@ -399,11 +398,9 @@ Run measure(const Options& o, PathScene& scene, const Framebuffer& ref, LightSam
     c.spp = k + 1;
     c.ms = elapsed;
     Framebuffer denoised(1, 1);
-    c.denoise_ms =
-        time_ms([&] {
-          atrous_denoise(mean, acc.guides(), denoise_settings(o), denoised,
-                         denoise_variance(o, acc));
-        });
+    c.denoise_ms = time_ms([&] {
+      atrous_denoise(mean, acc.guides(), denoise_settings(o), denoised, denoise_variance(o, acc));
+    });
     c.rmse = rmse(ref, mean);
     c.flip = flip(ref, mean).mean;
     c.rmse_denoised = rmse(ref, denoised);

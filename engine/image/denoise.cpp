@@ -174,7 +174,9 @@ SPECULA_SIMD_TARGET inline void vsplit(Vf t, Vf& power, Vf& g) {
 void prefilter_variance(Planes& px, const std::vector<std::uint8_t>& usable,
                         std::span<const float> variance) {
   const std::size_t w = px.width, h = px.height;
-  const auto known = [](float v) { return v >= 0.0f ? std::min(v, kUnknownVariance) : kUnknownVariance; };
+  const auto known = [](float v) {
+    return v >= 0.0f ? std::min(v, kUnknownVariance) : kUnknownVariance;
+  };
   for (std::size_t y = 0; y < h; ++y)
     for (std::size_t x = 0; x < w; ++x) {
       if (usable[y * w + x] == 0) continue;
@@ -303,7 +305,8 @@ void atrous_denoise(const Framebuffer& noisy, const GuideBuffers& guides,
   const std::size_t reach =
       settings.iterations == 0 ? 0 : std::size_t(2) << (settings.iterations - 1);
   Planes px;
-  px.allocate(width, height, (std::min<std::size_t>(reach, width) + kRowLanes - 1) / kRowLanes * kRowLanes,
+  px.allocate(width, height,
+              (std::min<std::size_t>(reach, width) + kRowLanes - 1) / kRowLanes * kRowLanes,
               guided);
   const std::span<const vec3> colour = noisy.pixels();
   std::vector<vec3> demodulators(n);

@@ -85,10 +85,11 @@ SPECULA_SIMD_TARGET void filter_level(Planes& px, std::uint32_t step, float inv_
           const Vf qr = vload(tr + ox);
           const Vf qg = vload(tg + ox);
           const Vf qb = vload(tb + ox);
-          const Vf dc = vadd(vadd(square(vsub(qr, cr)), square(vsub(qg, cg))), square(vsub(qb, cb)));
-          const Vf dn = vadd(vadd(square(vsub(vload(tnx + ox), cnx)),
-                                  square(vsub(vload(tny + ox), cny))),
-                             square(vsub(vload(tnz + ox), cnz)));
+          const Vf dc =
+              vadd(vadd(square(vsub(qr, cr)), square(vsub(qg, cg))), square(vsub(qb, cb)));
+          const Vf dn =
+              vadd(vadd(square(vsub(vload(tnx + ox), cnx)), square(vsub(vload(tny + ox), cny))),
+                   square(vsub(vload(tnz + ox), cnz)));
           const Vf predicted = vadd(cd_row, vmul(cgx, vset1(float(ox))));
           const Vf dd = vmul(vsub(vload(td + ox), predicted), cis);
           const Vf e = vadd(vadd(vmul(dc, ic_pixel), vmul(dn, in)), square(dd));
@@ -105,7 +106,8 @@ SPECULA_SIMD_TARGET void filter_level(Planes& px, std::uint32_t step, float inv_
         }
       }
       const Vf inv = vdiv(vset1(1.0f), sw);
-      if constexpr (kVariance) vstore(px.next_variance.row(y, stride, pad) + x, vmul(sv, square(inv)));
+      if constexpr (kVariance)
+        vstore(px.next_variance.row(y, stride, pad) + x, vmul(sv, square(inv)));
       vstore(px.next[0].row(y, stride, pad) + x, vmul(sr, inv));
       vstore(px.next[1].row(y, stride, pad) + x, vmul(sg, inv));
       vstore(px.next[2].row(y, stride, pad) + x, vmul(sb, inv));

@@ -1,8 +1,8 @@
 // Ray-cache cubes on the device (engine/gpu/device_cache.h): the device's cube addressing is
 // cube_map.h's bit for bit; cached Whitted frames (direction, tau and march modes, wavefront and
-// single kernel) equal the CPU integrator's over native-bvh — image and the store's counters — frame
-// after frame while the cubes fill, and again after an object moves and the store invalidates;
-// no ray is cut by the driver and every device lookup agrees with the store's own.
+// single kernel) equal the CPU integrator's over native-bvh — image and the store's counters —
+// frame after frame while the cubes fill, and again after an object moves and the store
+// invalidates; no ray is cut by the driver and every device lookup agrees with the store's own.
 #include "device_scenes.h"
 #include "specula/cache/cube_map.h"
 #include "specula/cache/ray_cache.h"

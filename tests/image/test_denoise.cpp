@@ -267,9 +267,8 @@ Framebuffer plain_atrous(const Framebuffer& noisy, const GuideBuffers& g, const 
             const float predicted = g.depth[p] + slope(x, y, 1, 0) * float(i * step) +
                                     slope(x, y, 0, 1) * float(j * step);
             const float dd = (g.depth[q] - predicted) / (s.sigma_depth * g.depth[p]);
-            const float colour_scale = variance.empty()
-                                           ? sc * sc
-                                           : s.sigma_variance * s.sigma_variance * var[p] + 1e-30f;
+            const float colour_scale =
+                variance.empty() ? sc * sc : s.sigma_variance * s.sigma_variance * var[p] + 1e-30f;
             const float e = glm::dot(dc, dc) / colour_scale +
                             glm::dot(dn, dn) / (s.sigma_normal * s.sigma_normal) + dd * dd;
             const float weight = e < 30.0f ? b3[i + 2] * b3[j + 2] * std::exp(-e) : 0.0f;
@@ -517,8 +516,7 @@ TEST(Denoise, MismatchedSizesAndBadSettingsThrow) {
   for (const float sigma : {0.0f, -2.0f, kInf, std::numeric_limits<float>::quiet_NaN()}) {
     DenoiseSettings settings;
     settings.sigma_variance = sigma;
-    EXPECT_THROW(atrous_denoise(image, guides, settings, out, std::vector<float>(128, 1.0f)),
-                 Error)
+    EXPECT_THROW(atrous_denoise(image, guides, settings, out, std::vector<float>(128, 1.0f)), Error)
         << sigma;
   }
   // The message names the guide and both sizes.

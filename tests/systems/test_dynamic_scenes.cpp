@@ -164,17 +164,15 @@ TEST_P(Restructuring, HappensWhenDeformationDegradesTheTreeNotWhenItMovesRigidly
   const std::string backend = GetParam();
   if (!available(backend)) GTEST_SKIP() << backend << " is not in this build";
   // Rigid: every vertex shifted alike; the refitted tree is the built one, translated.
-  EXPECT_EQ(restructures_on(backend, free_mesh_scene([](const vec3& p, std::size_t) {
-              return p + vec3(2.5f, 0.5f, -1.0f);
-            })),
-            0u);
+  const auto rigid = [](const vec3& p, std::size_t) { return p + vec3(2.5f, 0.5f, -1.0f); };
+  EXPECT_EQ(restructures_on(backend, free_mesh_scene(rigid)), 0u);
   // Degrading: the vertices of neighbouring triangles fly apart (a seeded-free scatter: each
   // vertex leaves along a direction given by its index), so the refitted boxes swell and overlap.
-  EXPECT_GT(restructures_on(backend, free_mesh_scene([](const vec3& p, std::size_t i) {
-              const float a = float(i) * 2.399963f; // the golden angle: spread, deterministic
-              return p + 3.0f * vec3(std::cos(a), 0.3f * std::sin(1.7f * a), std::sin(a));
-            })),
-            0u);
+  const auto scatter = [](const vec3& p, std::size_t i) {
+    const float a = float(i) * 2.399963f; // the golden angle: spread, deterministic
+    return p + 3.0f * vec3(std::cos(a), 0.3f * std::sin(1.7f * a), std::sin(a));
+  };
+  EXPECT_GT(restructures_on(backend, free_mesh_scene(scatter)), 0u);
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, Restructuring, ::testing::Values("native", "embree"),

@@ -304,7 +304,7 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     } else {
       rtcUpdateGeometryBuffer(d.own_mesh, RTC_BUFFER_TYPE_VERTEX, 0);
       rtcCommitGeometry(d.own_mesh);
-      rtcCommitScene(d.own_blas); // refit: the topology is unchanged
+      rtcCommitScene(d.own_blas);                // refit: the topology is unchanged
       last_.triangles_refit += m.triangle_count; // Embree refits whole (RTC_BUILD_QUALITY_REFIT)
       last_.refit_ms += ms_since(rebuild_start);
     }
