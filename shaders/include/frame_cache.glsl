@@ -1,5 +1,5 @@
 // Ray-cache cubes in the frame kernels (engine/gpu/device_cache.h): the lookup that
-// RayCacheStore::lookup makes for a ray leaving a cached object (Direction and Tau modes), and the
+// RayCacheStore::lookup makes for a ray leaving a cached object (Direction, Tau and March modes), and the
 // record of a traced leaving ray that the store receives after the frame (its leaving()). Only
 // compiled in when the frame has cubes (kCache).
 #ifndef SPECULA_FRAME_CACHE_GLSL
