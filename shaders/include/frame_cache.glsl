@@ -1,7 +1,7 @@
 // Ray-cache cubes in the frame kernels (engine/gpu/device_cache.h): the lookup that
-// RayCacheStore::lookup makes for a ray leaving a cached object (Direction, Tau and March modes), and the
-// record of a traced leaving ray that the store receives after the frame (its leaving()). Only
-// compiled in when the frame has cubes (kCache).
+// RayCacheStore::lookup makes for a ray leaving a cached object (Direction, Tau and March modes),
+// and the record of a traced leaving ray that the store receives after the frame (its leaving()).
+// Only compiled in when the frame has cubes (kCache).
 #ifndef SPECULA_FRAME_CACHE_GLSL
 #define SPECULA_FRAME_CACHE_GLSL
 
