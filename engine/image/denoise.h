@@ -50,8 +50,8 @@ struct DenoiseSettings {
   /// the levels as the variance of each level's weighted mean. A noisy pixel (a firefly) then
   /// mixes with its neighbours while a converged one keeps its value, whatever the image's scale;
   /// sigma_color is not used. The variance shrinks level by level as the estimate is averaged, so
-  /// σ_v is large: 12 gave the lowest FLIP after 8–16 samples of both path-traced sample scenes
-  /// among 1…32 (docs/PERFORMANCE.md §8).
+  /// σ_v is large: 12 gave the lowest FLIP at 8 and at 16 samples on the Cornell box among 1…32
+  /// (docs/PERFORMANCE.md §8).
   float sigma_variance = 12.0f;
   std::uint32_t threads = 0; ///< 0: every hardware thread
   /// Pixels per vector step: 0 the widest this CPU runs (8 with AVX2, else 4), 4 (SSE2) or 8
