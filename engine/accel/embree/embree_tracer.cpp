@@ -40,18 +40,26 @@ void EmbreeTracer::on_error(void* user, RTCError code, const char* message) {
   self->last_error_ = "Embree error " + std::to_string(int(code)) + ": " + (message ? message : "");
 }
 
-/// A deforming mesh's stand-in tree: the mesh's object-space triangles and Specula's binned-SAH
-/// BVH over them, refitted as Embree's BLAS is, whose SAH cost against its cost when built says
-/// how far the BLAS's (unseen) topology has degraded.
+/// A deforming mesh's stand-in tree: Specula's binned-SAH BVH over the mesh's object-space
+/// triangles, refitted as Embree's BLAS is, whose SAH cost against its cost when built says how far
+/// the BLAS's (unseen) topology has degraded. It is built and refitted straight from the layer's
+/// tables (mesh_view) and never traced, so it keeps no copy of the geometry: the view it holds is
+/// only read during build() and refit().
 struct EmbreeTracer::DegradationProbe {
-  std::vector<vec3> positions;
-  std::vector<uvec3> triangles;
   accel::Bvh bvh;
   float built_cost = 0.0f;
-  [[nodiscard]] accel::TriangleView view() const {
-    return {positions.data(), triangles.data(), std::uint32_t(triangles.size())};
-  }
 };
+
+namespace {
+
+/// Mesh `mesh`'s object-space triangles in the layer's tables (indices are mesh-local).
+accel::TriangleView mesh_view(const SceneTables& tables, std::uint32_t mesh) {
+  const gpu::GpuMesh& m = tables.meshes[mesh];
+  return {tables.positions.data() + m.first_vertex, tables.triangles.data() + m.first_triangle,
+          m.triangle_count};
+}
+
+} // namespace
 
 EmbreeTracer::EmbreeTracer(std::uint32_t packet_width, float restructure_threshold)
     : packet_width_(packet_width), restructure_threshold_(restructure_threshold) {
@@ -132,13 +140,8 @@ void EmbreeTracer::build_deforming(const SceneTables& tables, std::uint32_t slot
   rtcReleaseGeometry(d.own_mesh); // the scene keeps it
   rtcCommitScene(d.own_blas);
   check("building a deforming mesh's structure");
-  const gpu::GpuMesh& m = tables.meshes[mesh];
   auto probe = std::make_shared<DegradationProbe>();
-  probe->positions.assign(tables.positions.begin() + m.first_vertex,
-                          tables.positions.begin() + m.first_vertex + m.vertex_count);
-  probe->triangles.assign(tables.triangles.begin() + m.first_triangle,
-                          tables.triangles.begin() + m.first_triangle + m.triangle_count);
-  probe->bvh.build(probe->view());
+  probe->bvh.build(mesh_view(tables, mesh));
   probe->built_cost = probe->bvh.sah_cost();
   d.probe = std::move(probe);
 }
@@ -284,9 +287,7 @@ const TracerUpdateStats& EmbreeTracer::update(const SceneLayer& layer) {
     std::memcpy(vertices, tables.positions.data() + m.first_vertex, m.vertex_count * sizeof(vec3));
     // The probe follows the vertices; past the threshold the BLAS is rebuilt instead of refitted.
     DegradationProbe& probe = *d.probe;
-    std::memcpy(probe.positions.data(), tables.positions.data() + m.first_vertex,
-                m.vertex_count * sizeof(vec3));
-    probe.bvh.refit(probe.view());
+    probe.bvh.refit(mesh_view(tables, tables.instances[slot].mesh));
     const float cost = probe.bvh.sah_cost();
     ++last_.blas_refits; // as on the native backend: refitted, then rebuilt if degraded
     last_.refit_ms += ms_since(start);
