@@ -1,7 +1,8 @@
 // The BVH for dynamic objects (engine/accel/bvh): every query against brute force, the structure's
 // invariants, refit, selective restructuring, lazy expansion (also from several threads), packets
-// and the generic traversal over boxes.
+// and the generic traversal over boxes; and its 4-wide collapse for single rays (WideBvh).
 #include "specula/accel/bvh/bvh.h"
+#include "specula/accel/bvh/wide_bvh.h"
 
 #include "accel_test_meshes.h"
 
@@ -9,6 +10,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -91,8 +93,9 @@ bool same_hit(const TriangleHit& a, const TriangleHit& b) {
   return std::abs(a.t - b.t) <= 1e-5f * std::max(1.0f, std::abs(b.t));
 }
 
-template <TriangleTest Test>
-int mismatches_against_brute_force(const Bvh& bvh, const TriangleView& view, const std::vector<Ray>& rays) {
+template <TriangleTest Test, class Tree>
+int mismatches_against_brute_force(const Tree& bvh, const TriangleView& view,
+                                   const std::vector<Ray>& rays) {
   int bad = 0;
   for (const Ray& ray : rays) {
     const TriangleHit ref = brute_force_closest<Test>(view, PreparedRay::make(ray));
@@ -100,6 +103,8 @@ int mismatches_against_brute_force(const Bvh& bvh, const TriangleView& view, con
     TriangleHit hit;
     const bool found = bvh.intersect(r, hit, Test);
     bool ok = found == ref.hit() && same_hit(hit, ref) && (!found || r.tfar == hit.t);
+    // The same triangle: the same barycentrics, to the bit (the same operations in the same order).
+    ok = ok && (!found || hit.prim != ref.prim || (hit.u == ref.u && hit.v == ref.v));
     ok = ok && bvh.occluded(PreparedRay::make(ray), Test) == ref.hit();
     if (!ok && ++bad <= 3)
       ADD_FAILURE() << "ray o=(" << ray.origin.x << "," << ray.origin.y << "," << ray.origin.z
@@ -110,7 +115,8 @@ int mismatches_against_brute_force(const Bvh& bvh, const TriangleView& view, con
   return bad;
 }
 
-int mismatches(const Bvh& bvh, const TriangleView& view, const std::vector<Ray>& rays) {
+template <class Tree>
+int mismatches(const Tree& bvh, const TriangleView& view, const std::vector<Ray>& rays) {
   return mismatches_against_brute_force<TriangleTest::watertight>(bvh, view, rays) +
          mismatches_against_brute_force<TriangleTest::moller_trumbore>(bvh, view, rays);
 }
@@ -717,4 +723,198 @@ TEST(Bvh, MovedTreeKeepsWorking) {
   EXPECT_EQ(mismatches(c, view, make_rays(mesh_bounds(m), 2000, 121, false)), 0);
   a.build(m.view()); // a moved-from tree can be built again
   EXPECT_EQ(mismatches(a, view, make_rays(mesh_bounds(m), 500, 122, false)), 0);
+}
+
+// ---- The 4-wide collapse (wide_bvh.h) ----------------------------------------------------------
+
+namespace {
+
+/// Walks the wide tree: every triangle of the binary tree in exactly one group lane, groups full
+/// but for a leaf's last, unused lanes NaN; each child box the union of its subtree's triangle
+/// boxes (finite triangles), and inside the binary root's box.
+void check_wide_structure(const WideBvh& wide, const Bvh& binary, const TriangleView& tris) {
+  const auto nodes = wide.nodes();
+  const auto groups = wide.groups();
+  ASSERT_FALSE(nodes.empty());
+  std::vector<int> seen(tris.count, 0);
+  std::uint32_t leaves = 0, empty_slots = 0;
+  // Returns the box of the subtree's finite triangles.
+  const auto walk = [&](auto&& self, std::uint32_t node) -> Aabb {
+    Aabb all;
+    const WideBvhNode& n = nodes[node];
+    for (int i = 0; i < 4; ++i) {
+      const vec3 lo(n.lo[0][i], n.lo[1][i], n.lo[2][i]), hi(n.hi[0][i], n.hi[1][i], n.hi[2][i]);
+      Aabb box;
+      if (n.count[i] == 0 && n.child[i] == 0) { // an unused slot (no node has the root as a child)
+        ++empty_slots;
+        EXPECT_EQ(lo, vec3(std::numeric_limits<float>::infinity()));
+        continue;
+      }
+      if (n.count[i] == 0) {
+        EXPECT_GT(n.child[i], node) << "children follow their parent";
+        box = self(self, n.child[i]);
+      } else {
+        ++leaves;
+        for (std::uint32_t g = n.child[i]; g < n.child[i] + n.count[i]; ++g) {
+          const WideTriangles& w = groups[g];
+          for (int lane = 0; lane < 4; ++lane) {
+            const std::uint32_t prim = w.prim[lane];
+            if (prim == 0xFFFFFFFFu) {
+              EXPECT_EQ(g + 1, n.child[i] + n.count[i]) << "only the last group has unused lanes";
+              EXPECT_TRUE(std::isnan(w.p[0][0][lane]));
+              continue;
+            }
+            EXPECT_LT(prim, tris.count);
+            if (prim >= tris.count) continue;
+            ++seen[prim];
+            bool finite = true;
+            for (int k = 0; k < 3; ++k) {
+              for (int a = 0; a < 3; ++a) // the copy, bit for bit (NaN vertices too)
+                EXPECT_EQ(std::bit_cast<std::uint32_t>(w.p[k][a][lane]),
+                          std::bit_cast<std::uint32_t>(tris.vertex(prim, k)[a]));
+              finite = finite && is_finite(tris.vertex(prim, k));
+            }
+            if (finite) box.grow(tris.bounds(prim));
+          }
+        }
+      }
+      if (!box.empty()) {
+        EXPECT_EQ(lo, box.min);
+        EXPECT_EQ(hi, box.max);
+      }
+      all.grow(box);
+    }
+    return all;
+  };
+  const Aabb root = walk(walk, 0);
+  EXPECT_EQ(root.min, binary.bounds().min);
+  EXPECT_EQ(root.max, binary.bounds().max);
+  for (std::uint32_t p = 0; p < tris.count; ++p) ASSERT_EQ(seen[p], 1) << "triangle " << p;
+  EXPECT_EQ(wide.stats().leaves, leaves);
+  EXPECT_EQ(wide.stats().empty_slots, empty_slots);
+  EXPECT_EQ(wide.stats().nodes, nodes.size());
+  EXPECT_EQ(wide.stats().triangles, tris.count);
+}
+
+} // namespace
+
+TEST(WideBvh, EmptyTreeMissesEverything) {
+  Bvh binary;
+  binary.build(TriangleView{});
+  WideBvh wide;
+  wide.build(binary, TriangleView{});
+  EXPECT_TRUE(wide.empty());
+  PreparedRay r = PreparedRay::make(vec3(0), vec3(0, 0, 1), 0.0f, kInf);
+  TriangleHit hit;
+  EXPECT_FALSE(wide.intersect(r, hit));
+  EXPECT_FALSE(wide.occluded(r));
+}
+
+TEST(WideBvh, ClosestAndAnyHitEqualBruteForceToTheBit) {
+  int total_rays = 0;
+  for (const Mesh& mesh : test_meshes()) {
+    SCOPED_TRACE(mesh.name);
+    const TriangleView view = mesh.view();
+    Bvh binary;
+    binary.build(view);
+    WideBvh wide;
+    wide.build(binary, view);
+    check_wide_structure(wide, binary, view);
+    // Half as deep or so: a wide node stands for up to three binary ones.
+    EXPECT_LT(wide.stats().nodes, binary.stats().nodes / 2);
+    const Aabb box = mesh_bounds(mesh);
+    for (bool coherent : {true, false}) {
+      const auto rays =
+          make_rays(box, 13000 / kBruteForceDivisor, 200 + (coherent ? 1u : 0u), coherent);
+      EXPECT_EQ(mismatches(wide, view, rays), 0) << (coherent ? "coherent" : "incoherent");
+      total_rays += int(rays.size());
+    }
+  }
+  EXPECT_GE(total_rays, 100000 / kBruteForceDivisor);
+}
+
+TEST(WideBvh, RaysThroughSharedEdgesAndVerticesDoNotLeak) {
+  // A closed sphere: rays from the centre through every vertex and every edge midpoint, and rays
+  // from outside aimed at them, must hit (the lane-wise test keeps the scalar test's
+  // watertightness, its double-precision fallback included).
+  const Mesh m = test::uv_sphere(24, 32, 1.0f, vec3(0.1f, 0.2f, -0.3f), /*pole_slivers=*/false);
+  const TriangleView view = m.view();
+  Bvh binary;
+  binary.build(view);
+  WideBvh wide;
+  wide.build(binary, view);
+  const vec3 c(0.1f, 0.2f, -0.3f);
+  int rays = 0, leaks = 0;
+  for (std::uint32_t t = 0; t < view.count; ++t) {
+    for (int k = 0; k < 3; ++k) {
+      const vec3 a = view.vertex(t, k), b = view.vertex(t, (k + 1) % 3);
+      for (const vec3& target : {a, 0.5f * (a + b)}) {
+        const vec3 out = c + 3.0f * (target - c);
+        for (const Ray& ray : {Ray{c, 0.0f, target - c}, Ray{out, 0.0f, target - out}}) {
+          PreparedRay r = PreparedRay::make(ray);
+          TriangleHit hit;
+          ++rays;
+          leaks += wide.intersect(r, hit) ? 0 : 1;
+          leaks += wide.occluded(PreparedRay::make(ray)) ? 0 : 1;
+        }
+      }
+    }
+  }
+  EXPECT_GT(rays, 10000);
+  EXPECT_EQ(leaks, 0);
+}
+
+TEST(WideBvh, LazyBinaryTreeCollapsesToTheEagerOne) {
+  const Mesh m = random_soup(5000, 91, 3.0f, 0.15f);
+  const TriangleView view = m.view();
+  Bvh eager, lazy;
+  eager.build(view);
+  lazy.build(view, {.lazy = true, .lazy_depth = 2});
+  WideBvh a, b;
+  a.build(eager, view);
+  b.build(lazy, view); // expands the lazy tree first
+  check_wide_structure(b, lazy, view);
+  EXPECT_EQ(a.stats().nodes, b.stats().nodes);
+  EXPECT_EQ(a.stats().leaves, b.stats().leaves);
+  EXPECT_EQ(mismatches(b, view, make_rays(mesh_bounds(m), 3000 / kBruteForceDivisor, 92, false)),
+            0);
+}
+
+TEST(WideBvh, EdgeFunctionsThatRoundToZeroAreRecomputedLaneByLane) {
+  // Triangles (a, b, c) in the plane z = 0, seen by the ray from (0, 0, -1) along +z, so that ray
+  // space is the xy plane: b and c nearly opposite about the origin, with c × b rounding to exactly
+  // 0 in single precision but not in double. a is placed so that the other two edge functions have
+  // the same sign s: the ray then hits exactly when the double-precision sign of the first is s as
+  // well. In single precision alone every one of them would be a hit on the edge.
+  std::mt19937 rng(2026);
+  std::uniform_real_distribution<float> u(0.5f, 2.0f);
+  int cases = 0, misses = 0;
+  for (int attempt = 0; attempt < 200000 && cases < 300; ++attempt) {
+    const float bx = u(rng), by = u(rng), k = u(rng);
+    const float cx = -bx * k;
+    float cy = -by * k;
+    cy = std::nextafter(cy, attempt % 2 == 0 ? 0.0f : -10.0f);
+    const float U = cx * by - cy * bx;
+    const double Ud = double(cx) * double(by) - double(cy) * double(bx);
+    if (U != 0.0f || Ud == 0.0) continue;
+    const float s = attempt % 4 < 2 ? 1.0f : -1.0f;
+    test::Mesh m;
+    m.add(vec3(-by * s, bx * s, 0.0f), vec3(bx, by, 0.0f), vec3(cx, cy, 0.0f));
+    const TriangleView view = m.view();
+    Bvh binary;
+    binary.build(view);
+    WideBvh wide;
+    wide.build(binary, view);
+    const Ray ray{vec3(0.0f, 0.0f, -1.0f), 0.0f, vec3(0.0f, 0.0f, 1.0f)};
+    const TriangleHit ref = brute_force_closest(view, PreparedRay::make(ray));
+    PreparedRay r = PreparedRay::make(ray);
+    TriangleHit hit;
+    EXPECT_EQ(wide.intersect(r, hit), ref.hit()) << "case " << cases;
+    EXPECT_TRUE(same_hit(hit, ref));
+    EXPECT_EQ(wide.occluded(PreparedRay::make(ray)), ref.hit());
+    ++cases;
+    misses += ref.hit() ? 0 : 1;
+  }
+  EXPECT_GE(cases, 100);
+  EXPECT_GT(misses, cases / 5) << "the double-precision signs decide some of them";
 }

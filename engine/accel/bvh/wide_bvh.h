@@ -1,0 +1,94 @@
+#pragma once
+/// \file
+/// A 4-wide BVH for single rays, collapsed from a built binary Bvh (bvh.h): each node holds the
+/// boxes of up to four children side by side (one SSE register per axis and side), so one ray
+/// tests four boxes in a handful of vector instructions and walks about half as many levels.
+/// This is how Embree's single-ray kernels work (BVH4/BVH8); Specula's binary BVH tests one box
+/// at a time and pays a step per level.
+///
+///   - Collapse (Wald, Benthin & Boulos, "Getting Rid of Packets", RT 2008): from the binary root,
+///     the interior child with the largest surface area is opened (replaced by its two children)
+///     until four children are held or only leaves are left; leaves and their primitive ranges
+///     are the binary tree's own, and the index array is copied as it is.
+///   - Leaves: each binary leaf's triangles copied in groups of four (WideTriangles: vertices by
+///     component, one lane a triangle), tested against the ray four at a time with Woop et al.'s
+///     watertight test written lane-wise: the same operations in the same order as the scalar test
+///     (intersect_watertight), its double-precision fallback taken lane by lane. Möller–Trumbore
+///     (the option) reads the same copies one triangle at a time.
+///   - Traversal: the slab test of intersect_box (ray_query.h) on four boxes at once, with the same
+///     operations and the same conservative far distance, so a box the scalar test enters is
+///     entered here. Closest hit: hit children in order of their entry distance, the nearest
+///     first; any hit: in any order, stopping at the first.
+///   - For the static part of `native-bvh` (rebuilt when static geometry changes, never refitted);
+///     packets and dynamic instances keep the binary tree, which refits.
+
+#include "specula/accel/bvh/bvh.h"
+#include "specula/accel/common/ray_query.h"
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace specula::accel {
+
+/// One node: four child boxes in SoA, and each child's reference. count[i] == 0: interior child,
+/// node child[i]; count[i] > 0: a leaf of count[i] groups of triangles from child[i] of the group
+/// array. An unused slot has an empty box (lo = +inf, hi = -inf), which no ray enters, and count 0.
+struct alignas(16) WideBvhNode {
+  float lo[3][4];
+  float hi[3][4];
+  std::uint32_t child[4];
+  std::uint32_t count[4];
+};
+static_assert(sizeof(WideBvhNode) == 128);
+
+/// Up to four triangles of a leaf: p[vertex][axis][lane]; prim[lane] indexes the TriangleView,
+/// 0xFFFFFFFF in an unused lane (whose vertices are NaN: no test passes).
+struct alignas(16) WideTriangles {
+  float p[3][3][4];
+  std::uint32_t prim[4];
+};
+static_assert(sizeof(WideTriangles) == 160);
+
+struct WideBvhStats {
+  std::uint32_t nodes = 0, leaves = 0, max_depth = 0;
+  std::uint32_t empty_slots = 0; ///< child slots left unused (binary leaves under a node)
+  std::uint32_t groups = 0;      ///< WideTriangles records
+  std::uint64_t triangles = 0;   ///< triangle references over all groups
+  std::size_t bytes = 0;
+};
+
+class WideBvh {
+public:
+  /// Collapses `binary` (expanded first if it is lazy), a tree over the triangles of `tris`, and
+  /// copies the leaves' triangles (hits report indices into `tris`, which is not kept). An empty
+  /// tree gives an empty WideBvh.
+  void build(const Bvh& binary, const TriangleView& tris);
+
+  [[nodiscard]] bool empty() const { return nodes_.empty(); }
+
+  /// Closest hit: on a hit closer than r.tfar updates `hit`, sets r.tfar = hit.t, returns true.
+  bool intersect(PreparedRay& r, TriangleHit& hit,
+                 TriangleTest test = TriangleTest::watertight) const;
+  /// Whether any triangle lies within (r.tnear, r.tfar).
+  [[nodiscard]] bool occluded(const PreparedRay& r,
+                              TriangleTest test = TriangleTest::watertight) const;
+
+  [[nodiscard]] std::span<const WideBvhNode> nodes() const { return nodes_; }
+  [[nodiscard]] std::span<const WideTriangles> groups() const { return groups_; }
+  [[nodiscard]] const WideBvhStats& stats() const { return stats_; }
+
+  /// Entries of the traversal stack: at most three pushed per level, and the binary tree's depth
+  /// is below Bvh::kSahDepthLimit + 33 (build() checks the collapsed depth against it).
+  static constexpr int kStackSize = 256;
+
+private:
+  template <TriangleTest Test, bool AnyHit>
+  bool traverse(PreparedRay& r, TriangleHit* hit) const;
+
+  std::vector<WideBvhNode> nodes_;
+  std::vector<WideTriangles> groups_;
+  WideBvhStats stats_;
+};
+
+} // namespace specula::accel
