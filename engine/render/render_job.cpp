@@ -79,6 +79,7 @@ void prepare_rendering(ecs::Registry& registry, RenderJob job) {
   tracer_options.packet_width = job.packet_width;
   tracer_options.kind = scene_kind(registry);
   tracer_options.gpu = job.gpu;
+  tracer_options.native_wide_bvh = job.native_wide_bvh;
   std::unique_ptr<Tracer> tracer = make_tracer(job.backend, tracer_options);
   job.backend = std::string(tracer->name());
   if (job.cache.policy != cache::CachePolicy::Off) {

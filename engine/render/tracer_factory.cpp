@@ -155,14 +155,18 @@ SceneKind scene_kind(ecs::Registry& registry) {
 }
 
 std::vector<std::string_view> cpu_preference(SceneKind kind) {
-  // Measured with specula_bench (docs/PERFORMANCE.md §6): Embree is the fastest CPU backend on
-  // static scenes (primary, shadow and reflection rays) and on both animated scenes, rigid and
-  // deforming; of the native configurations the kd-tree over the static set beats the BVH on
-  // whole frames of each of them (the animated scenes 1.00-1.16x, the Cornell box and the area
-  // lights 1.05-1.2x in Whitted frames), as the real-time ray tracer paper found. Kept per kind
-  // so that a measurement that turns one around changes one line.
+  // Measured with specula_bench and `specula render` (docs/PERFORMANCE.md §6): Embree is the
+  // fastest CPU backend on static scenes (primary, shadow and reflection rays) and on both
+  // animated scenes, rigid and deforming. Of the native configurations, on static scenes the BVH
+  // with its 4-wide collapse for single rays (since 2026-11-28) beats the kd-tree on whole frames:
+  // Cornell box 1.13-1.17x (Whitted) and 1.5x (path), 32 mirror spheres 1.25-1.3x, the heavy
+  // variant 1.26-1.31x, area lights a tie (the kd-tree 0-5% ahead). On the animated scenes the two
+  // tie (kd-tree + BVH 0.95-1.01x BVH only), and the kd-tree stays first there, as the real-time
+  // ray tracer paper has it. Kept per kind so that a measurement that turns one around changes
+  // one line.
   switch (kind) {
   case SceneKind::static_only:
+    return {"embree", "native-bvh", "native"};
   case SceneKind::rigid_dynamic:
   case SceneKind::deforming:
   default:
@@ -254,6 +258,7 @@ std::unique_ptr<Tracer> make_tracer(std::string_view name, const TracerOptions& 
   if (backend == "native-bvh") native.static_structure = StaticStructure::bvh;
   if (backend == "native-grid") native.static_structure = StaticStructure::grid;
   native.grid_density = options.gpu.grid_density;
+  native.wide_static_bvh = options.native_wide_bvh;
   if (backend == "native" || backend == "native-bvh" || backend == "native-grid")
     return std::make_unique<NativeTracer>(packet_width, native);
   throw UnavailableError("backend '" + backend + "' has no tracer in this build");

@@ -86,6 +86,9 @@ struct TracerOptions {
   std::uint32_t packet_width = 16; ///< primary packet width: 1, 4, 8 or 16
   SceneKind kind = SceneKind::static_only;
   GpuTracerOptions gpu;
+  /// `native-bvh`: single rays through the BVH's 4-wide collapse (NativeOptions::wide_static_bvh).
+  /// False: through the binary tree, hit for hit as the Vulkan device (tests comparing the two).
+  bool native_wide_bvh = true;
 };
 
 /// A new tracer of the named backend (resolve_backend's rules, so `auto` works too). Throws

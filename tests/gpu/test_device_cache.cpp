@@ -162,7 +162,7 @@ class DeviceCacheFrames : public ::testing::TestWithParam<Param> {};
 int compare_frames(const Param& p, int frames, int move_at, std::uint32_t budget = 0,
                    float orbit = 0.0f) {
   CacheScene scene;
-  test::TracedWorld world(scene.reg, "native-bvh");
+  test::TracedWorld world(scene.reg, "native-bvh", test::device_mirror_options());
   CacheSettings cs;
   cs.policy = p.policy;
   cs.lookup = p.mode;
@@ -331,6 +331,7 @@ TEST(DeviceCache, ARenderJobWithCachesRendersOnTheDeviceAsOnTheCpu) {
     test::add_camera(scene.reg, vec3(scene.camera.position), vec3(scene.camera.look_at), 45.0f);
     RenderJob job;
     job.backend = k == 0 ? "native-bvh" : "vulkan";
+    job.native_wide_bvh = false; // the device's mirror (test::device_mirror_options)
     job.settings.mode = TraceMode::Whitted;
     job.settings.max_depth = 4;
     job.settings.threads = 2;
@@ -368,7 +369,7 @@ TEST(DeviceCache, ARenderJobWithCachesRendersOnTheDeviceAsOnTheCpu) {
 TEST(DeviceCache, OnlyStoresTheDeviceServesAreAccepted) {
   SPECULA_NEED_DEVICE();
   CacheScene scene;
-  test::TracedWorld world(scene.reg, "native-bvh");
+  test::TracedWorld world(scene.reg, "native-bvh", test::device_mirror_options());
   auto context = gpu::Context::create();
   gpu::GpuScene gpu_scene(*context, gpu::GpuStructure::bvh);
   gpu_scene.update(world.layer);

@@ -78,7 +78,7 @@ TEST_P(DeviceFrames, MatchTheCpuImageAndPrimaryHits) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
   test::cornell(reg);
-  test::TracedWorld world(reg, reference_backend());
+  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
   const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(GetParam());
   Framebuffer cpu(kWidth, kHeight);
@@ -101,7 +101,7 @@ TEST_P(DeviceFrames, WavefrontAndSingleKernelGiveTheSameImage) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
   test::cornell(reg);
-  test::TracedWorld world(reg, reference_backend());
+  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
   const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(GetParam());
   Device wavefront(world.layer, gpu::Execution::wavefront);
@@ -124,7 +124,7 @@ TEST_P(DeviceFrames, SmallBudgetResumesToTheSameImage) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
   test::cornell(reg);
-  test::TracedWorld world(reg, reference_backend());
+  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
   const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(GetParam());
   for (const gpu::Execution e : {gpu::Execution::wavefront, gpu::Execution::single_kernel}) {
@@ -160,7 +160,7 @@ TEST(DeviceFramesScene, AMovedObjectRendersAtItsNewPosition) {
   const ecs::Entity ball = test::add_mesh(reg, test::primitive("sphere", 0.2f, vec3(1), 12, 6),
                                           test::at(vec3(0.0f, 1.0f, 0.5f)), m,
                                           Kinematics::Type::Free);
-  test::TracedWorld world(reg, reference_backend());
+  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
   const Camera camera = test::cornell_camera();
   const TraceSettings s = settings_for(TraceMode::Whitted);
   Device device(world.layer, gpu::Execution::wavefront);
@@ -186,7 +186,7 @@ TEST(DeviceFramesScene, ATopLevelThatComesAndGoesRendersEveryFrameRight) {
     SCOPED_TRACE(e == gpu::Execution::wavefront ? "wavefront" : "single kernel");
     ecs::Registry reg;
     test::cornell(reg);
-    test::TracedWorld world(reg, reference_backend());
+    test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
     Device device(world.layer, e);
     const auto matches_cpu = [&](const char* frame, const Framebuffer& image) {
       SCOPED_TRACE(frame);
@@ -253,7 +253,7 @@ TEST(DeviceFramesScene, DeviceLossIsAClearError) {
   SPECULA_NEED_DEVICE();
   ecs::Registry reg;
   test::cornell(reg);
-  test::TracedWorld world(reg, reference_backend());
+  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
   Device device(world.layer, gpu::Execution::wavefront);
   device.context->simulate_device_loss();
   try {

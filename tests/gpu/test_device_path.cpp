@@ -57,7 +57,7 @@ struct Cpu {
   std::unique_ptr<test::TracedWorld> world;
   Cpu() {
     test::cornell(reg);
-    world = std::make_unique<test::TracedWorld>(reg, "native-bvh");
+    world = std::make_unique<test::TracedWorld>(reg, "native-bvh", test::device_mirror_options());
   }
   Framebuffer render(const TraceSettings& s, FrameStats* stats = nullptr) {
     Framebuffer out(kWidth, kHeight);
@@ -355,6 +355,7 @@ TEST(DevicePath, ADenoisedPathJobRendersOnTheDevice) {
     test::add_camera(reg, vec3(c.position), vec3(c.look_at), glm::degrees(c.vertical_fov));
     RenderJob job;
     job.backend = k == 0 ? "native-bvh" : "vulkan";
+    job.native_wide_bvh = false; // the device's mirror (test::device_mirror_options)
     job.settings = path_settings(1, 0);
     job.packet_width = 1; // as the per-pixel tests: wider CPU packets round some hits otherwise
     job.image = Framebuffer(kWidth, kHeight);

@@ -138,7 +138,7 @@ TEST_P(Hybrid, CornellBoxMatchesTheTracedFrame) {
   SPECULA_NEED_DRAWING_DEVICE();
   ecs::Registry reg;
   test::cornell(reg);
-  test::TracedWorld world(reg, "native-bvh");
+  test::TracedWorld world(reg, "native-bvh", test::device_mirror_options());
   expect_hybrid_matches(world.layer, test::cornell_camera(), GetParam(), "cornell");
 }
 
@@ -146,7 +146,7 @@ TEST_P(Hybrid, MeshSceneWithADynamicInstanceMatchesTheTracedFrame) {
   SPECULA_NEED_DRAWING_DEVICE();
   ecs::Registry reg;
   mesh_scene(reg);
-  test::TracedWorld world(reg, "native-bvh");
+  test::TracedWorld world(reg, "native-bvh", test::device_mirror_options());
   ASSERT_FALSE(world.tables().instances.empty());
   expect_hybrid_matches(world.layer, mesh_camera(), GetParam(), "mesh");
 }
@@ -163,7 +163,7 @@ TEST_P(Hybrid, FarFromTheWorldOriginMatchesTheTracedFrame) {
   camera.position += offset;
   camera.look_at += offset;
   reg.emplace<Camera>(reg.create(), camera);
-  test::TracedWorld world(reg, "native-bvh");
+  test::TracedWorld world(reg, "native-bvh", test::device_mirror_options());
   ASSERT_GT(glm::length(world.layer.render_origin()), 1e6) << "the render origin must move";
   expect_hybrid_matches(world.layer, camera, GetParam(), "far");
 }

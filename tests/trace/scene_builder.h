@@ -119,6 +119,10 @@ struct TracedWorld {
       : tracer(make_tracer(backend, packet_width)) {
     update(reg);
   }
+  TracedWorld(ecs::Registry& reg, std::string_view backend, const TracerOptions& options)
+      : tracer(make_tracer(backend, options)) {
+    update(reg);
+  }
   /// World transforms (as one more tick), layer and tracer brought up to date with the registry.
   void update(ecs::Registry& reg) {
     update_world_transforms(reg, ++tick);
@@ -137,6 +141,16 @@ struct TracedWorld {
     return blocked != 0;
   }
 };
+
+/// Options of the CPU tracer that answers hit for hit as the Vulkan device: `native-bvh` with its
+/// single rays through the binary tree too, the one the device walks (the 4-wide collapse may
+/// report the other of two triangles at the same t, at a shared edge). The device tests' reference.
+inline TracerOptions device_mirror_options(std::uint32_t packet_width = 1) {
+  TracerOptions o;
+  o.packet_width = packet_width;
+  o.native_wide_bvh = false;
+  return o;
+}
 
 /// The names of every backend this build and machine have (tests are parameterised over them).
 inline std::vector<std::string> available_backends() {

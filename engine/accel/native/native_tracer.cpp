@@ -78,6 +78,7 @@ void NativeTracer::rebuild_static(const SceneTables& tables) {
                                  std::uint32_t(static_triangles_.size())};
   kd_ = accel::KdTree{};
   static_bvh_ = accel::Bvh{};
+  static_wide_ = accel::WideBvh{};
   grid_ = accel::UniformGrid{};
   has_static_ = view.count > 0;
   if (has_static_) {
@@ -87,6 +88,7 @@ void NativeTracer::rebuild_static(const SceneTables& tables) {
       break;
     case StaticStructure::bvh:
       static_bvh_.build(view);
+      if (options_.wide_static_bvh) static_wide_.build(static_bvh_, view);
       break;
     case StaticStructure::grid: {
       accel::GridBuildOptions grid_options;
@@ -285,7 +287,8 @@ void NativeTracer::intersect_one(PreparedRay& r, Hit& hit) const {
       found = kd_.intersect(r, th, Test);
       break;
     case StaticStructure::bvh:
-      found = static_bvh_.intersect(r, th, Test);
+      found = options_.wide_static_bvh ? static_wide_.intersect(r, th, Test)
+                                       : static_bvh_.intersect(r, th, Test);
       break;
     case StaticStructure::grid:
       found = grid_.intersect(r, th, Test);
@@ -306,7 +309,8 @@ bool NativeTracer::occluded_one(const PreparedRay& r) const {
       blocked = kd_.occluded(r, Test);
       break;
     case StaticStructure::bvh:
-      blocked = static_bvh_.occluded(r, Test);
+      blocked =
+          options_.wide_static_bvh ? static_wide_.occluded(r, Test) : static_bvh_.occluded(r, Test);
       break;
     case StaticStructure::grid:
       blocked = grid_.occluded(r, Test);

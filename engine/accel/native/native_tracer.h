@@ -17,6 +17,7 @@
 /// last_update() counts and times what was done.
 
 #include "specula/accel/bvh/bvh.h"
+#include "specula/accel/bvh/wide_bvh.h"
 #include "specula/accel/common/ray_query.h"
 #include "specula/accel/grid/grid.h"
 #include "specula/accel/kdtree/kdtree.h"
@@ -46,6 +47,11 @@ struct NativeOptions {
   float restructure_threshold = 1.3f;
   /// Target cells per static triangle when the static set is a grid (accel::GridBuildOptions).
   float grid_density = accel::GridBuildOptions{}.density;
+  /// With a BVH static set: single rays traverse its 4-wide collapse (accel::WideBvh); packets
+  /// use the binary tree either way. Off: single rays use the binary tree too, as the Vulkan
+  /// device does — the CPU mirror of the device, hit for hit (at a shared edge, two triangles at
+  /// the same t, the wide tree may report the other one).
+  bool wide_static_bvh = true;
 };
 
 class NativeTracer final : public Tracer {
@@ -140,6 +146,7 @@ private:
   std::vector<std::uint32_t> static_slot_;           ///< the instance slot of each
   accel::KdTree kd_;
   accel::Bvh static_bvh_;
+  accel::WideBvh static_wide_; ///< empty unless options_.wide_static_bvh
   accel::UniformGrid grid_;
   bool has_static_ = false;
   // Dynamic instances.
