@@ -25,6 +25,9 @@ struct Options {
   int subdivisions = 4;
   /// Largest mesh of the build-scaling section, in triangles.
   std::uint32_t max_build_triangles = 1u << 20;
+  /// The paper section's native backends trace single rays through the 4-wide BVHs (false: the
+  /// binary trees, RenderJob::native_wide_bvh), to measure what the wide trees buy.
+  bool native_wide_bvh = true;
   std::string sections = "primary,tiles,whitted,depth,build,refit,native,paper";
   /// `sections` split at commas (main fills it).
   std::set<std::string> sections_list;

@@ -261,7 +261,7 @@ void section_native(const Options& o) {
     // native-bvh traces single rays through the BVH's 4-wide collapse; the same tree without it
     // (packets use the binary tree in both) shows what the wide nodes buy, in the same run.
     NativeOptions binary_options = bvh_options;
-    binary_options.wide_static_bvh = false;
+    binary_options.wide_bvh = false;
     NativeTracer native_binary(8, binary_options);
     native_binary.update(layer);
     const Camera camera = *active_camera(scene.registry);
@@ -459,6 +459,7 @@ void section_paper(const Options& o) {
         Scene scene = paper_scene(o, deforming);
         RenderJob job;
         job.backend = backend;
+        job.native_wide_bvh = o.native_wide_bvh;
         job.settings.mode = config.mode;
         job.settings.shadows = config.shadows;
         job.settings.max_depth = config.depth;

@@ -394,6 +394,9 @@ int main(int argc, char** argv) {
   app.add_option("--max-build-triangles", o.max_build_triangles,
                  "Largest mesh of the build-scaling section (triangles)")
       ->check(CLI::Range(1000u, 1u << 24));
+  app.add_flag("!--binary-bvh", o.native_wide_bvh,
+               "The paper section's native backends trace single rays through the binary BVHs, "
+               "not their 4-wide collapse");
   app.add_option("--source-dir", o.source_dir, "Specula source tree (for samples/)");
   CLI11_PARSE(app, argc, argv);
   if (app.count("--frames") > 0) o.cache_frames = o.frames;

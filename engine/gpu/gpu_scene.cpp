@@ -28,7 +28,7 @@ enum Binding : std::uint32_t {
 NativeOptions native_options(GpuStructure structure, float grid_density) {
   NativeOptions o;
   o.static_structure = structure == GpuStructure::grid ? StaticStructure::grid : StaticStructure::bvh;
-  o.wide_static_bvh = false; // the device traverses the binary tree; this tracer answers as it does
+  o.wide_bvh = false; // the device traverses the binary tree; this tracer answers as it does
   o.grid_density = grid_density;
   return o;
 }

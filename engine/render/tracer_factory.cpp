@@ -258,7 +258,7 @@ std::unique_ptr<Tracer> make_tracer(std::string_view name, const TracerOptions& 
   if (backend == "native-bvh") native.static_structure = StaticStructure::bvh;
   if (backend == "native-grid") native.static_structure = StaticStructure::grid;
   native.grid_density = options.gpu.grid_density;
-  native.wide_static_bvh = options.native_wide_bvh;
+  native.wide_bvh = options.native_wide_bvh;
   if (backend == "native" || backend == "native-bvh" || backend == "native-grid")
     return std::make_unique<NativeTracer>(packet_width, native);
   throw UnavailableError("backend '" + backend + "' has no tracer in this build");

@@ -86,7 +86,7 @@ struct TracerOptions {
   std::uint32_t packet_width = 16; ///< primary packet width: 1, 4, 8 or 16
   SceneKind kind = SceneKind::static_only;
   GpuTracerOptions gpu;
-  /// `native-bvh`: single rays through the BVH's 4-wide collapse (NativeOptions::wide_static_bvh).
+  /// `native-bvh`: single rays through the BVH's 4-wide collapse (NativeOptions::wide_bvh).
   /// False: through the binary tree, hit for hit as the Vulkan device (tests comparing the two).
   bool native_wide_bvh = true;
 };

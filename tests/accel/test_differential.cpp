@@ -230,11 +230,11 @@ TEST(Differential, StaticStructuresAgreeWithEmbree) {
     const test::TracedWorld tested(reg, backend);
     expect_agreement(compare(*reference.tracer, *tested.tracer, rays, reference.tables()), backend);
   }
-  // The BVH's 4-wide collapse for single rays (NativeOptions::wide_static_bvh), both tests.
+  // The BVH's 4-wide collapse for single rays (NativeOptions::wide_bvh), both tests.
   for (const auto test : {accel::TriangleTest::watertight, accel::TriangleTest::moller_trumbore}) {
     NativeOptions options;
     options.static_structure = StaticStructure::bvh;
-    options.wide_static_bvh = true;
+    options.wide_bvh = true;
     options.triangle_test = test;
     NativeTracer tested(1, options);
     tested.update(reference.layer);

@@ -42,7 +42,7 @@ std::unique_ptr<VulkanTracer> try_vulkan(const VulkanOptions& options = {}) {
 NativeOptions native_like(const VulkanOptions& o) {
   NativeOptions n;
   n.static_structure = o.structure == GpuStructure::grid ? StaticStructure::grid : StaticStructure::bvh;
-  n.wide_static_bvh = false; // the binary tree, as the device walks it
+  n.wide_bvh = false; // the binary tree, as the device walks it
   n.grid_density = o.grid_density;
   return n;
 }

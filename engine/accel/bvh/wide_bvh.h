@@ -19,8 +19,9 @@
 ///     operations and the same conservative far distance, so a box the scalar test enters is
 ///     entered here. Closest hit: hit children in order of their entry distance, the nearest
 ///     first; any hit: in any order, stopping at the first.
-///   - For the static part of `native-bvh` (rebuilt when static geometry changes, never refitted);
-///     packets and dynamic instances keep the binary tree, which refits.
+///   - Used for the static set of `native-bvh` and for the BVHs of meshes that rigid instances
+///     share (every native backend), both built once and never refitted; packets and deforming
+///     meshes' BVHs (refitted every frame) keep the binary tree.
 
 #include "specula/accel/bvh/bvh.h"
 #include "specula/accel/common/ray_query.h"

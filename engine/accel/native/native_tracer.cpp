@@ -88,7 +88,7 @@ void NativeTracer::rebuild_static(const SceneTables& tables) {
       break;
     case StaticStructure::bvh:
       static_bvh_.build(view);
-      if (options_.wide_static_bvh) static_wide_.build(static_bvh_, view);
+      if (options_.wide_bvh) static_wide_.build(static_bvh_, view);
       break;
     case StaticStructure::grid: {
       accel::GridBuildOptions grid_options;
@@ -120,6 +120,7 @@ const NativeTracer::Blas* NativeTracer::shared_blas(const SceneTables& tables, s
     accel::BvhBuildOptions options;
     options.lazy = options_.lazy_blas;
     blas->bvh.build(blas->view(), options);
+    if (options_.wide_bvh && !options_.lazy_blas) blas->wide.build(blas->bvh, blas->view());
     ++last_.blas_builds;
     last_.triangles_rebuilt += blas->triangles.size();
     last_.blas_build_ms += ms_since(start);
@@ -257,11 +258,15 @@ void NativeTracer::intersect_dynamic(PreparedRay& r, Hit& hit) const {
     const Dynamic& d = *top_entry_[box];
     TriangleHit th;
     bool found;
+    const auto closest = [&](PreparedRay& ray) {
+      return d.blas->wide.empty() ? d.blas->bvh.intersect(ray, th, Test)
+                                  : d.blas->wide.intersect(ray, th, Test);
+    };
     if (d.identity) {
-      found = d.blas->bvh.intersect(world, th, Test);
+      found = closest(world);
     } else {
       PreparedRay local = to_object(world, d.object_from_world);
-      found = d.blas->bvh.intersect(local, th, Test);
+      found = closest(local);
       if (found) world.tfar = th.t;
     }
     if (found) {
@@ -287,8 +292,8 @@ void NativeTracer::intersect_one(PreparedRay& r, Hit& hit) const {
       found = kd_.intersect(r, th, Test);
       break;
     case StaticStructure::bvh:
-      found = options_.wide_static_bvh ? static_wide_.intersect(r, th, Test)
-                                       : static_bvh_.intersect(r, th, Test);
+      found = options_.wide_bvh ? static_wide_.intersect(r, th, Test)
+                                : static_bvh_.intersect(r, th, Test);
       break;
     case StaticStructure::grid:
       found = grid_.intersect(r, th, Test);
@@ -309,8 +314,7 @@ bool NativeTracer::occluded_one(const PreparedRay& r) const {
       blocked = kd_.occluded(r, Test);
       break;
     case StaticStructure::bvh:
-      blocked =
-          options_.wide_static_bvh ? static_wide_.occluded(r, Test) : static_bvh_.occluded(r, Test);
+      blocked = options_.wide_bvh ? static_wide_.occluded(r, Test) : static_bvh_.occluded(r, Test);
       break;
     case StaticStructure::grid:
       blocked = grid_.occluded(r, Test);
@@ -323,8 +327,9 @@ bool NativeTracer::occluded_one(const PreparedRay& r) const {
   PreparedRay world = r;
   top_.traverse(world, [&](std::uint32_t box, PreparedRay& ray) {
     const Dynamic& d = *top_entry_[box];
-    blocked = d.identity ? d.blas->bvh.occluded(ray, Test)
-                         : d.blas->bvh.occluded(to_object(ray, d.object_from_world), Test);
+    const PreparedRay local = d.identity ? ray : to_object(ray, d.object_from_world);
+    blocked = d.blas->wide.empty() ? d.blas->bvh.occluded(local, Test)
+                                   : d.blas->wide.occluded(local, Test);
     return blocked;
   });
   return blocked;

@@ -47,11 +47,13 @@ struct NativeOptions {
   float restructure_threshold = 1.3f;
   /// Target cells per static triangle when the static set is a grid (accel::GridBuildOptions).
   float grid_density = accel::GridBuildOptions{}.density;
-  /// With a BVH static set: single rays traverse its 4-wide collapse (accel::WideBvh); packets
-  /// use the binary tree either way. Off: single rays use the binary tree too, as the Vulkan
+  /// Single rays traverse the 4-wide collapse (accel::WideBvh) of the static set's BVH (when
+  /// the static set is a BVH) and of each shared mesh's BVH (rigid instances; not a lazy one,
+  /// which would have to be expanded whole). Packets and deforming meshes' BVHs, refitted every
+  /// frame, keep the binary trees. Off: single rays use the binary trees too, as the Vulkan
   /// device does — the CPU mirror of the device, hit for hit (at a shared edge, two triangles at
   /// the same t, the wide tree may report the other one).
-  bool wide_static_bvh = true;
+  bool wide_bvh = true;
 };
 
 class NativeTracer final : public Tracer {
@@ -106,6 +108,7 @@ private:
     std::vector<vec3> positions;
     std::vector<uvec3> triangles;
     accel::Bvh bvh;
+    accel::WideBvh wide; ///< single rays, when not empty (rigid meshes with options_.wide_bvh)
     [[nodiscard]] accel::TriangleView view() const {
       return {positions.data(), triangles.data(), std::uint32_t(triangles.size())};
     }
@@ -146,7 +149,7 @@ private:
   std::vector<std::uint32_t> static_slot_;           ///< the instance slot of each
   accel::KdTree kd_;
   accel::Bvh static_bvh_;
-  accel::WideBvh static_wide_; ///< empty unless options_.wide_static_bvh
+  accel::WideBvh static_wide_; ///< empty unless options_.wide_bvh
   accel::UniformGrid grid_;
   bool has_static_ = false;
   // Dynamic instances.
