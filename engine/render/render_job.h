@@ -35,8 +35,8 @@ struct RenderJob {
   /// How the Vulkan backends run (execution style, device frames, grid density); CPU backends
   /// ignore it.
   GpuTracerOptions gpu;
-  /// `native-bvh` only: false traces single rays through the binary BVH, as the Vulkan device
-  /// does (TracerOptions::native_wide_bvh).
+  /// Native backends: false traces single rays through the binary BVHs, not their 4-wide
+  /// collapse, as the Vulkan device does (TracerOptions::native_wide_bvh).
   bool native_wide_bvh = true;
   /// For path and shadow modes, settings.sample_offset is where the first frame after every
   /// restart starts; later frames continue from there (Accumulation).

@@ -86,8 +86,9 @@ struct TracerOptions {
   std::uint32_t packet_width = 16; ///< primary packet width: 1, 4, 8 or 16
   SceneKind kind = SceneKind::static_only;
   GpuTracerOptions gpu;
-  /// `native-bvh`: single rays through the BVH's 4-wide collapse (NativeOptions::wide_bvh).
-  /// False: through the binary tree, hit for hit as the Vulkan device (tests comparing the two).
+  /// Native backends: single rays through the 4-wide collapse of the static set's BVH
+  /// (`native-bvh`) and of rigid meshes' BVHs (NativeOptions::wide_bvh). False: through the
+  /// binary trees, hit for hit as the Vulkan device (tests comparing the two).
   bool native_wide_bvh = true;
 };
 
