@@ -29,8 +29,6 @@ WideBvhNode empty_node() {
   return w;
 }
 
-/// Appends the wide node over binary node `b` (its children, opened down to at most four) and,
-/// depth first, the wide nodes under it; returns its index.
 /// Appends the triangles of a binary leaf (entries [first, first + count) of `indices`) as groups
 /// of four; returns the first group.
 std::uint32_t append_groups(const TriangleView& tris, std::span<const std::uint32_t> indices,
@@ -61,6 +59,8 @@ struct Collapse {
   WideBvhStats& stats;
 };
 
+/// Appends the wide node over binary node `b` (its children, opened down to at most four) and,
+/// depth first, the wide nodes under it; returns its index.
 std::uint32_t collapse(const Collapse& c, std::uint32_t b, std::uint32_t depth) {
   const std::span<const gpu::BvhNode> bn = c.bn;
   std::vector<WideBvhNode>& out = c.out;
