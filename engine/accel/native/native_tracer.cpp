@@ -327,9 +327,10 @@ bool NativeTracer::occluded_one(const PreparedRay& r) const {
   PreparedRay world = r;
   top_.traverse(world, [&](std::uint32_t box, PreparedRay& ray) {
     const Dynamic& d = *top_entry_[box];
-    const PreparedRay local = d.identity ? ray : to_object(ray, d.object_from_world);
-    blocked = d.blas->wide.empty() ? d.blas->bvh.occluded(local, Test)
-                                   : d.blas->wide.occluded(local, Test);
+    const auto any = [&](const PreparedRay& q) {
+      return d.blas->wide.empty() ? d.blas->bvh.occluded(q, Test) : d.blas->wide.occluded(q, Test);
+    };
+    blocked = d.identity ? any(ray) : any(to_object(ray, d.object_from_world));
     return blocked;
   });
   return blocked;
