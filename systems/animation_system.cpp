@@ -31,6 +31,10 @@ void animation_system(ecs::Registry& registry, const FrameContext& ctx) {
       if (mesh != nullptr &&
           (mesh->deformed_positions.empty() || mesh->deformed_time != anim.time)) {
         sample(anim.vertices, anim.time, mesh->deformed_positions);
+        if (anim.normals.empty())
+          mesh->deformed_normals.clear();
+        else
+          sample_normals(anim.normals, anim.time, mesh->deformed_normals);
         mesh->deformed_time = anim.time;
         mesh->deformed_tick = ctx.tick;
       }

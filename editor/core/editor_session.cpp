@@ -19,7 +19,7 @@ namespace {
 bool same(const Mesh& a, const Mesh& b) {
   return a.geometry == b.geometry && a.source == b.source &&
          a.deformed_positions == b.deformed_positions && a.deformed_tick == b.deformed_tick &&
-         a.deformed_time == b.deformed_time;
+         a.deformed_time == b.deformed_time && a.deformed_normals == b.deformed_normals;
 }
 bool same(const Name& a, const Name& b) { return a.value == b.value; }
 template <typename T>

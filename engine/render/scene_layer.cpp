@@ -270,6 +270,7 @@ void SceneLayer::apply_deformations(ecs::Registry& registry) {
                                std::to_string(record.vertex_count));
     std::copy(positions.begin(), positions.end(), tables_.positions.begin() + record.first_vertex);
     stats_.vertices_written += positions.size();
+    write_deformed_normals(record, mesh);
     const Aabb b = bounds_of(positions.data(), positions.size());
     record.bounds_min = b.min;
     record.bounds_max = b.max;
@@ -277,6 +278,19 @@ void SceneLayer::apply_deformations(ecs::Registry& registry) {
     delta_.instances_deformed.push_back(slot);
     ++stats_.instances_deformed;
   }
+}
+
+void SceneLayer::write_deformed_normals(gpu::GpuMesh& record, const Mesh& mesh) {
+  const std::vector<vec3>& n = mesh.deformed_normals;
+  if (n.size() != record.vertex_count) {
+    record.first_normal = gpu::kNoIndex; // none sampled: its old range is left for compaction
+    return;
+  }
+  if (record.first_normal == gpu::kNoIndex) {
+    record.first_normal = std::uint32_t(tables_.normals.size());
+    tables_.normals.resize(tables_.normals.size() + n.size());
+  }
+  std::copy(n.begin(), n.end(), tables_.normals.begin() + record.first_normal);
 }
 
 void SceneLayer::refresh_materials(ecs::Registry& registry) {
@@ -443,8 +457,10 @@ void SceneLayer::add_instance(ecs::Registry& registry, ecs::Entity e, const Desi
 
   s.shared_mesh = acquire_shared_mesh(*d.geometry);
   if (d.deforming) {
-    // Its own vertex range (the shared triangles): rewritten in place when it deforms. Its vertex
-    // normals no longer match the positions, so shading uses the geometric normal.
+    // Its own vertex range (the shared triangles): rewritten in place when it deforms. The shared
+    // mesh's vertex normals no longer match the positions: it has its own range of them when its
+    // animation samples normals too (write_deformed_normals), else shading uses the geometric
+    // normal.
     const gpu::GpuMesh shared = tables_.meshes[s.shared_mesh];
     const std::vector<vec3>& positions = mesh.positions();
     if (positions.size() != shared.vertex_count)
@@ -462,7 +478,9 @@ void SceneLayer::add_instance(ecs::Registry& registry, ecs::Entity e, const Desi
     own.bounds_min = b.min;
     own.bounds_max = b.max;
     tables_.meshes[inst.mesh] = own;
-    inst.flags = gpu::kInstanceDeforming;
+    write_deformed_normals(tables_.meshes[inst.mesh], mesh);
+    // Smooth whenever its mesh record has normals: they may come and go as it deforms.
+    inst.flags = gpu::kInstanceDeforming | gpu::kInstanceSmooth;
     deforming_.push_back(slot);
   } else {
     inst.mesh = s.shared_mesh;
@@ -591,6 +609,11 @@ void SceneLayer::relayout(ecs::Registry& registry, bool rebake) {
     positions.insert(positions.end(), first, first + record.vertex_count);
     record.first_vertex = first_vertex;
     record.first_triangle = tables_.meshes[slots_[slot].shared_mesh].first_triangle;
+    if (record.first_normal != gpu::kNoIndex) {
+      const auto n = tables_.normals.begin() + record.first_normal;
+      record.first_normal = std::uint32_t(normals.size());
+      normals.insert(normals.end(), n, n + record.vertex_count);
+    }
   }
 
   tables_.positions = std::move(positions);

@@ -26,6 +26,8 @@
 
 namespace specula {
 
+struct Mesh;
+
 /// The render origin moves to the camera when the camera is farther than this from it (world
 /// units, Euclidean). Within it, render-space coordinates near the camera stay below 4096·√3,
 /// where float resolves 2^-11 ≈ 4.9e-4 or better (docs/design/large-worlds.md).
@@ -170,6 +172,10 @@ private:
   void full_scan(ecs::Registry& registry, const std::vector<ecs::Entity>* moved);
   void apply_moved(ecs::Registry& registry, const std::vector<ecs::Entity>& moved);
   void apply_deformations(ecs::Registry& registry);
+  /// A deforming instance's mesh record gets the mesh's deformed normals: written into its own
+  /// range of the normals pool (appended when it had none), or first_normal = kNoIndex when there
+  /// are none to match its vertices.
+  void write_deformed_normals(gpu::GpuMesh& record, const Mesh& mesh);
   void refresh_materials(ecs::Registry& registry);
   void refresh_lights(ecs::Registry& registry);
   void add_instance(ecs::Registry& registry, ecs::Entity e, const Desired& d);

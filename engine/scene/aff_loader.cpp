@@ -186,8 +186,8 @@ struct Morph {
   ecs::Entity parent = ecs::null_entity;
   std::uint32_t material = 0;
   std::vector<float> times;
-  std::vector<std::vector<vec3>> keys; ///< positions per key time
-  std::vector<vec3> normals;           ///< at the first key (used when there is only one)
+  std::vector<std::vector<vec3>> keys;    ///< positions per key time
+  std::vector<std::vector<vec3>> normals; ///< vertex normals per key time
 };
 
 struct PendingKeys {
@@ -531,7 +531,10 @@ void AffReader::animated_triangle(Lexer& lex) {
     if (k > 0 && !(times[k] > times[k - 1])) lex.fail(at, "key times must be strictly increasing");
     for (int j = 0; j < 3; ++j) {
       pos[3 * k + j] = lex.vector("vertex");
+      const int normal_line = lex.line();
       nrm[3 * k + j] = lex.vector("normal");
+      if (!(glm::length(nrm[3 * k + j]) > 1e-6f))
+        lex.fail(normal_line, "an animated triangle's normal has zero length");
     }
   }
   const auto key = std::make_tuple(current_parent().index, material_, times);
@@ -539,11 +542,14 @@ void AffReader::animated_triangle(Lexer& lex) {
   if (added) {
     morphs_.push_back(Morph{current_parent(), material_, times, {}, {}});
     morphs_.back().keys.resize(n);
+    morphs_.back().normals.resize(n);
   }
   Morph& m = morphs_[it->second];
   for (std::uint64_t k = 0; k < n; ++k)
-    for (int j = 0; j < 3; ++j) m.keys[k].push_back(pos[3 * k + j]);
-  for (int j = 0; j < 3; ++j) m.normals.push_back(nrm[j]);
+    for (int j = 0; j < 3; ++j) {
+      m.keys[k].push_back(pos[3 * k + j]);
+      m.normals[k].push_back(nrm[3 * k + j]);
+    }
 }
 
 void AffReader::sphere(Lexer& lex) {
@@ -832,19 +838,19 @@ void AffReader::finish() {
   for (Morph& m : morphs_) {
     TriangleMesh mesh;
     mesh.positions = m.keys.front();
-    // The tracers take vertex normals as given, so normals of the first key would go stale as
-    // the triangles morph: animated ones are shaded with face normals instead (docs).
-    if (m.times.size() == 1) mesh.normals = std::move(m.normals);
+    mesh.normals = m.normals.front();
     for (std::uint32_t i = 0; i < mesh.positions.size(); i += 3)
       mesh.triangles.push_back(uvec3(i, i + 1, i + 2));
     const ecs::Entity e = add_mesh(
         m.parent, m.material, node_name(m.parent) + "/morph " + std::to_string(&m - morphs_.data()),
         std::move(mesh));
     if (m.times.size() > 1) {
-      // BART's tpa interpolates linearly between its keys.
+      // BART's tpa interpolates linearly between its keys, normals included (renormalised).
       Animation a;
-      a.vertices.times = std::move(m.times);
+      a.vertices.times = m.times;
       a.vertices.values = std::move(m.keys);
+      a.normals.times = std::move(m.times);
+      a.normals.values = std::move(m.normals);
       a.time = t0;
       validate_animation(a, a.vertices.values.front().size(), scene_.source.string(), "tpa");
       reg_.emplace<Animation>(e, std::move(a));

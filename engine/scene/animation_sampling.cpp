@@ -160,20 +160,48 @@ quat sample(const Keyframes<quat>& track, float t) {
       kb_rotation);
 }
 
-void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3>& out) {
-  const std::vector<vec3>* a = &track.values.front();
-  const std::vector<vec3>* b = a;
-  float f = 0.0f;
+namespace {
+
+/// The two vertex-set keys around time t and the blend between them (a == b outside the keys
+/// and for Step).
+struct VertexKeys {
+  const std::vector<vec3>* a;
+  const std::vector<vec3>* b;
+  float f;
+};
+
+VertexKeys vertex_keys(const Keyframes<std::vector<vec3>>& track, float t) {
+  VertexKeys k{&track.values.front(), &track.values.front(), 0.0f};
   if (t >= track.times.back()) {
-    a = b = &track.values.back();
+    k.a = k.b = &track.values.back();
   } else if (t > track.times.front()) {
     const auto [i, blend] = locate(track.times, t);
-    a = &track.values[i];
-    b = track.interpolation == Interpolation::Step ? a : &track.values[i + 1];
-    f = blend;
+    k.a = &track.values[i];
+    k.b = track.interpolation == Interpolation::Step ? k.a : &track.values[i + 1];
+    k.f = blend;
   }
+  return k;
+}
+
+} // namespace
+
+void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3>& out) {
+  const auto [a, b, f] = vertex_keys(track, t);
   out.resize(a->size());
   for (std::size_t v = 0; v < a->size(); ++v) out[v] = glm::mix((*a)[v], (*b)[v], f);
+}
+
+void sample_normals(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3>& out) {
+  const auto [a, b, f] = vertex_keys(track, t);
+  out.resize(a->size());
+  for (std::size_t v = 0; v < a->size(); ++v) {
+    const vec3 na = glm::normalize((*a)[v]);
+    const vec3 nb = glm::normalize((*b)[v]);
+    const vec3 n = glm::mix(na, nb, f);
+    // Keys of opposite normals blend to zero halfway: the nearer key's normal then.
+    const float len = glm::length(n);
+    out[v] = len > 1e-6f ? n / len : (f < 0.5f ? na : nb);
+  }
 }
 
 float advance_time(float time, float speed, float dt, float duration, bool loop) {
@@ -225,9 +253,16 @@ void validate_animation(const Animation& a, std::size_t vertex_count, const std:
       throw Error(context, field + ".visibility.values[" + std::to_string(i) + "]",
                   "a visibility key is 0 (hidden) or 1 (shown)");
   }
+  check_times(a.normals, context, field + ".normals");
   if (a.vertices.interpolation == Interpolation::KochanekBartels)
     throw Error(context, field + ".vertices",
                 "vertex tracks interpolate linearly or by step, not Kochanek-Bartels");
+  if (a.normals.interpolation == Interpolation::KochanekBartels)
+    throw Error(context, field + ".normals",
+                "normal tracks interpolate linearly or by step, not Kochanek-Bartels");
+  if (!a.normals.empty() && a.vertices.empty())
+    throw Error(context, field + ".normals",
+                "a normal track needs a vertex track beside it (the normals of what positions?)");
   for (std::size_t i = 0; i < a.translation.values.size(); ++i)
     if (!is_finite(a.translation.values[i]) || !in_range(a.translation.values[i]))
       throw Error(context, field + ".translation.values[" + std::to_string(i) + "]",
@@ -252,6 +287,17 @@ void validate_animation(const Animation& a, std::size_t vertex_count, const std:
         throw Error(context, field + ".vertices.values[" + std::to_string(k) + "]",
                     std::string("vertex position is not finite or outside ") +
                         kCoordinateRangeText);
+  }
+  for (std::size_t k = 0; k < a.normals.values.size(); ++k) {
+    const auto& key = a.normals.values[k];
+    const std::string at = field + ".normals.values[" + std::to_string(k) + "]";
+    if (key.size() != vertex_count)
+      throw Error(context, at,
+                  "key has " + std::to_string(key.size()) + " normals but the mesh has " +
+                      std::to_string(vertex_count) + " vertices");
+    for (const vec3& n : key)
+      if (!is_finite(n) || !(glm::length(n) > 1e-6f))
+        throw Error(context, at, "vertex normal is not finite or has zero length");
   }
   if (!std::isfinite(a.speed) || !std::isfinite(a.time))
     throw Error(context, field, "speed and time must be finite");

@@ -21,6 +21,9 @@ namespace specula {
 [[nodiscard]] quat sample(const Keyframes<quat>& track, float t);
 /// Writes the interpolated vertex set into `out` (resized to the keys' vertex count).
 void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3>& out);
+/// The same for a normal track: each key's normals normalised, blended, normalised again (two
+/// opposite normals halfway between their keys give the nearer key's).
+void sample_normals(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3>& out);
 
 /// The time to sample at after advancing by `dt`: time + speed·dt, wrapped into [0, duration]
 /// when looping (duration 0: always 0).
@@ -33,12 +36,12 @@ void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3
 [[nodiscard]] bool visible_at(const VisibilityKeys& keys, float t);
 
 /// Throws specula::Error(context, field, ...) for: times not finite or not strictly increasing,
-/// a Kochanek-Bartels track with fewer than 4 keys or without one tcb triple in [-1, 1] per key, tcb
-/// on another interpolation, a Kochanek-Bartels vertex track,
-/// a values count different from the times count, non-finite values, translations or camera
-/// positions outside ±kMaxCoordinate (core/math.h), zero-length rotations,
-/// vertex keys whose size differs from `vertex_count` (pass 0 when there is no mesh: any vertex
-/// track is then an error), non-finite speed.
+/// a Kochanek-Bartels track with fewer than 4 keys or without one tcb triple in [-1, 1] per key,
+/// tcb on another interpolation, a Kochanek-Bartels vertex track, a values count different from the
+/// times count, non-finite values, translations or camera positions outside ±kMaxCoordinate
+/// (core/math.h), zero-length rotations, vertex or normal keys whose size differs from
+/// `vertex_count` (pass 0 when there is no mesh: any vertex track is then an error), a normal track
+/// without a vertex track, Kochanek-Bartels or zero-length or non-finite normals, non-finite speed.
 void validate_animation(const Animation& animation, std::size_t vertex_count,
                         const std::string& context, const std::string& field);
 void validate_camera_path(const CameraPath& path, const std::string& context,

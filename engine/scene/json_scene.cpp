@@ -533,7 +533,7 @@ Animation read_animation(const Reader& r, const json& j, const std::string& path
   Animation a;
   const Object o(r, j, path,
                  {"loop", "speed", "time", "translation", "rotation", "scale", "vertices",
-                  "visibility"},
+                  "normals", "visibility"},
                  "animation");
   if (const json* v = o.find("loop")) a.loop = read_bool(r, *v, o.path("loop"));
   if (const json* v = o.find("speed")) a.speed = read_float(r, *v, o.path("speed"));
@@ -551,11 +551,14 @@ Animation read_animation(const Reader& r, const json& j, const std::string& path
     a.scale = read_track<vec3>(r, *v, o.path("scale"), [&](const json& x, const std::string& at) {
       return read_scale(r, x, at);
     });
-  if (const json* v = o.find("vertices")) {
-    if (!mesh) r.fail(o.path("vertices"), "vertex animation needs a mesh on the same entity");
-    a.vertices = read_track<std::vector<vec3>>(
-        r, *v, o.path("vertices"), [&](const json& x, const std::string& at) {
-          read_array(r, x, at, "one position per mesh vertex");
+  const auto vertex_track = [&](const char* name, const char* what) {
+    const json* v = o.find(name);
+    if (v == nullptr) return Keyframes<std::vector<vec3>>{};
+    if (!mesh) r.fail(o.path(name), "vertex animation needs a mesh on the same entity");
+    return read_track<std::vector<vec3>>(
+        r, *v, o.path(name),
+        [&](const json& x, const std::string& at) {
+          read_array(r, x, at, what);
           std::vector<vec3> key;
           key.reserve(x.size());
           for (std::size_t i = 0; i < x.size(); ++i)
@@ -563,7 +566,9 @@ Animation read_animation(const Reader& r, const json& j, const std::string& path
           return key;
         },
         false);
-  }
+  };
+  a.vertices = vertex_track("vertices", "one position per mesh vertex");
+  a.normals = vertex_track("normals", "one normal per mesh vertex");
   if (const json* v = o.find("visibility")) {
     // Switches, not a curve: no interpolation, the values booleans.
     const Object k(r, *v, o.path("visibility"), {"times", "values"}, "visibility keys");
@@ -1041,12 +1046,13 @@ Out write_animation(const Writer& w, const Animation& a) {
   if (!a.rotation.empty())
     o.add("rotation", write_track(w, a.rotation, [&](const quat& q) { return w.rotation(q); }));
   if (!a.scale.empty()) o.add("scale", write_track(w, a.scale, vec3_value));
-  if (!a.vertices.empty())
-    o.add("vertices", write_track(w, a.vertices, [&](const std::vector<vec3>& key) {
-            Out positions = Out::array();
-            for (const vec3& p : key) positions.push(w.vec<3>(p));
-            return positions;
-          }));
+  const auto vertex_key = [&](const std::vector<vec3>& key) {
+    Out values = Out::array();
+    for (const vec3& p : key) values.push(w.vec<3>(p));
+    return values;
+  };
+  if (!a.vertices.empty()) o.add("vertices", write_track(w, a.vertices, vertex_key));
+  if (!a.normals.empty()) o.add("normals", write_track(w, a.normals, vertex_key));
   if (!a.visibility.empty()) {
     Out& keys = o.add("visibility", Out::object());
     Out& times = keys.add("times", Out::array());

@@ -3,7 +3,7 @@
 // visibility agreeing on 99.9% of pixels, the wavefront and the single kernel giving the same
 // image, no ray cut by the driver, resumption after a small traversal budget, a moved object
 // seen where it moved, a dynamic object seen while it exists (the top level's code compiled in
-// and out), and a lost device reported as such.
+// and out), a morphing mesh shaded with its sampled normals, and a lost device reported as such.
 #include "device_scenes.h"
 #include "specula/core/error.h"
 #include "specula/gpu/device_renderer.h"
@@ -226,6 +226,80 @@ TEST(DeviceFramesScene, ATopLevelThatComesAndGoesRendersEveryFrameRight) {
     for (std::size_t i = 0; i < after.pixels().size(); ++i)
       differ += after.pixels()[i] != before.pixels()[i] ? 1u : 0u;
     EXPECT_EQ(differ, 0u) << "pixels that differ from the frame before the ball came";
+  }
+}
+
+// A deforming mesh with sampled normals (Animation::normals, BART's tpa) is shaded with them on
+// the device too, frame after frame as they change, and with geometric normals once it has none:
+// each frame matches the CPU's, and the normals visibly change the CPU's image.
+/// Pixels of which some channel differs by more than 1%.
+std::uint32_t differing(const Framebuffer& a, const Framebuffer& b) {
+  std::uint32_t n = 0;
+  for (std::size_t i = 0; i < a.pixels().size(); ++i) {
+    const vec3 d = glm::abs(a.pixels()[i] - b.pixels()[i]);
+    n += glm::max(d.x, glm::max(d.y, d.z)) > 0.01f ? 1u : 0u;
+  }
+  return n;
+}
+
+TEST(DeviceFramesScene, AMorphingMeshIsShadedWithItsSampledNormals) {
+  SPECULA_NEED_DEVICE();
+  ecs::Registry reg;
+  test::cornell(reg);
+  Material m;
+  m.base_color = vec3(0.9f, 0.8f, 0.3f);
+  const ecs::Entity blob =
+      test::add_mesh(reg, test::primitive("sphere", 0.45f, vec3(1), 8, 4),
+                     test::at(vec3(0.0f, 1.0f, 0.5f)), m, Kinematics::Type::Free);
+  (void)test::add_point_light(reg, vec3(0.6f, 1.7f, 1.8f), 3.0f); // the panel lights no Whitted ray
+  const TriangleMesh& sphere = *reg.get<Mesh>(blob).geometry;
+  ASSERT_EQ(sphere.normals.size(), sphere.positions.size());
+  std::uint64_t tick = 0;
+  // Squashed in y by `f`, with the squashed sphere's normals or none.
+  const auto squash = [&](float f, bool normals) {
+    Mesh& mesh = reg.get<Mesh>(blob);
+    mesh.deformed_positions = sphere.positions;
+    for (vec3& p : mesh.deformed_positions) p.y *= f;
+    mesh.deformed_normals.clear();
+    if (normals)
+      for (const vec3& n : sphere.normals)
+        mesh.deformed_normals.push_back(glm::normalize(vec3(n.x, n.y / f, n.z)));
+    mesh.deformed_tick = ++tick;
+  };
+  squash(0.5f, true);
+  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
+  const Camera camera = test::cornell_camera();
+  const TraceSettings s = settings_for(TraceMode::Whitted);
+  Device device(world.layer, gpu::Execution::wavefront);
+  const auto frame = [&](const char* what) {
+    SCOPED_TRACE(what);
+    const Framebuffer image = device.render(world.layer, camera, s);
+    Framebuffer cpu(kWidth, kHeight);
+    (void)render_frame(*world.tracer, world.layer, camera, s, cpu);
+    EXPECT_GE(psnr(cpu, image), 45.0);
+    EXPECT_LE(differing(cpu, image), kWidth * kHeight / 500) << "pixels that differ visibly";
+    EXPECT_EQ(device.counters.cut, 0u);
+    return cpu;
+  };
+  (void)frame("first frame, normals of y * 0.5");
+  for (const auto& [f, normals, what] :
+       {std::tuple{1.5f, true, "normals of y * 1.5"}, std::tuple{1.5f, false, "face normals"},
+        std::tuple{1.5f, true, "normals again"}}) {
+    squash(f, normals);
+    world.update(reg);
+    device.scene->update(world.layer);
+    const Framebuffer cpu = frame(what);
+    if (!normals) {
+      squash(1.5f, true);
+      world.update(reg);
+      device.scene->update(world.layer);
+      Framebuffer smooth(kWidth, kHeight);
+      (void)render_frame(*world.tracer, world.layer, camera, s, smooth);
+      // Far more than a device frame may differ by: a device shading with face normals (or
+      // stale ones) fails.
+      EXPECT_GE(differing(cpu, smooth), kWidth * kHeight / 50)
+          << "smooth and faceted shading look alike";
+    }
   }
 }
 

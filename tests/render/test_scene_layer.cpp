@@ -253,6 +253,69 @@ TEST(SceneLayer, OneDeformedMeshIsOneRefitOfItsOwnVertices) {
             w.reg.get<Mesh>(w.ball).geometry->positions[0]);
 }
 
+/// A normal track (BART's tpa normals) gives a deforming mesh its own vertex normals: sampled
+/// with its vertices, rewritten with them, carried along by a relayout. Without one it has none
+/// (shading takes the geometric normal), and a track given again gets a range again.
+TEST(SceneLayer, ADeformedMeshWithANormalTrackCarriesItsSampledNormals) {
+  World w;
+  const TriangleMesh& sphere = *w.reg.get<Mesh>(w.blob).geometry;
+  ASSERT_EQ(sphere.normals.size(), sphere.positions.size());
+  Keyframes<std::vector<vec3>> track;
+  track.times = {0.0f, 1.0f};
+  std::vector<vec3> stretched = sphere.normals; // the normals of the sphere stretched by 2 in y
+  for (vec3& n : stretched) n = glm::normalize(vec3(n.x, 0.5f * n.y, n.z));
+  track.values = {sphere.normals, stretched};
+  w.reg.get<Animation>(w.blob).normals = track;
+  SceneLayer layer;
+  Ticker tick;
+  const auto normals_of = [&]() -> std::vector<vec3> {
+    const SceneTables& t = layer.tables();
+    const gpu::GpuInstance& inst = t.instances[*layer.instance_of(w.blob)];
+    EXPECT_NE(inst.flags & gpu::kInstanceSmooth, 0u);
+    const gpu::GpuMesh& record = t.meshes[inst.mesh];
+    if (record.first_normal == gpu::kNoIndex) return {};
+    const auto first = t.normals.begin() + record.first_normal;
+    return {first, first + record.vertex_count};
+  };
+  const Mesh& mesh = w.reg.get<Mesh>(w.blob);
+  tick(w.reg, layer);
+  const std::vector<vec3> first = normals_of();
+  EXPECT_EQ(first, mesh.deformed_normals);
+  ASSERT_EQ(first.size(), sphere.normals.size());
+  for (std::size_t i = 0; i < first.size(); ++i)
+    EXPECT_LT(glm::distance(first[i], sphere.normals[i]), 1e-6f) << "key 0's normal " << i;
+
+  w.reg.get<Animation>(w.blob).speed = 1.0f;
+  ASSERT_EQ(tick(w.reg, layer, 0.5).instances_deformed.size(), 1u);
+  const std::vector<vec3> half = normals_of();
+  ASSERT_EQ(half.size(), sphere.normals.size());
+  std::size_t turned = 0;
+  for (std::size_t i = 0; i < half.size(); ++i) {
+    const vec3 expected =
+        glm::normalize(glm::mix(glm::normalize(sphere.normals[i]), stretched[i], 0.5f));
+    EXPECT_LT(glm::distance(half[i], expected), 1e-6f) << "vertex " << i;
+    EXPECT_NEAR(glm::length(half[i]), 1.0f, 1e-6f);
+    turned += glm::distance(half[i], sphere.normals[i]) > 1e-3f ? 1u : 0u;
+  }
+  EXPECT_GT(turned, half.size() / 2) << "the normals follow the stretch";
+
+  // A relayout (the static set baked again; dt 0: nothing deforms) moves them with the vertices.
+  w.reg.get<Transform>(w.ground).translation.y = -1.0f;
+  EXPECT_TRUE(tick(w.reg, layer, 0.0).static_rebuilt);
+  EXPECT_EQ(layer.stats().relayouts, 1u);
+  EXPECT_EQ(normals_of(), half);
+
+  w.reg.get<Animation>(w.blob).normals = {};
+  ASSERT_EQ(tick(w.reg, layer, 0.25).instances_deformed.size(), 1u);
+  EXPECT_TRUE(mesh.deformed_normals.empty());
+  EXPECT_TRUE(normals_of().empty()) << "no normals to match the vertices: geometric normals";
+
+  w.reg.get<Animation>(w.blob).normals = track;
+  ASSERT_EQ(tick(w.reg, layer, 0.1).instances_deformed.size(), 1u);
+  EXPECT_FALSE(mesh.deformed_normals.empty());
+  EXPECT_EQ(normals_of(), mesh.deformed_normals);
+}
+
 TEST(SceneLayer, AMovedStaticEntityIsBakedAgainWhereItNowIs) {
   World w;
   SceneLayer layer;

@@ -187,7 +187,22 @@ TEST(Aff, MorphingTrianglesAreFreeAndTheCameraMoves) {
     EXPECT_EQ(a.vertices.times, (std::vector<float>{0.0f, 1.0f}));
     EXPECT_EQ(a.vertices.values[1][0], vec3(0, 0, 1));
     EXPECT_EQ(reg.get<Kinematics>(e).type, Kinematics::Type::Free);
-    EXPECT_TRUE(m.geometry->normals.empty()); // face normals follow the morph
+    // The normals morph with the triangles: a linear track of the file's normals per key, the
+    // first key's in the geometry.
+    EXPECT_EQ(a.normals.times, a.vertices.times);
+    EXPECT_EQ(a.normals.interpolation, Interpolation::Linear);
+    ASSERT_EQ(a.normals.values.size(), 2u);
+    EXPECT_EQ(a.normals.values[1][0], vec3(0, 2, 2));
+    EXPECT_EQ(a.normals.values[1][2], vec3(1, 0, 0));
+    EXPECT_EQ(m.geometry->normals, a.normals.values[0]);
+    // Halfway, each normal is the normalised blend of its keys' unit normals.
+    std::vector<vec3> half;
+    sample_normals(a.normals, 0.5f, half);
+    ASSERT_EQ(half.size(), 6u);
+    const vec3 expected = glm::normalize(vec3(0, 0, 1) + glm::normalize(vec3(0, 2, 2)));
+    EXPECT_NEAR(glm::distance(half[0], expected), 0.0f, 1e-6f);
+    EXPECT_NEAR(glm::length(half[2]), 1.0f, 1e-6f);
+    EXPECT_NEAR(half[2].x, half[2].z, 1e-6f); // halfway between +Z and +X
   });
   EXPECT_EQ(morphs, 1u);
   const ecs::Entity cam = find_named(reg, "camera");
@@ -435,6 +450,8 @@ INSTANTIATE_TEST_SUITE_P(
                "x n {\n}\nk n {\nscale 4\n0 1 1 1 0 0 0\n1 1 1 1 0 0 0\n2 1 1 1 9 0 0\n"
                "3 1 1 1 0 0 0\n}\n",
                3, "[-1, 1]"},
+        BadAff{"zero_tpa_normal", "tpa 1\n0\n0 0 0 0 0 1\n1 0 0 0 0 0\n0 1 0 0 0 1\n", 4,
+               "zero length"},
         BadAff{"bad_view",
                "v\nfrom 0 0 0\nat 0 0 1\nup 0 1 0\nangle 200\nhither 1\n"
                "resolution 4 4\n",

@@ -229,6 +229,10 @@ TEST(JsonScene, ReadsEveryFeatureAsWritten) {
   EXPECT_EQ(reg.get<Kinematics>(jelly).type, Kinematics::Type::Free);
   EXPECT_EQ(reg.get<RayCacheCube>(jelly).resolution, 256u);
   EXPECT_EQ(reg.get<Animation>(jelly).vertices.values[1][2], vec3(0, 1.2f, 0));
+  const Keyframes<std::vector<vec3>>& normals = reg.get<Animation>(jelly).normals;
+  EXPECT_EQ(normals.interpolation, Interpolation::Step);
+  EXPECT_EQ(normals.times, (std::vector<float>{0.0f, 0.25f}));
+  EXPECT_EQ(normals.values[1][1], vec3(0, 0.6f, 0.8f));
   // look_at turns -Z toward the point.
   const Transform& jt = reg.get<Transform>(jelly);
   const vec3 minus_z = jt.rotation * vec3(0, 0, -1);
@@ -396,6 +400,9 @@ const BadCase kBadCases[] = {
     {"values_count_mismatch.json", "entities[0].animation.translation.values", "2 key times"},
     {"vertex_count_mismatch.json", "entities[0].animation.vertices.values[0]", "3"},
     {"vertex_animation_without_mesh.json", "entities[0].animation.vertices", "needs a mesh"},
+    {"normal_count_mismatch.json", "entities[0].animation.normals.values[0]", "2 normals"},
+    {"zero_normal.json", "entities[0].animation.normals.values[1]", "zero length"},
+    {"normals_without_vertices.json", "entities[0].animation.normals", "vertex track"},
     // Checked by load_scene for every format (settle_kinematics), so named by entity, not field.
     {"static_but_animated.json", "",
      "kinematics of \"hand\" is \"static\" but it is moved by the animation of its ancestor "
@@ -900,6 +907,11 @@ std::optional<std::pair<json, std::string>> embed(const std::string& def, const 
   if (def == "vertices_track")
     return entity({{"mesh", triangle}, {"animation", {{"vertices", value}}}},
                   ".animation.vertices");
+  if (def == "normals_track") {
+    const json vertices = {{"times", {0}}, {"values", {{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}}}};
+    return entity({{"mesh", triangle}, {"animation", {{"vertices", vertices}, {"normals", value}}}},
+                  ".animation.normals");
+  }
   return std::nullopt;
 }
 

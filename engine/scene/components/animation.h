@@ -32,8 +32,9 @@ struct Keyframes {
 };
 
 /// Keyframed TRS tracks (applied to Transform) and vertex animation (applied to Mesh: each key is
-/// a full set of positions, as many as the mesh's vertices). animation_system samples at
-/// `time + speed * t`; with `loop`, time wraps to the track's duration.
+/// a full set of positions, as many as the mesh's vertices; an optional normal track, only beside
+/// a vertex track, gives each key's vertex normals, interpolated like positions then normalised).
+/// animation_system samples at `time + speed * t`; with `loop`, time wraps to the track's duration.
 /// Translation keys are double (world positions far from the origin keep their precision).
 /// Visibility switches (BART's `visibility` keys): from each key's time on, the entity and its
 /// subtree are shown (1) or hidden (0); before the first key, the first key's state.
@@ -49,6 +50,7 @@ struct Animation {
   Keyframes<quat> rotation;
   Keyframes<vec3> scale;
   Keyframes<std::vector<vec3>> vertices;
+  Keyframes<std::vector<vec3>> normals;
   VisibilityKeys visibility;
   float time = 0.0f;
   float speed = 1.0f;
@@ -66,6 +68,7 @@ inline float Animation::duration() const {
   if (!rotation.empty()) d = glm::max(d, rotation.end_time());
   if (!scale.empty()) d = glm::max(d, scale.end_time());
   if (!vertices.empty()) d = glm::max(d, vertices.end_time());
+  if (!normals.empty()) d = glm::max(d, normals.end_time());
   if (!visibility.empty()) d = glm::max(d, visibility.times.back());
   return d;
 }

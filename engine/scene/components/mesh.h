@@ -34,7 +34,9 @@ struct MeshSource {
 
 /// Handle to shared triangle geometry (several entities may point at one TriangleMesh).
 /// A deforming entity (vertex Animation) gets its own `deformed_positions`, written by
-/// animation_system; `deformed_tick` says when they last changed.
+/// animation_system; `deformed_tick` says when they last changed. When its Animation also has a
+/// normal track, `deformed_normals` holds the matching vertex normals; without one a deformed mesh
+/// is shaded with its triangles' geometric normals (the shared geometry's would be stale).
 struct Mesh {
   std::shared_ptr<const TriangleMesh> geometry;
   MeshSource source;
@@ -43,6 +45,8 @@ struct Mesh {
   /// The animation time deformed_positions were sampled at (animation_system resamples only when
   /// the time changed, so a paused animation causes no refits).
   float deformed_time = 0.0f;
+  /// Unit vertex normals sampled with deformed_positions (Animation::normals), else empty.
+  std::vector<vec3> deformed_normals{};
 
   /// The positions to trace: the deformed ones when present, else the shared geometry's.
   [[nodiscard]] const std::vector<vec3>& positions() const {
