@@ -195,12 +195,10 @@ void sample_normals(const Keyframes<std::vector<vec3>>& track, float t, std::vec
   const auto [a, b, f] = vertex_keys(track, t);
   out.resize(a->size());
   for (std::size_t v = 0; v < a->size(); ++v) {
-    const vec3 na = glm::normalize((*a)[v]);
-    const vec3 nb = glm::normalize((*b)[v]);
-    const vec3 n = glm::mix(na, nb, f);
-    // Keys of opposite normals blend to zero halfway: the nearer key's normal then.
+    const vec3 n = glm::mix((*a)[v], (*b)[v], f);
+    // Keys of opposite normals may blend to zero between them: the nearer key's normal then.
     const float len = glm::length(n);
-    out[v] = len > 1e-6f ? n / len : (f < 0.5f ? na : nb);
+    out[v] = len > 1e-6f ? n / len : glm::normalize(f < 0.5f ? (*a)[v] : (*b)[v]);
   }
 }
 

@@ -21,8 +21,8 @@ namespace specula {
 [[nodiscard]] quat sample(const Keyframes<quat>& track, float t);
 /// Writes the interpolated vertex set into `out` (resized to the keys' vertex count).
 void sample(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3>& out);
-/// The same for a normal track: each key's normals normalised, blended, normalised again (two
-/// opposite normals halfway between their keys give the nearer key's).
+/// The same for a normal track, each blended normal then normalised (keys need not be unit
+/// length; where two keys' normals blend to zero length, the nearer key's normal, normalised).
 void sample_normals(const Keyframes<std::vector<vec3>>& track, float t, std::vector<vec3>& out);
 
 /// The time to sample at after advancing by `dt`: time + speed·dt, wrapped into [0, duration]

@@ -596,6 +596,11 @@ struct MeshPart {
   /// per-vertex position offsets (zeros where a target has no POSITION).
   std::vector<vec3> base_positions;
   std::vector<std::vector<vec3>> target_offsets;
+  /// Likewise for normals, when every primitive of the part has NORMAL (normals computed from
+  /// the positions of one set of weights do not morph): empty otherwise.
+  std::vector<vec3> base_normals;
+  std::vector<std::vector<vec3>> target_normal_offsets;
+  bool normals_morph = true; ///< no primitive without NORMAL so far
 };
 
 std::string mode_name(int mode) {
@@ -658,6 +663,25 @@ std::vector<vec3> morphed(const std::vector<vec3>& base,
   return out;
 }
 
+/// Morphed normals (glTF §3.7.2.2: NORMAL targets are displacements), normalised when
+/// `normalise`; left as they are for keys, which sample_normals blends and then normalises, so a
+/// sampled normal is the normalised morph of the interpolated weights. A normal the weights
+/// cancel out is no direction: an error naming `field`.
+std::vector<vec3> morphed_normals(const Context& ctx, const std::vector<vec3>& base,
+                                  const std::vector<std::vector<vec3>>& offsets,
+                                  std::span<const float> weights, const std::string& field,
+                                  bool normalise) {
+  std::vector<vec3> out = morphed(base, offsets, weights);
+  for (std::size_t v = 0; v < out.size(); ++v) {
+    const float len = glm::length(out[v]);
+    if (!(len > 1e-6f))
+      ctx.fail(field,
+               "the morph weights give vertex " + std::to_string(v) + " a zero-length normal");
+    if (normalise) out[v] /= len;
+  }
+  return out;
+}
+
 /// Reads one triangle primitive and appends it to `part`. `weights` are the morph weights the
 /// geometry is built with.
 void append_primitive(const Context& ctx, const tinygltf::Primitive& prim, const std::string& field,
@@ -690,18 +714,31 @@ void append_primitive(const Context& ctx, const tinygltf::Primitive& prim, const
   }
 
   // Morph targets (build_mesh_parts checked that every primitive has the same number).
-  std::vector<std::vector<vec3>> offsets(prim.targets.size());
-  for (std::size_t t = 0; t < prim.targets.size(); ++t) {
-    const std::string target_field = field + index_field(".targets", t) + ".POSITION";
-    if (const auto it = prim.targets[t].find("POSITION"); it != prim.targets[t].end()) {
-      offsets[t] = read_vec3s(ctx, it->second, target_field, Components::AnyNumber, n);
-      for (const vec3& d : offsets[t])
-        if (!is_finite(d)) ctx.fail(target_field, "morph target offset is not finite (NaN or Inf)");
-    } else {
-      offsets[t].assign(n, vec3(0.0f));
+  const auto target_offsets = [&](const char* attribute) {
+    std::vector<std::vector<vec3>> offsets(prim.targets.size());
+    for (std::size_t t = 0; t < prim.targets.size(); ++t) {
+      const std::string target_field = field + index_field(".targets", t) + "." + attribute;
+      if (const auto it = prim.targets[t].find(attribute); it != prim.targets[t].end()) {
+        offsets[t] = read_vec3s(ctx, it->second, target_field, Components::AnyNumber, n);
+        for (const vec3& d : offsets[t])
+          if (!is_finite(d))
+            ctx.fail(target_field, "morph target offset is not finite (NaN or Inf)");
+      } else {
+        offsets[t].assign(n, vec3(0.0f));
+      }
     }
-  }
+    return offsets;
+  };
+  const std::vector<std::vector<vec3>> offsets = target_offsets("POSITION");
   mesh.positions = morphed(base, offsets, weights);
+  const bool normals_morph = !offsets.empty() && !mesh.normals.empty();
+  std::vector<vec3> base_normals;
+  std::vector<std::vector<vec3>> normal_offsets;
+  if (normals_morph) {
+    base_normals = mesh.normals;
+    normal_offsets = target_offsets("NORMAL");
+    mesh.normals = morphed_normals(ctx, base_normals, normal_offsets, weights, field, true);
+  }
 
   std::vector<std::uint32_t> indices;
   if (prim.indices >= 0) {
@@ -742,6 +779,17 @@ void append_primitive(const Context& ctx, const tinygltf::Primitive& prim, const
     for (std::size_t t = 0; t < offsets.size(); ++t)
       part.target_offsets[t].insert(part.target_offsets[t].end(), offsets[t].begin(),
                                     offsets[t].end());
+    part.normals_morph = part.normals_morph && normals_morph;
+    if (part.normals_morph) {
+      part.base_normals.insert(part.base_normals.end(), base_normals.begin(), base_normals.end());
+      part.target_normal_offsets.resize(normal_offsets.size());
+      for (std::size_t t = 0; t < normal_offsets.size(); ++t)
+        part.target_normal_offsets[t].insert(part.target_normal_offsets[t].end(),
+                                             normal_offsets[t].begin(), normal_offsets[t].end());
+    } else {
+      part.base_normals.clear();
+      part.target_normal_offsets.clear();
+    }
   }
 }
 
@@ -1241,6 +1289,21 @@ Keyframes<std::vector<vec3>> vertex_keys(const Context& ctx, const WeightTrack& 
   return keys;
 }
 
+/// Normal keys for one mesh part whose normals morph (MeshPart::base_normals), at the same times;
+/// an empty track for one whose normals do not.
+Keyframes<std::vector<vec3>> normal_keys(const Context& ctx, const WeightTrack& w,
+                                         const MeshPart& part) {
+  Keyframes<std::vector<vec3>> keys;
+  if (part.base_normals.empty()) return keys;
+  keys.times = w.times;
+  keys.interpolation = w.interpolation;
+  keys.values.reserve(w.times.size());
+  for (const auto& weights : w.weights)
+    keys.values.push_back(morphed_normals(ctx, part.base_normals, part.target_normal_offsets,
+                                          weights, w.field, false));
+  return keys;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Scene
 
@@ -1424,6 +1487,7 @@ Scene build_scene(const Context& ctx, const fs::path& path) {
         if (split) animation = &part_animation;
         if (deforms) {
           animation->vertices = vertex_keys(ctx, *node_anim->weights, part);
+          animation->normals = normal_keys(ctx, *node_anim->weights, part);
           validate_animation(*animation, part.geometry.vertex_count(), ctx.file,
                              node_anim->weights->field);
         }

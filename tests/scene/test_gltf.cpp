@@ -327,6 +327,33 @@ TEST(GltfAnimation, MorphWeightsGiveBasePlusWeightedTargets) {
     expect_near(posed.geometry->positions[v], posed_want[v]);
 }
 
+TEST(GltfAnimation, NormalTargetsMorphTheNormalsAsTheWeightsMove) {
+  Scene scene = load_gltf_scene(kData / "animated.gltf");
+  ecs::Registry& reg = scene.registry;
+  // Normals +Z; target 0 adds (0, 1, -1) to each, target 1 has no NORMAL: with target 0's
+  // weight w the normal is (0, w, 1 - w), normalised (glTF: NORMAL targets are displacements).
+  const auto normal = [](float w) { return glm::normalize(vec3(0, w, 1 - w)); };
+  const Animation& a = reg.get<Animation>(find(reg, "bender"));
+  ASSERT_EQ(a.normals.times, a.vertices.times);
+  EXPECT_EQ(a.normals.interpolation, a.vertices.interpolation);
+  // Weights (0, 0), (1, 0), (0.5, 1) at 0, 1, 2 s: at each key time and between keys, the
+  // sampled normal is the one of the interpolated weights.
+  const std::pair<float, float> at[] = {
+      {0.0f, 0.0f}, {0.5f, 0.5f}, {1.0f, 1.0f}, {1.5f, 0.75f}, {2.0f, 0.5f}};
+  std::vector<vec3> sampled;
+  for (const auto& [t, w] : at) {
+    SCOPED_TRACE(t);
+    sample_normals(a.normals, t, sampled);
+    ASSERT_EQ(sampled.size(), 3u);
+    for (const vec3& n : sampled) expect_near(n, normal(w));
+  }
+  // A node posed with weights (0.5, 0) gets morphed unit normals in its own geometry.
+  for (const vec3& n : reg.get<Mesh>(find(reg, "leaning")).geometry->normals)
+    expect_near(n, normal(0.5f));
+  // Without NORMAL there is no normal track: face normals follow the moving vertices.
+  EXPECT_TRUE(reg.get<Animation>(find(reg, "blob")).normals.empty());
+}
+
 // --- Accessors and primitive modes -----------------------------------------------------------
 
 TEST(GltfAccessors, SparseValuesReplaceTheBaseOrZeros) {
@@ -458,6 +485,7 @@ const BadFile kBadFiles[] = {
     {"bad_absurd_count.gltf", "absurd", true},
     {"bad_singular_matrix.gltf", "singular", false},
     {"bad_normal_count.gltf", "one per vertex", true},
+    {"bad_morph_normal.gltf", "zero-length normal", true},
     {"bad_animation_times.gltf", "strictly increasing", false},
     {"bad_light_index.gltf", "light index 3 is out of range", false},
     {"bad_material_index.gltf", "material index 4 is out of range", false},

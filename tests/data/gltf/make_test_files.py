@@ -5,7 +5,7 @@ Run from anywhere: `python3 tests/data/gltf/make_test_files.py`. The outputs are
 script documents what each file holds (tests compare against the numbers written here).
 
 Good files: hierarchy.gltf (nodes, materials, cameras, lights), animated.gltf (TRS and morph
-animation), sparse.gltf (sparse accessors), modes.gltf (strips, fans, points, quantized
+animation, morphing normals included), sparse.gltf (sparse accessors), modes.gltf (strips, fans, points, quantized
 positions), box.glb (binary).
 Bad files: bad_*.gltf / bad_*.glb, one problem each (see BAD_FILES at the bottom).
 """
@@ -182,12 +182,22 @@ def write_animated():
     g.add("meshes", {"name": "morph", "weights": [0, 0], "primitives": [{
         "attributes": {"POSITION": base}, "targets": [{"POSITION": target0},
                                                       {"POSITION": target1}]}]})  # mesh 1
+    # Normals that morph: every normal +Z; target 0 adds (0, 1, -1) to each (+Y at weight 1),
+    # target 1 has no NORMAL (zeros); its POSITION moves vertex 2 by +Z.
+    bent_normals = g.accessor([0, 0, 1] * 3, "VEC3")
+    bent_target0 = g.accessor([0, 1, -1] * 3, "VEC3")
+    bent_target1 = g.accessor([0, 0, 0, 0, 0, 0, 0, 0, 1], "VEC3")
+    g.add("meshes", {"name": "bent", "primitives": [{
+        "attributes": {"POSITION": base, "NORMAL": bent_normals},
+        "targets": [{"NORMAL": bent_target0}, {"POSITION": bent_target1}]}]})  # mesh 2
     g.doc["nodes"] = [
         {"name": "mover", "mesh": 0, "children": [1]},                  # 0
         {"name": "rider", "translation": [0, 1, 0], "mesh": 0},         # 1
         {"name": "still", "translation": [5, 0, 0], "mesh": 0},         # 2
         {"name": "blob", "mesh": 1},                                    # 3
         {"name": "posed", "mesh": 1, "weights": [1, 0]},                # 4
+        {"name": "bender", "mesh": 2},                                  # 5
+        {"name": "leaning", "mesh": 2, "weights": [0.5, 0]},            # 6
     ]
     t3 = g.accessor([0, 1, 2], "SCALAR", minmax=True)
     t2 = g.accessor([0, 1], "SCALAR", minmax=True)
@@ -196,23 +206,26 @@ def write_animated():
     # CUBICSPLINE: (in-tangent, value, out-tangent) per key; tangents are junk on purpose.
     scale = g.accessor([9, 9, 9, 1, 1, 1, 9, 9, 9, 9, 9, 9, 2, 2, 2, 9, 9, 9], "VEC3")
     weights = g.accessor([0, 0, 1, 0, 0.5, 1], "SCALAR")
+    bent_weights = g.accessor([0, 0, 1, 0, 0.5, 1], "SCALAR")
     other_translation = g.accessor([7, 7, 7, 8, 8, 8], "VEC3")
     g.doc["animations"] = [
         {"name": "main",
          "samplers": [{"input": t3, "output": translation, "interpolation": "LINEAR"},
                       {"input": t2, "output": rotation, "interpolation": "STEP"},
                       {"input": t2, "output": scale, "interpolation": "CUBICSPLINE"},
-                      {"input": t3, "output": weights}],
+                      {"input": t3, "output": weights},
+                      {"input": t3, "output": bent_weights}],
          "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}},
                       {"sampler": 1, "target": {"node": 0, "path": "rotation"}},
                       {"sampler": 2, "target": {"node": 0, "path": "scale"}},
-                      {"sampler": 3, "target": {"node": 3, "path": "weights"}}]},
+                      {"sampler": 3, "target": {"node": 3, "path": "weights"}},
+                      {"sampler": 4, "target": {"node": 5, "path": "weights"}}]},
         # A second clip on the same node and path: the first animation keeps it.
         {"name": "conflicting",
          "samplers": [{"input": t2, "output": other_translation}],
          "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}]},
     ]
-    g.doc["scenes"] = [{"nodes": [0, 2, 3, 4]}]
+    g.doc["scenes"] = [{"nodes": [0, 2, 3, 4, 5, 6]}]
     g.doc["scene"] = 0
     g.write_gltf("animated.gltf")
 
@@ -339,6 +352,15 @@ def write_bad_files():
     normals = g.accessor([0, 0, 1] * 2, "VEC3", target=ARRAY_BUFFER)  # 2 normals, 3 vertices
     g.doc["meshes"][0]["primitives"][0]["attributes"]["NORMAL"] = normals
     g.write_gltf("bad_normal_count.gltf")
+
+    g = small_triangle(Gltf())
+    normals = g.accessor([0, 0, 1] * 3, "VEC3", target=ARRAY_BUFFER)
+    cancel = g.accessor([0, 0, -1] * 3, "VEC3")  # weight 1 cancels every normal
+    prim = g.doc["meshes"][0]["primitives"][0]
+    prim["attributes"]["NORMAL"] = normals
+    prim["targets"] = [{"NORMAL": cancel}]
+    g.doc["meshes"][0]["weights"] = [1]
+    g.write_gltf("bad_morph_normal.gltf")
 
     g = small_triangle(Gltf())
     times = g.accessor([0, 2, 1], "SCALAR")
