@@ -109,7 +109,8 @@ def car():
 
 
 def flag():
-    """A grid hung from the back wall, waving: vertex keys of a travelling wave."""
+    """A grid hung from the back wall, waving: vertex keys of a travelling wave, with the wave's
+    normals keyed beside them (smooth shading that follows the waves)."""
     w, h = 3.0, 1.5
     positions, triangles = [], []
     for j in range(FLAG_ROWS + 1):
@@ -122,15 +123,20 @@ def flag():
             triangles += [[a, b, d], [a, d, c]]
     keys = 6
     times = [DURATION * k / keys for k in range(keys + 1)]
-    frames = []
+    frames, normals = [], []
     for k in range(keys + 1):
         phase = 2 * math.pi * k / keys
+        # z = a(x) sin(2.5 x + phase), a(x) = 0.25 (x + w/2) / w; the normal is (-dz/dx, 0, 1).
         frames.append([vec((x, y, 0.25 * (x + w / 2) / w * math.sin(2.5 * x + phase)))
                        for (x, y, _) in positions])
+        slope = [0.25 / w * math.sin(2.5 * x + phase) +
+                 0.25 * (x + w / 2) / w * 2.5 * math.cos(2.5 * x + phase) for (x, _, _) in positions]
+        normals.append([vec((-d / math.hypot(d, 1), 0.0, 1 / math.hypot(d, 1))) for d in slope])
     return {"name": "flag", "kinematics": "free", "transform": {"translation": [0, 2.6, -5.6]},
-            "mesh": {"inline": {"positions": frames[0], "triangles": triangles}},
+            "mesh": {"inline": {"positions": frames[0], "normals": normals[0],
+                                "triangles": triangles}},
             "material": {"base_color": [0.2, 0.45, 0.85]},
-            "animation": {"vertices": track(times, frames)}}
+            "animation": {"vertices": track(times, frames), "normals": track(times, normals)}}
 
 
 def swarm():
