@@ -14,6 +14,17 @@
 
 namespace specula::bench {
 
+std::vector<std::string> split_list(const std::string& list) {
+  std::vector<std::string> items;
+  for (std::size_t begin = 0; begin <= list.size();) {
+    std::size_t end = list.find(',', begin);
+    if (end == std::string::npos) end = list.size();
+    if (end > begin) items.push_back(list.substr(begin, end - begin));
+    begin = end + 1;
+  }
+  return items;
+}
+
 double time_ms(const std::function<void()>& f) {
   const auto start = std::chrono::steady_clock::now();
   f();

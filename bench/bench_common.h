@@ -14,6 +14,7 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace specula::bench {
 
@@ -65,7 +66,13 @@ struct Options {
   double denoise_sigma_variance = std::numeric_limits<double>::quiet_NaN();
   /// The fixed colour weight (DenoiseSettings::sigma_color) instead of the variance-guided one.
   bool denoise_fixed = false;
+  /// The dynamic section's scene files, comma-separated (empty: the dynamic_three_classes sample
+  /// and its large variant). BART's kitchen.aff and robots.aff give the paper's Table 1.
+  std::string dynamic_scenes;
 };
+
+/// The non-empty items of a comma-separated list (--path-scenes, --dynamic-scenes, ...).
+std::vector<std::string> split_list(const std::string& list);
 
 /// Wall-clock milliseconds of f().
 double time_ms(const std::function<void()>& f);

@@ -1,7 +1,8 @@
 // Animated scenes (issue 11): the acceleration-structure update against the frame, per backend,
-// on samples/scenes/dynamic_three_classes.json and a larger variant built here, with per-frame
+// on samples/scenes/dynamic_three_classes.json and a larger variant built here (or the scene files
+// of --dynamic-scenes: BART's kitchen.aff and robots.aff where they are at hand), with per-frame
 // plots; and the real-time ray tracer paper's Table 1 grid (BVH only against kd-tree + BVH, per
-// effect) on the same two scenes.
+// effect) on the same scenes.
 
 #include "bench_common.h"
 #include "plot_png.h"
@@ -16,6 +17,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -85,10 +87,38 @@ struct Run {
   std::uint64_t rebuilt = 0, refit = 0, untouched = 0; ///< per frame, medians' inputs summed
 };
 
-/// `frames` frames over [0, kDuration] after the first build (frame 0, not measured: it builds
-/// everything), Whitted at depth 2.
-Run animate(Scene scene, const std::string& backend, std::uint32_t width, std::uint32_t height,
-            int frames, int threads, bool shadows = true, std::uint32_t depth = 2) {
+/// A scene the section animates: its label, how to load it afresh (every run starts from the
+/// file's state) and the animation time its frames cover.
+struct Animated {
+  std::string name;
+  std::function<Scene()> load;
+  double duration = kDuration;
+};
+
+/// The sample and its large variant, or the --dynamic-scenes files over their own time range
+/// (RenderSettings::anim_start/anim_end: AFF's `a`, JSON's settings.animation), else kDuration.
+std::vector<Animated> animated_scenes(const Options& o) {
+  if (o.dynamic_scenes.empty())
+    return {
+        {"dynamic_three_classes", [&o] { return sample(o); }, kDuration},
+        {"dynamic_three_classes + statue + wobbling sphere", [&o] { return large(o); }, kDuration}};
+  std::vector<Animated> out;
+  for (const std::string& file : split_list(o.dynamic_scenes)) {
+    const fs::path path(file);
+    const Scene probe = load_scene(path); // a bad file fails here, before any measurement
+    const double range = double(probe.settings.anim_end) - double(probe.settings.anim_start);
+    out.push_back({path.filename().string(), [path] { return load_scene(path); },
+                   range > 0.0 ? range : kDuration});
+  }
+  return out;
+}
+
+/// `frames` frames over the scene's duration after the first build (frame 0, not measured: it
+/// builds everything), Whitted at depth 2.
+Run animate(const Animated& animated, const std::string& backend, std::uint32_t width,
+            std::uint32_t height, int frames, int threads, bool shadows = true,
+            std::uint32_t depth = 2) {
+  Scene scene = animated.load();
   RenderJob job;
   job.backend = backend;
   job.settings.mode = TraceMode::Whitted;
@@ -102,7 +132,7 @@ Run animate(Scene scene, const std::string& backend, std::uint32_t width, std::u
   schedule.tick(scene.registry, 0.0);
   Run run;
   for (int f = 0; f < frames; ++f) {
-    schedule.tick(scene.registry, kDuration / frames);
+    schedule.tick(scene.registry, animated.duration / frames);
     const FrameStats& s = scene.registry.resource<RenderJob>().last;
     run.frame_ms.push_back(s.ms);
     run.accel_ms.push_back(s.systems.acceleration_ms);
@@ -129,32 +159,32 @@ void section_dynamic(const Options& o) {
   const int frames = std::max(2, o.frames);
   const fs::path dir = report_dir(o);
   Report report;
+  const std::vector<Animated> scenes = animated_scenes(o);
   report("\n### Animated scenes: acceleration update against frame time (%ux%u, Whitted depth 2, "
-         "%d threads, %d frames over %.0f s after the first build)\n\n",
-         width, height, o.threads, frames, kDuration);
+         "%d threads, %d frames over each scene's animation after the first build)\n\n",
+         width, height, o.threads, frames);
   report("| scene | triangles | backend | frame ms (median) | update ms (median) | update / frame "
          "| frames/s | restructures | triangles per frame: rebuilt / refit / untouched |\n"
          "|---|---:|---|---:|---:|---:|---:|---:|---|\n");
   const Rgb colours[] = {{31, 119, 180}, {214, 39, 40}, {44, 160, 44}};
   const Marker markers[] = {Marker::Circle, Marker::Square, Marker::TriangleUp};
-  for (const bool big : {false, true}) {
-    const char* name =
-        big ? "dynamic_three_classes + statue + wobbling sphere" : "dynamic_three_classes";
+  for (std::size_t i = 0; i < scenes.size(); ++i) {
+    const Animated& scene = scenes[i];
+    const char* name = scene.name.c_str();
     std::uint64_t triangles = 0;
     {
-      Scene probe = big ? large(o) : sample(o);
+      Scene probe = scene.load();
       triangles = triangle_count(probe.registry);
     }
     Plot plot;
-    plot.title = big ? "large variant: ms per frame" : "dynamic three classes: ms per frame";
+    plot.title = scene.name + ": ms per frame";
     plot.x_label = "frame";
     plot.y_label = "ms";
     plot.y_min = 0.0;
     int k = 0;
     for (const char* backend : {"native", "native-bvh", "embree"}) {
       if (!backend_info(backend).available) continue;
-      const Run run =
-          animate(big ? large(o) : sample(o), backend, width, height, frames, o.threads);
+      const Run run = animate(scene, backend, width, height, frames, o.threads);
       const double frame = median(run.frame_ms), update = median(run.accel_ms);
       report("| %s | %llu | %s | %.1f | %.2f | %.1f%% | %.1f | %u | %llu / %llu / %llu |\n", name,
              static_cast<unsigned long long>(triangles), backend, frame, update,
@@ -173,7 +203,11 @@ void section_dynamic(const Options& o) {
       plot.legend.push_back({std::string(backend) + " update", colours[k], Marker::Cross});
       ++k;
     }
-    const fs::path png = dir / (big ? "frames_large.png" : "frames_sample.png");
+    // The default scenes' plots keep their names (docs/PERFORMANCE.md links them).
+    const fs::path png =
+        dir / (!o.dynamic_scenes.empty() ? "frames_" + fs::path(scene.name).stem().string() + ".png"
+               : i == 0                  ? std::string("frames_sample.png")
+                                         : std::string("frames_large.png"));
     write_plot_png(plot, png);
     report("\nPer-frame plot: `%s`\n\n", png.filename().string().c_str());
   }
@@ -192,19 +226,19 @@ void section_dynamic(const Options& o) {
                             {"+ shadows", true, 0},
                             {"+ reflection & refraction", false, 2},
                             {"all effects", true, 2}};
-  for (const bool big : {false, true}) {
+  for (const Animated& scene : scenes) {
     for (const Config& c : configs) {
       double ms[3] = {0, 0, 0};
       int k = 0;
       for (const char* backend : {"native-bvh", "native", "embree"}) {
         if (backend_info(backend).available)
-          ms[k] = median(animate(big ? large(o) : sample(o), backend, width, height, frames,
-                                 o.threads, c.shadows, c.depth)
-                             .frame_ms);
+          ms[k] =
+              median(animate(scene, backend, width, height, frames, o.threads, c.shadows, c.depth)
+                         .frame_ms);
         ++k;
       }
-      report("| %s | %s | %.1f | %.1f | %.1f | %.2f |\n", big ? "large variant" : "sample", c.name,
-             ms[0], ms[1], ms[2], ms[1] > 0.0 ? ms[0] / ms[1] : 0.0);
+      report("| %s | %s | %.1f | %.1f | %.1f | %.2f |\n", scene.name.c_str(), c.name, ms[0], ms[1],
+             ms[2], ms[1] > 0.0 ? ms[0] / ms[1] : 0.0);
     }
   }
   report.save(dir / "README.md");

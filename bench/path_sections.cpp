@@ -70,18 +70,6 @@ constexpr const char* kReferenceVersion = "specula-path-reference-1";
 
 // --- Scenes ------------------------------------------------------------------------------------
 
-/// The names of a comma-separated list (--path-scenes, --path-cache-scenes).
-std::vector<std::string> scene_names(const std::string& list) {
-  std::vector<std::string> names;
-  for (std::size_t begin = 0; begin <= list.size();) {
-    std::size_t end = list.find(',', begin);
-    if (end == std::string::npos) end = list.size();
-    if (end > begin) names.push_back(list.substr(begin, end - begin));
-    begin = end + 1;
-  }
-  return names;
-}
-
 /// Every path scene is measured at the Cornell box's bench size: size/2 × size·400/1024
 /// (512×400 at the default --size 1024).
 std::uint32_t path_width(const Options& o) { return std::max(16u, o.size / 2); }
@@ -571,7 +559,7 @@ void path_reference(const Options& o) {
   Report out;
   out("\n## Path tracing: converged references (MIS, %u spp, %ux%u, %u threads)\n\n",
       o.reference_spp, path_width(o), path_height(o), o.threads);
-  for (const std::string& name : scene_names(o.path_scenes)) {
+  for (const std::string& name : split_list(o.path_scenes)) {
     PathScene scene(o, name);
     (void)reference(o, scene, out);
   }
@@ -598,7 +586,7 @@ void path_error(const Options& o) {
              shortest(d.sigma_color) + ", halved per level)")
                 .c_str());
   std::vector<std::string> summary_rows;
-  for (const std::string& name : scene_names(o.path_scenes)) {
+  for (const std::string& name : split_list(o.path_scenes)) {
     PathScene scene(o, name);
     const Framebuffer ref = reference(o, scene, out);
     std::vector<Run> runs;
@@ -780,7 +768,7 @@ void path_cache(const Options& o) {
       "reached %.0f ms (or the last). The uncached run is repeated last, to show the machine's "
       "drift.\n\n",
       3.0 * budget, o.reference_spp, budget, 3.0 * budget, budget, budget);
-  for (const std::string& name : scene_names(o.path_cache_scenes)) {
+  for (const std::string& name : split_list(o.path_cache_scenes)) {
     PathScene scene(o, name, true);
     const Framebuffer ref = reference(o, scene, out);
     std::vector<CacheRun> runs;

@@ -365,6 +365,10 @@ int main(int argc, char** argv) {
                  "Comma-separated sample scenes of the path sections");
   app.add_option("--path-cache-scenes", o.path_cache_scenes,
                  "Comma-separated sample scenes of path-cache (square images)");
+  app.add_option("--dynamic-scenes", o.dynamic_scenes,
+                 "Comma-separated scene files (JSON, glTF, AFF) the dynamic section animates over "
+                 "their own time range (default: the dynamic_three_classes sample and its large "
+                 "variant)");
   app.add_option("--path-spp", o.path_spp, "Samples path-error accumulates (1-spp frames)")
       ->check(CLI::Range(1u, 1u << 20));
   app.add_option("--reference-spp", o.reference_spp, "Samples per pixel of the references")
