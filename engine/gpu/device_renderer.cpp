@@ -101,8 +101,19 @@ void DeviceRenderer::upload_tables(const SceneLayer& layer) {
     upload_vector(context_, materials_, t.materials);
   if (all || d.lights_changed) upload_vector(context_, lights_, t.lights);
   if (all || d.geometry_relocated || d.static_rebuilt || !d.meshes_added.empty() ||
-      !d.instances_added.empty() || !d.instances_deformed.empty())
+      !d.instances_added.empty() || t.normals.size() != normals_uploaded_) {
     upload_vector(context_, normals_, t.normals);
+    normals_uploaded_ = t.normals.size();
+  } else {
+    // Deformed in place: only their own normals changed (a deforming mesh that gains normals
+    // appends a range, which the size check above sends whole).
+    for (const std::uint32_t slot : d.instances_deformed) {
+      const GpuMesh& m = t.meshes[t.instances[slot].mesh];
+      if (m.first_normal != kNoIndex)
+        normals_.upload(&t.normals[m.first_normal], m.vertex_count * sizeof(vec3),
+                        m.first_normal * sizeof(vec3));
+    }
+  }
   light_count_ = std::uint32_t(t.lights.size());
   tables_sync_ = layer.syncs();
 }

@@ -128,6 +128,7 @@ private:
   Buffer unused_; ///< 16 bytes, bound where a frame has no cubes or no visibility buffer
   std::unique_ptr<StatePool> pool_; ///< saved traversal states (trace_pool.glsl)
   std::uint64_t tables_sync_ = 0; ///< SceneLayer::syncs() of the tables uploaded (0: none)
+  std::size_t normals_uploaded_ = 0; ///< size of the normals pool last uploaded whole
   std::uint32_t node_capacity_ = 0, shadow_capacity_ = 0, chunk_pixels_ = 0;
   std::uint32_t light_count_ = 0;
   std::uint32_t max_depth_ = 0;
