@@ -273,6 +273,47 @@ TEST(Systems, VertexAnimationDeformsTheEntitysPositionsNotTheSharedMesh) {
   for (const vec3& p : shared->positions) EXPECT_EQ(p.z, 0.0f);
 }
 
+TEST(Systems, NormalTracksGiveUnitNormalsAndOppositeKeysNeverANan) {
+  ecs::Registry reg;
+  auto shared = std::make_shared<TriangleMesh>();
+  shared->positions = {vec3(0, 0, 0), vec3(1, 0, 0), vec3(0, 1, 0)};
+  shared->triangles = {uvec3(0, 1, 2)};
+  const ecs::Entity e = reg.create();
+  reg.emplace<Transform>(e);
+  reg.emplace<Mesh>(e, Mesh{shared, {}, {}, 0});
+  Animation anim;
+  anim.loop = false;
+  anim.vertices.times = {0.0f, 1.0f};
+  anim.vertices.values = {shared->positions, shared->positions};
+  // Vertex 0 turns from +Z to +X with keys of length 2 and 1; vertex 1 flips from +Z to -Z
+  // (the blend passes through zero halfway); vertex 2 holds still.
+  anim.normals.times = {0.0f, 1.0f};
+  anim.normals.values = {{vec3(0, 0, 2), vec3(0, 0, 1), vec3(0, 1, 0)},
+                         {vec3(1, 0, 0), vec3(0, 0, -1), vec3(0, 1, 0)}};
+  reg.emplace<Animation>(e, anim);
+  Schedule schedule;
+  const auto normals_at = [&](double dt) {
+    schedule.tick(reg, dt);
+    return reg.get<Mesh>(e).deformed_normals;
+  };
+  std::vector<vec3> n = normals_at(0.25); // t = 0.25
+  ASSERT_EQ(n.size(), 3u);
+  // The keys blend as given, then normalise: (0.25, 0, 1.5) for vertex 0.
+  EXPECT_LT(glm::distance(n[0], glm::normalize(vec3(0.25f, 0, 1.5f))), 1e-6f);
+  EXPECT_EQ(n[1], vec3(0, 0, 1));
+  EXPECT_EQ(n[2], vec3(0, 1, 0));
+  n = normals_at(0.25); // t = 0.5: vertex 1's blend is zero, so the nearer key's (the later one)
+  EXPECT_EQ(n[1], vec3(0, 0, -1));
+  for (const vec3& v : n) EXPECT_NEAR(glm::length(v), 1.0f, 1e-6f);
+  n = normals_at(0.6); // past the last key: the last key's normals, normalised
+  EXPECT_EQ(n[0], vec3(1, 0, 0));
+  EXPECT_EQ(n[1], vec3(0, 0, -1));
+  // Without a normal track the deformed mesh has none (face normals in shading).
+  reg.get<Animation>(e).normals = {};
+  reg.get<Animation>(e).time = 0.0f;
+  EXPECT_TRUE(normals_at(0.1).empty());
+}
+
 TEST(Systems, StepInterpolationHoldsThePreviousKey) {
   ecs::Registry reg;
   const ecs::Entity e = reg.create();
