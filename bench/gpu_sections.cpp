@@ -236,16 +236,22 @@ void traversal_table(const Options& o, Scene& scene) {
               scene.settings.width, scene.settings.height, o.threads);
   std::vector<Hit> reference(rays.size()), hits(rays.size());
   double native_bvh = 0.0;
-  for (const char* name : {"native-bvh", "vulkan", "native-grid", "vulkan-grid", "embree"}) {
+  // The reference is the device's own traversal in scalar C++: the binary BVH, one box per step.
+  // native-bvh's default, the 4-wide SIMD collapse (wide_bvh.h), is a different walk and follows
+  // as its own row; the ratios stay against the scalar one, as the target states.
+  constexpr const char* kWide = "native-bvh (4-wide SIMD)";
+  for (const char* name : {"native-bvh", "vulkan", "native-grid", "vulkan-grid", "embree", kWide}) {
+    const bool wide = std::string_view(name) == kWide;
     const bool device = std::string_view(name).starts_with("vulkan");
     try {
       TracerOptions options;
       options.packet_width = 8;
-      const std::unique_ptr<Tracer> tracer = make_tracer(name, options);
+      options.native_wide_bvh = wide;
+      const std::unique_ptr<Tracer> tracer = make_tracer(wide ? "native-bvh" : name, options);
       tracer->update(layer);
       const double m = mrays(rays.size(), time_batch(o, *tracer, rays, hits, device));
       std::string same;
-      if (std::string_view(name).starts_with("native")) {
+      if (std::string_view(name).starts_with("native") && !wide) {
         reference = hits;
       } else if (device) {
         std::size_t differ = 0;
