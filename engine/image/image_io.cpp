@@ -731,10 +731,11 @@ void write_png_srgb8(std::span<const std::uint8_t> rgb, std::uint32_t width, std
 void write_png(const Framebuffer& image, const std::filesystem::path& path) {
   std::vector<std::uint8_t> rgb(3 * image.pixel_count());
   std::size_t i = 0;
+  const Srgb8Encoder& encode = Srgb8Encoder::get();
   for (const vec3& p : image.pixels()) {
-    rgb[i++] = encode_srgb8(p.r);
-    rgb[i++] = encode_srgb8(p.g);
-    rgb[i++] = encode_srgb8(p.b);
+    rgb[i++] = encode(p.r);
+    rgb[i++] = encode(p.g);
+    rgb[i++] = encode(p.b);
   }
   write_png_srgb8(rgb, image.width(), image.height(), path);
 }

@@ -36,38 +36,51 @@ void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint3
   // colour; one drawn at its size or smaller takes the source pixel under each destination
   // pixel's centre (nearest neighbour, in integers: at the same size, the frame itself).
   const bool bilinear = dw >= fw && dh >= fh && (dw > fw || dh > fh);
+  // Each drawn column's source column (or taps), once per frame rather than a division per pixel.
   std::vector<LinearTaps> columns;
+  std::vector<std::uint32_t> nearest_columns;
   if (bilinear) {
     columns.resize(dw);
     for (std::uint64_t x = 0; x < dw; ++x) columns[x] = linear_source(x, dw, fw);
+  } else {
+    nearest_columns.resize(dw);
+    for (std::uint64_t x = 0; x < dw; ++x)
+      nearest_columns[x] = std::uint32_t(nearest_source(x, dw, fw));
   }
+  const Srgb8Encoder& encode = Srgb8Encoder::get();
+  const auto black = [](std::uint8_t* p, std::uint64_t count) {
+    for (std::uint64_t i = 0; i < count; ++i, p += 4) {
+      p[0] = p[1] = p[2] = 0;
+      p[3] = 255;
+    }
+  };
   tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, height), [&](const auto& rows) {
     for (std::uint32_t y = rows.begin(); y != rows.end(); ++y) {
       std::uint8_t* row = out.data() + std::size_t(y) * width * 4;
-      const bool inside_y = y >= oy && y < oy + dh;
-      const std::uint64_t sy = inside_y && !bilinear ? nearest_source(y - oy, dh, fh) : 0;
-      const LinearTaps ty = inside_y && bilinear ? linear_source(y - oy, dh, fh) : LinearTaps{};
-      for (std::uint32_t x = 0; x < width; ++x) {
-        std::uint8_t* p = row + std::size_t(x) * 4;
-        if (!inside_y || x < ox || x >= ox + dw) {
-          p[0] = p[1] = p[2] = 0;
-          p[3] = 255;
-          continue;
-        }
-        vec3 c;
-        if (bilinear) {
-          const LinearTaps& tx = columns[x - ox];
-          const vec3* lo = &pixels[std::size_t(ty.lo) * fw];
-          const vec3* hi = &pixels[std::size_t(ty.hi) * fw];
-          c = lerp_taps(lerp_taps(lo[tx.lo], lo[tx.hi], tx.weight),
-                        lerp_taps(hi[tx.lo], hi[tx.hi], tx.weight), ty.weight);
-        } else {
-          c = pixels[std::size_t(sy * fw + nearest_source(x - ox, dw, fw))];
-        }
-        p[r] = specula::encode_srgb8(c.r);
-        p[1] = specula::encode_srgb8(c.g);
-        p[b] = specula::encode_srgb8(c.b);
+      if (y < oy || y >= oy + dh) {
+        black(row, width);
+        continue;
+      }
+      black(row, ox);
+      black(row + (ox + dw) * 4, width - ox - dw);
+      std::uint8_t* p = row + ox * 4;
+      const auto put = [&](const vec3& c) {
+        p[r] = encode(c.r);
+        p[1] = encode(c.g);
+        p[b] = encode(c.b);
         p[3] = 255;
+        p += 4;
+      };
+      if (bilinear) {
+        const LinearTaps ty = linear_source(y - oy, dh, fh);
+        const vec3* lo = &pixels[std::size_t(ty.lo) * fw];
+        const vec3* hi = &pixels[std::size_t(ty.hi) * fw];
+        for (const LinearTaps& tx : columns)
+          put(lerp_taps(lerp_taps(lo[tx.lo], lo[tx.hi], tx.weight),
+                        lerp_taps(hi[tx.lo], hi[tx.hi], tx.weight), ty.weight));
+      } else {
+        const vec3* source = &pixels[std::size_t(nearest_source(y - oy, dh, fh) * fw)];
+        for (const std::uint32_t sx : nearest_columns) put(source[sx]);
       }
     }
   });
