@@ -1,10 +1,12 @@
 // specula-editor SCENE [--headless] [--script FILE] [--backend B] [--mode M] [--size WxH]
-//   [--depth N] [--cache off|on] [--frames N] [--screenshot PNG]
+//   [--depth N] [--cache off|on] [--frames N] [--screenshot PNG] [--screenshot-ui PNG]
 // Windowed by default (editor_window.cpp, when this build has specula::present); --headless runs
 // the same session and panels without a window. Windowed, --frames N closes the window after N
-// frames and --screenshot writes the last one; --target-fps F (default 30, 0 off) renders below
-// the window's size when frames take longer than 1/F s (dynamic resolution). Exit codes: 0 done, 1 bad input or a failed
-// script line (the message names file:line), 2 a feature this build or machine lacks.
+// frames and --screenshot writes the last one (--screenshot-ui: with the panels over it, as drawn;
+// headless, drawn offscreen on any Vulkan device); --target-fps F (default 30, 0 off) renders below
+// the window's size when frames take longer than 1/F s (dynamic resolution). Exit codes: 0 done, 1
+// bad input or a failed script line (the message names file:line), 2 a feature this build or
+// machine lacks.
 
 #include "editor/core/editor_session.h"
 #include "editor/core/panels.h"
@@ -16,6 +18,7 @@
 
 #include <cstdio>
 #include <iostream>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -38,7 +41,7 @@ int main(int argc, char** argv) {
   using namespace specula;
   CLI::App app{"Specula editor"};
   std::string scene, script, backend = "auto", mode = "whitted", size = "960x540", caches = "off",
-                             screenshot;
+                             screenshot, screenshot_ui;
   bool headless = false;
   std::optional<std::uint32_t> depth;
   std::optional<std::uint32_t> frames;
@@ -54,6 +57,9 @@ int main(int argc, char** argv) {
   app.add_option("--frames", frames, "Frames to render (headless, no script) or to show before closing (windowed)")
       ->check(CLI::Range(1u, 1000000u));
   app.add_option("--screenshot", screenshot, "Write the last frame to this PNG");
+  app.add_option("--screenshot-ui", screenshot_ui,
+                 "Write the whole editor as drawn (the last frame with the panels over it) to this "
+                 "PNG");
   app.add_option("--target-fps", target_fps,
                  "Window: frame rate held by rendering below the window's size (0: full size)")
       ->check(CLI::Range(0.0, 1000.0));
@@ -80,18 +86,32 @@ int main(int argc, char** argv) {
       run.frames = frames;
       run.target_fps = target_fps;
       if (!screenshot.empty()) run.screenshot = screenshot;
+      if (!screenshot_ui.empty()) run.screenshot_ui = screenshot_ui;
       return editor::run_window(session, run);
     }
-    editor::HeadlessUi ui(float(view.width), float(view.height));
-    ui.frame(session);
+    // The panels run on a bare ImGui context, or drawn offscreen when the whole editor is wanted.
+    std::optional<editor::HeadlessUi> bare;
+    std::unique_ptr<editor::UiCapture> drawn;
+    if (screenshot_ui.empty())
+      bare.emplace(float(view.width), float(view.height));
+    else
+      drawn = editor::UiCapture::create(view.width, view.height);
+    const auto ui_frame = [&] {
+      if (drawn)
+        drawn->frame(session);
+      else
+        bare->frame(session);
+    };
+    ui_frame();
     if (!script.empty())
-      editor::run_script(session, script, [&] { ui.frame(session); });
+      editor::run_script(session, script, ui_frame);
     else
       for (std::uint32_t i = 1; i < frames.value_or(1); ++i) {
         session.tick();
-        ui.frame(session);
+        ui_frame();
       }
     if (!screenshot.empty()) session.screenshot(screenshot);
+    if (drawn) drawn->write(session, screenshot_ui);
     return 0;
   } catch (const UnavailableError& e) {
     std::cerr << "specula-editor: " << e.what() << "\n";

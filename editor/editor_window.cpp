@@ -5,6 +5,7 @@
 #include "editor/core/panels.h"
 #include "editor/core/script.h"
 #include "editor/window_controls.h"
+#include "specula/image/image_io.h"
 #include "specula/present/window.h"
 #include "specula/render/resolution_governor.h"
 
@@ -17,6 +18,48 @@
 #include <vector>
 
 namespace specula::editor {
+
+namespace {
+
+/// An RGBA8 image as a PNG (alpha dropped: the canvas is opaque).
+void write_rgba_png(const present::Rgba8Image& image, const std::filesystem::path& path) {
+  std::vector<std::uint8_t> rgb(std::size_t(image.width) * image.height * 3);
+  for (std::size_t i = 0, n = std::size_t(image.width) * image.height; i < n; ++i)
+    for (int c = 0; c < 3; ++c) rgb[3 * i + std::size_t(c)] = image.rgba[4 * i + std::size_t(c)];
+  write_png_srgb8(rgb, image.width, image.height, path);
+}
+
+class OffscreenUiCapture final : public UiCapture {
+public:
+  OffscreenUiCapture(std::uint32_t width, std::uint32_t height) {
+    present::OffscreenSettings settings;
+    settings.width = width;
+    settings.height = height;
+    settings.ui = true;
+    target_ = present::Offscreen::create(settings);
+  }
+
+  void frame(EditorSession& session) override {
+    // No platform backend moves ImGui's clock here: io.DeltaTime keeps its 1/60 s.
+    target_->begin_ui();
+    draw_panels(session, panels_);
+    ImGui::Render();
+  }
+
+  void write(const EditorSession& session, const std::filesystem::path& png) override {
+    write_rgba_png(target_->render(session.frame(), ImGui::GetDrawData()), png);
+  }
+
+private:
+  std::unique_ptr<present::Offscreen> target_;
+  PanelState panels_;
+};
+
+} // namespace
+
+std::unique_ptr<UiCapture> UiCapture::create(std::uint32_t width, std::uint32_t height) {
+  return std::make_unique<OffscreenUiCapture>(width, height);
+}
 
 int run_window(EditorSession& session, const WindowRun& run) {
   present::WindowSettings settings;
@@ -61,6 +104,7 @@ int run_window(EditorSession& session, const WindowRun& run) {
     ++shown;
   }
   if (run.screenshot) session.screenshot(*run.screenshot);
+  if (run.screenshot_ui) write_rgba_png(window->read_back(), *run.screenshot_ui);
   if (run.frames && !frame_ms.empty()) {
     // The presented rate, for docs/PERFORMANCE.md (a run with --frames is a measurement or a test).
     const double f = median(frame_ms);

@@ -6,8 +6,10 @@
 
 #include <imgui.h>
 
+#include <algorithm>
 #include <cfloat>
 #include <charconv>
+#include <cmath>
 #include <cstring>
 #include <functional>
 #include <map>
@@ -75,7 +77,35 @@ bool combo(const char* name, std::string& value, std::initializer_list<const cha
 
 } // namespace
 
+PanelLayout panel_layout(float width, float height) {
+  const float column = std::clamp(0.25f * width, 180.0f, 320.0f);
+  const float right = std::max(0.0f, width - column);
+  PanelLayout l;
+  const float entities = std::round(0.45f * height);
+  l.entities = {0.0f, 0.0f, column, entities};
+  l.inspector = {0.0f, entities, column, height - entities};
+  const float render = std::min(130.0f, std::round(0.25f * height));
+  const float frame = std::round(0.55f * height);
+  l.render = {right, 0.0f, column, render};
+  l.frame = {right, render, column, frame};
+  l.caches = {right, render + frame, column, std::max(0.0f, height - render - frame)};
+  return l;
+}
+
+namespace {
+
+/// Opens the next panel at its place in panel_layout, the first time only.
+void place(PanelRect PanelLayout::*which) {
+  const ImVec2 display = ImGui::GetIO().DisplaySize;
+  const PanelRect r = panel_layout(display.x, display.y).*which;
+  ImGui::SetNextWindowPos(ImVec2(r.x, r.y), ImGuiCond_FirstUseEver);
+  ImGui::SetNextWindowSize(ImVec2(r.width, r.height), ImGuiCond_FirstUseEver);
+}
+
+} // namespace
+
 void entity_tree_panel(EditorSession& s, PanelState& state) {
+  place(&PanelLayout::entities);
   ImGui::Begin("Entities");
   std::multimap<std::uint32_t, ecs::Entity> children; // by parent index
   std::vector<ecs::Entity> roots;
@@ -85,6 +115,17 @@ void entity_tree_panel(EditorSession& s, PanelState& state) {
     else
       roots.push_back(e);
   });
+  // The buttons first: a long tree scrolls below them instead of pushing them out of view.
+  if (ImGui::Button("Add sphere")) act(state, [&] { (void)s.add_primitive("sphere", "sphere"); });
+  ImGui::SameLine();
+  if (ImGui::Button("Add box")) act(state, [&] { (void)s.add_primitive("box", "box"); });
+  ImGui::SameLine();
+  if (ImGui::Button("Delete") && s.selected()) act(state, [&] { s.remove(*s.selected()); });
+  if (ImGui::Button("Undo")) s.undo();
+  ImGui::SameLine();
+  if (ImGui::Button("Redo")) s.redo();
+  if (!state.status.empty()) ImGui::TextWrapped("%s", state.status.c_str());
+  ImGui::Separator();
   ImGui::TextUnformatted("(scene root: drop here to unparent)");
   if (ImGui::BeginDragDropTarget()) {
     if (const ImGuiPayload* p = ImGui::AcceptDragDropPayload("specula-entity")) {
@@ -95,19 +136,11 @@ void entity_tree_panel(EditorSession& s, PanelState& state) {
     ImGui::EndDragDropTarget();
   }
   for (const ecs::Entity e : roots) tree_node(s, state, e, children);
-  if (ImGui::Button("Add sphere")) act(state, [&] { (void)s.add_primitive("sphere", "sphere"); });
-  ImGui::SameLine();
-  if (ImGui::Button("Add box")) act(state, [&] { (void)s.add_primitive("box", "box"); });
-  ImGui::SameLine();
-  if (ImGui::Button("Delete") && s.selected()) act(state, [&] { s.remove(*s.selected()); });
-  if (ImGui::Button("Undo")) s.undo();
-  ImGui::SameLine();
-  if (ImGui::Button("Redo")) s.redo();
-  if (!state.status.empty()) ImGui::TextWrapped("%s", state.status.c_str());
   ImGui::End();
 }
 
 void inspector_panel(EditorSession& s, PanelState& state) {
+  place(&PanelLayout::inspector);
   ImGui::Begin("Inspector");
   const std::optional<ecs::Entity> e = s.selected();
   if (!e) {
@@ -117,6 +150,8 @@ void inspector_panel(EditorSession& s, PanelState& state) {
   }
   ImGui::TextUnformatted(entity_label(s.registry(), *e).c_str());
   const EntitySnapshot snap = s.snapshot(*e);
+  // Values a third of the width, the field paths ("Transform.translation.x") in the rest.
+  ImGui::PushItemWidth(std::max(60.0f, 0.35f * ImGui::GetContentRegionAvail().x));
   for (const std::string& path : field_paths()) {
     std::string value = get_field(snap, path);
     if (path == "RayCacheCube.enabled") {
@@ -144,11 +179,13 @@ void inspector_panel(EditorSession& s, PanelState& state) {
       }
     }
   }
+  ImGui::PopItemWidth();
   if (ImGui::Button("Frame selected")) s.frame_selected();
   ImGui::End();
 }
 
 void render_settings_panel(EditorSession& s, PanelState& state) {
+  place(&PanelLayout::render);
   ImGui::Begin("Render");
   const ViewSettings& v = s.view();
   std::string backend = s.registry().resource<RenderJob>().backend;
@@ -174,6 +211,7 @@ void render_settings_panel(EditorSession& s, PanelState& state) {
 }
 
 void overlay_panel(EditorSession& s) {
+  place(&PanelLayout::frame);
   ImGui::Begin("Frame");
   const auto& h = s.history();
   if (h.empty()) {
@@ -182,6 +220,8 @@ void overlay_panel(EditorSession& s) {
   }
   std::vector<float> series(h.size());
   const auto names = Schedule::system_names();
+  // Room right of each plot for its label ("acceleration ms").
+  ImGui::PushItemWidth(-9.0f * ImGui::GetFontSize());
   for (std::size_t k = 0; k < names.size(); ++k) {
     for (std::size_t i = 0; i < h.size(); ++i)
       series[i] = k < h[i].system_ms.size() ? float(h[i].system_ms[k]) : 0.0f;
@@ -193,6 +233,7 @@ void overlay_panel(EditorSession& s) {
   for (std::size_t i = 0; i < h.size(); ++i) series[i] = float(h[i].rays_per_second * 1e-6);
   ImGui::PlotLines("Mrays/s", series.data(), int(series.size()), 0, nullptr, 0.0f, FLT_MAX,
                    ImVec2(0, 40));
+  ImGui::PopItemWidth();
   ImGui::Text("frame %.2f ms", h.back().ms);
   ImGui::End();
 }
@@ -200,6 +241,7 @@ void overlay_panel(EditorSession& s) {
 void cache_panel(EditorSession& s) {
   const auto* caches = s.registry().try_resource<cache::RayCaches>();
   if (caches == nullptr || !caches->store) return;
+  place(&PanelLayout::caches);
   ImGui::Begin("Ray caches");
   const cache::RayCacheStore& store = *caches->store;
   for (std::size_t i = 0; i < store.cube_count(); ++i) {

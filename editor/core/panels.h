@@ -16,6 +16,21 @@ struct PanelState {
   std::string status; ///< the last action's error, shown until the next action succeeds
 };
 
+/// A panel's rectangle in display pixels (origin top left).
+struct PanelRect {
+  float x = 0.0f, y = 0.0f, width = 0.0f, height = 0.0f;
+};
+
+/// Where the panels open on a display of width × height (Dear ImGui's FirstUseEver: a person may
+/// move and resize them afterwards): the entity tree and the inspector down the left edge, the
+/// render settings, the frame plots and the cache panel down the right, each column a quarter of
+/// the width (180 to 320 pixels), so the middle of the viewport stays clear. Without it every
+/// panel opened at ImGui's default spot, one on top of the other.
+struct PanelLayout {
+  PanelRect entities, inspector, render, frame, caches;
+};
+[[nodiscard]] PanelLayout panel_layout(float width, float height);
+
 /// Entity tree (the Parent hierarchy; click selects, drag onto another entity reparents, onto
 /// the root entry unparents), inspector, render settings, overlay plot and cache view.
 void draw_panels(EditorSession& session, PanelState& state);

@@ -13,11 +13,13 @@
 #include "specula/image/flip.h"
 #include "specula/image/image_io.h"
 #include "specula/image/metrics.h"
+#include "specula/image/srgb.h"
 #include "specula/scene/hierarchy.h"
 #include "specula/scene/json_scene.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -710,6 +712,66 @@ TEST(EditorScript, ErrorsNameFileAndLineAndExitNonZero) {
   const ProgramRun no_scene = run_editor("no-such-scene.json --headless");
   EXPECT_EQ(no_scene.code, 1);
   EXPECT_NE(no_scene.output.find("no-such-scene.json"), std::string::npos) << no_scene.output;
+}
+
+// The whole editor as drawn — the frame with every panel over it, Dear ImGui rendered by its
+// Vulkan backend offscreen (--screenshot-ui) — against a committed PNG
+// (tests/data/golden/editor/editor_ui.png; SPECULA_UPDATE_GOLDEN=1 rewrites it, review it first).
+// The "Frame" panel shows this run's timings, so its rectangle (panel_layout) is left out;
+// everything else — the entity tree with the selection, the inspector's fields, the render
+// settings, the frame — must match: at most 0.1% of the pixels may differ by more than 8 levels
+// (another rasteriser's edge rounding), and PSNR over the compared pixels must be >= 40 dB.
+TEST(EditorScript, ScreenshotOfTheWholeEditorMatchesTheGolden) {
+  constexpr std::uint32_t kW = 960, kH = 540;
+  const fs::path script = write_script("ui.txt", "select \"mirror sphere\"\n"
+                                                 "frames 2\n");
+  const fs::path shot = temp_dir() / "editor_ui.png";
+  fs::remove(shot);
+  const ProgramRun r = run_editor((kScenes / "cornell_box.json").string() +
+                                  " --headless --backend native --size 960x540 --script " +
+                                  script.string() + " --screenshot-ui " + shot.string());
+  if (r.code == 2) GTEST_SKIP() << "no Vulkan device to draw the panels: " << r.output;
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Framebuffer image = read_png(shot);
+  ASSERT_EQ(image.width(), kW);
+  ASSERT_EQ(image.height(), kH);
+  const fs::path reference =
+      fs::path(SPECULA_TEST_DATA_DIR) / "golden" / "editor" / "editor_ui.png";
+  if (std::getenv("SPECULA_UPDATE_GOLDEN") != nullptr) {
+    fs::create_directories(reference.parent_path());
+    fs::copy_file(shot, reference, fs::copy_options::overwrite_existing);
+    GTEST_SKIP() << "rewrote " << reference;
+  }
+  ASSERT_TRUE(fs::exists(reference)) << reference << " is missing (SPECULA_UPDATE_GOLDEN=1)";
+  const Framebuffer golden = read_png(reference);
+  ASSERT_EQ(golden.width(), kW);
+  ASSERT_EQ(golden.height(), kH);
+  const PanelRect timings = panel_layout(float(kW), float(kH)).frame;
+  const auto in_timings = [&](std::uint32_t x, std::uint32_t y) {
+    return float(x) >= timings.x && float(x) < timings.x + timings.width && float(y) >= timings.y &&
+           float(y) < timings.y + timings.height;
+  };
+  std::uint64_t compared = 0, differing = 0;
+  double squared = 0.0;
+  for (std::uint32_t y = 0; y < kH; ++y)
+    for (std::uint32_t x = 0; x < kW; ++x) {
+      if (in_timings(x, y)) continue;
+      ++compared;
+      int worst = 0;
+      for (int c = 0; c < 3; ++c) {
+        const int d = int(encode_srgb8(image.at(x, y)[c])) - int(encode_srgb8(golden.at(x, y)[c]));
+        worst = std::max(worst, std::abs(d));
+        squared += double(d) * double(d);
+      }
+      differing += worst > 8 ? 1 : 0;
+    }
+  ASSERT_GT(compared, std::uint64_t(kW) * kH / 2);
+  const double mse = squared / (3.0 * double(compared));
+  const double db = mse > 0.0 ? 10.0 * std::log10(255.0 * 255.0 / mse) : 999.0;
+  EXPECT_LE(double(differing), 0.001 * double(compared))
+      << differing << " of " << compared
+      << " pixels differ by more than 8 levels; actual: " << shot;
+  EXPECT_GE(db, 40.0) << "actual: " << shot;
 }
 
 // --- soak
