@@ -606,8 +606,16 @@ struct ProgramRun {
   std::string output;
 };
 
-ProgramRun run_editor(const std::string& args) {
-  const std::string command = std::string(SPECULA_EDITOR_EXE) + " " + args + " 2>&1";
+/// Runs the editor with `args`. `device`: the run opens a Vulkan device (--screenshot-ui), so
+/// sanitized builds preload lavapipe for it, as for every program that does: LeakSanitizer would
+/// take the driver's globals for leaks once the loader unloads it (tests/CMakeLists.txt).
+ProgramRun run_editor(const std::string& args, bool device = false) {
+  std::string command = std::string(SPECULA_EDITOR_EXE) + " " + args + " 2>&1";
+#ifdef SPECULA_KEEP_VULKAN_DRIVER
+  if (device) command = "LD_PRELOAD='" + std::string(SPECULA_KEEP_VULKAN_DRIVER) + "' " + command;
+#else
+  (void)device;
+#endif
   FILE* pipe = ::popen(command.c_str(), "r");
   std::string out;
   char buf[4096];
@@ -728,8 +736,9 @@ TEST(EditorScript, ScreenshotOfTheWholeEditorMatchesTheGolden) {
   const fs::path shot = temp_dir() / "editor_ui.png";
   fs::remove(shot);
   const ProgramRun r = run_editor((kScenes / "cornell_box.json").string() +
-                                  " --headless --backend native --size 960x540 --script " +
-                                  script.string() + " --screenshot-ui " + shot.string());
+                                      " --headless --backend native --size 960x540 --script " +
+                                      script.string() + " --screenshot-ui " + shot.string(),
+                                  /*device=*/true);
   if (r.code == 2) GTEST_SKIP() << "no Vulkan device to draw the panels: " << r.output;
   ASSERT_EQ(r.code, 0) << r.output;
   const Framebuffer image = read_png(shot);
