@@ -129,7 +129,9 @@ const SceneDelta& SceneLayer::sync(ecs::Registry& registry) {
                   "'hierarchical' or 'free')");
     relayout(registry, true);
   } else if (const std::size_t garbage = tables_.positions.size() - live_vertices_;
-             garbage > std::max<std::size_t>(live_vertices_, 1u << 16)) {
+             garbage > std::max<std::size_t>(live_vertices_, 1u << 16) ||
+             dropped_normals_ >
+                 std::max<std::size_t>(tables_.normals.size() - dropped_normals_, 1u << 16)) {
     relayout(registry, false);
   }
   // Mesh records freed in this sync become reusable only now: a consumer removes them after
@@ -283,7 +285,9 @@ void SceneLayer::apply_deformations(ecs::Registry& registry) {
 void SceneLayer::write_deformed_normals(gpu::GpuMesh& record, const Mesh& mesh) {
   const std::vector<vec3>& n = mesh.deformed_normals;
   if (n.size() != record.vertex_count) {
-    record.first_normal = gpu::kNoIndex; // none sampled: its old range is left for compaction
+    // None sampled: its old range is left for compaction, and counted.
+    if (record.first_normal != gpu::kNoIndex) dropped_normals_ += record.vertex_count;
+    record.first_normal = gpu::kNoIndex;
     return;
   }
   if (record.first_normal == gpu::kNoIndex) {
@@ -620,6 +624,7 @@ void SceneLayer::relayout(ecs::Registry& registry, bool rebake) {
   tables_.normals = std::move(normals);
   tables_.triangles = std::move(triangles);
   live_vertices_ = tables_.positions.size();
+  dropped_normals_ = 0;
   delta_.geometry_relocated = true;
   ++stats_.relayouts;
   if (rebake) {

@@ -218,6 +218,10 @@ private:
   std::uint64_t version_mesh_ = 0, version_transform_ = 0, version_kinematics_ = 0,
                 version_animation_ = 0, version_parent_ = 0, version_material_ = 0;
   std::size_t live_vertices_ = 0; ///< pool vertices in use (the rest is garbage until relayout)
+  /// Normals left in the pool by deforming meshes whose normals went (write_deformed_normals):
+  /// garbage until relayout, which runs once they outnumber the rest (and 64 Ki), so a mesh whose
+  /// normal track comes and goes again and again cannot grow the pool without bound.
+  std::size_t dropped_normals_ = 0;
   bool static_moved_ = false;     ///< in the current sync: a static entity moved (warned)
 };
 

@@ -315,6 +315,47 @@ TEST(SceneLayer, ADeformedMeshWithANormalTrackCarriesItsSampledNormals) {
   EXPECT_EQ(normals_of(), mesh.deformed_normals);
 }
 
+/// A normal track taken away and given back, 1,000 times: each return appends a fresh range, and
+/// the dropped ones are compacted away once they outnumber the live normals (and 64 Ki), so the
+/// pool stays bounded; before, it grew by the mesh's vertex count every cycle until some other
+/// relayout.
+TEST(SceneLayer, ANormalTrackThatComesAndGoesDoesNotGrowThePoolWithoutBound) {
+  World w;
+  const TriangleMesh& sphere = *w.reg.get<Mesh>(w.blob).geometry;
+  Keyframes<std::vector<vec3>> track;
+  track.times = {0.0f, 1.0f};
+  track.values = {sphere.normals, sphere.normals};
+  Animation& anim = w.reg.get<Animation>(w.blob);
+  anim.normals = track;
+  anim.speed = 1.0f;
+  SceneLayer layer;
+  Ticker tick;
+  tick(w.reg, layer);
+  const std::size_t initial = layer.tables().normals.size();
+  const std::size_t v = sphere.positions.size();
+  constexpr int kCycles = 1000;
+  ASSERT_GT(kCycles * v, std::size_t(1) << 17) << "enough cycles to need a compaction";
+  std::size_t largest = 0;
+  std::uint32_t relayouts = 0; // the stats are the last sync's
+  for (int i = 0; i < kCycles; ++i) {
+    w.reg.get<Animation>(w.blob).normals = {};
+    ASSERT_EQ(tick(w.reg, layer, 0.001).instances_deformed.size(), 1u);
+    relayouts += layer.stats().relayouts;
+    w.reg.get<Animation>(w.blob).normals = track;
+    ASSERT_EQ(tick(w.reg, layer, 0.001).instances_deformed.size(), 1u);
+    relayouts += layer.stats().relayouts;
+    largest = std::max(largest, layer.tables().normals.size());
+  }
+  EXPECT_LE(largest, initial + (std::size_t(1) << 16) + v);
+  EXPECT_GE(relayouts, 1u);
+  const SceneTables& t = layer.tables();
+  const gpu::GpuMesh& record = t.meshes[t.instances[*layer.instance_of(w.blob)].mesh];
+  ASSERT_NE(record.first_normal, gpu::kNoIndex);
+  const std::vector<vec3>& sampled = w.reg.get<Mesh>(w.blob).deformed_normals;
+  ASSERT_EQ(sampled.size(), v);
+  for (std::size_t i = 0; i < v; ++i) EXPECT_EQ(t.normals[record.first_normal + i], sampled[i]);
+}
+
 TEST(SceneLayer, AMovedStaticEntityIsBakedAgainWhereItNowIs) {
   World w;
   SceneLayer layer;
