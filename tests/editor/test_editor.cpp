@@ -17,6 +17,8 @@
 #include "specula/scene/hierarchy.h"
 #include "specula/scene/json_scene.h"
 
+#include "sanitizers.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -785,15 +787,6 @@ TEST(EditorScript, ScreenshotOfTheWholeEditorMatchesTheGolden) {
 
 // --- soak
 // -----------------------------------------------------------------------------------------
-
-// GCC defines __SANITIZE_ADDRESS__ under -fsanitize=address; Clang answers __has_feature.
-#if defined(__SANITIZE_ADDRESS__)
-#define SPECULA_TEST_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define SPECULA_TEST_ASAN 1
-#endif
-#endif
 
 /// Frames of the soak: SPECULA_EDITOR_SOAK_FRAMES, else 2,000 (the count; about 8 s in
 /// the ci build here), 100 under AddressSanitizer (2,000 took 140 s there).

@@ -4,6 +4,8 @@
 #include "specula/image/framebuffer.h"
 #include "specula/image/srgb.h"
 
+#include "sanitizers.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -73,15 +75,6 @@ TEST(Srgb, TransferFunctionsInvertEachOtherAndClamp) {
   EXPECT_EQ(linear_to_srgb(std::numeric_limits<float>::quiet_NaN()), 0.0f);
   EXPECT_NEAR(linear_to_srgb(std::numeric_limits<float>::infinity()), 1.0f, 1e-6f);
 }
-
-// GCC defines __SANITIZE_ADDRESS__ under -fsanitize=address; Clang answers __has_feature.
-#if defined(__SANITIZE_ADDRESS__)
-#define SPECULA_TEST_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define SPECULA_TEST_ASAN 1
-#endif
-#endif
 
 // The table encoder gives the reference's byte for every float of [0, 1]: all 1,065,353,217 of
 // them (about 4 s in the ci build), every 61st under AddressSanitizer, with the first and last
