@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
 #include <numbers>
 #include <random>
 
@@ -247,11 +248,17 @@ TEST(Systems, ChildrenCreatedBeforeParentsStillGetParentFirstOrder) {
     EXPECT_FLOAT_EQ(reg.get<WorldTransform>(chain[i]).world_from_object[3].y, float(i + 1));
 }
 
+/// A shared mesh of one triangle in the z = 0 plane, for the vertex- and normal-track tests.
+std::shared_ptr<TriangleMesh> one_triangle() {
+  auto mesh = std::make_shared<TriangleMesh>();
+  mesh->positions = {vec3(0, 0, 0), vec3(1, 0, 0), vec3(0, 1, 0)};
+  mesh->triangles = {uvec3(0, 1, 2)};
+  return mesh;
+}
+
 TEST(Systems, VertexAnimationDeformsTheEntitysPositionsNotTheSharedMesh) {
   ecs::Registry reg;
-  auto shared = std::make_shared<TriangleMesh>();
-  shared->positions = {vec3(0, 0, 0), vec3(1, 0, 0), vec3(0, 1, 0)};
-  shared->triangles = {uvec3(0, 1, 2)};
+  const std::shared_ptr<TriangleMesh> shared = one_triangle();
   const ecs::Entity a = reg.create();
   const ecs::Entity b = reg.create();
   for (const ecs::Entity e : {a, b}) {
@@ -275,9 +282,7 @@ TEST(Systems, VertexAnimationDeformsTheEntitysPositionsNotTheSharedMesh) {
 
 TEST(Systems, NormalTracksGiveUnitNormalsAndOppositeKeysNeverANan) {
   ecs::Registry reg;
-  auto shared = std::make_shared<TriangleMesh>();
-  shared->positions = {vec3(0, 0, 0), vec3(1, 0, 0), vec3(0, 1, 0)};
-  shared->triangles = {uvec3(0, 1, 2)};
+  const std::shared_ptr<TriangleMesh> shared = one_triangle();
   const ecs::Entity e = reg.create();
   reg.emplace<Transform>(e);
   reg.emplace<Mesh>(e, Mesh{shared, {}, {}, 0});
