@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cstring>
 #include <limits>
 
 namespace specula::accel {
@@ -432,6 +433,12 @@ struct BoxTestSse {
   static bool make_lanes(const PreparedRay* rays, unsigned mask, Lanes& w) {
     return simd_sse::make_watertight_lanes(rays, mask, w);
   }
+  static bool prepare(const RayPacket<4>& rays, const bool* active, PreparedRay* out,
+                      unsigned& mask, std::uint32_t neg[3], Lanes& w) {
+    return simd_sse::prepare_coherent_lanes(rays, active, nullptr, out, nullptr, nullptr, mask, neg,
+                                            w);
+  }
+  static void store(float* p, const __m128& v) { _mm_store_ps(p, v); }
   static void leaf(const Lanes& w, PreparedRay* rays, TriangleHit* hits, unsigned mask,
                    const TriangleView& tris, const std::uint32_t* ids, std::uint32_t count) {
     simd_sse::intersect_leaf_lanes(w, rays, hits, mask, tris, ids, count);
@@ -446,6 +453,13 @@ struct BoxTestAvx2 {
   static bool make_lanes(const PreparedRay* rays, unsigned mask, Lanes& w) {
     return simd_avx2::make_watertight_lanes(rays, mask, w);
   }
+  static bool prepare(const RayPacket<8>& rays, const bool* active, PreparedRay* out,
+                      unsigned& mask, std::uint32_t neg[3], Lanes& w) {
+    return simd_avx2::prepare_coherent_lanes(rays, active, nullptr, out, nullptr, nullptr, mask,
+                                             neg, w);
+  }
+  /// Copies a vector of the lanes into an array (bytewise: this caller is not compiled for AVX).
+  static void store(float* p, const __m256& v) { std::memcpy(p, &v, sizeof(v)); }
   static void leaf(const Lanes& w, PreparedRay* rays, TriangleHit* hits, unsigned mask,
                    const TriangleView& tris, const std::uint32_t* ids, std::uint32_t count) {
     simd_avx2::intersect_leaf_lanes(w, rays, hits, mask, tris, ids, count);
@@ -894,23 +908,37 @@ void Bvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool a
   PreparedRay lane[N];
   TriangleHit lane_hit[N];
   std::uint32_t mask = 0;
-  for (int i = 0; i < N; ++i) {
-    lane[i] = PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
-                                vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i], rays.tfar[i]);
-    if (active[i] && lane[i].valid()) mask |= 1u << i;
+  typename BoxTest::Lanes lanes;
+  // Lanes that agree on their signs and ray space are prepared in vector steps (the same bits).
+  std::uint32_t neg[3];
+  const bool vector_prepared = BoxTest::prepare(rays, active, lane, mask, neg, lanes);
+  if (vector_prepared) {
     for (int a = 0; a < 3; ++a) {
-      p.org[a][i] = lane[i].org[a];
-      p.inv[a][i] = lane[i].inv_dir[a];
-      p.neg[a][i] = lane[i].neg[a] ? ~0u : 0u;
+      BoxTest::store(p.org[a], lanes.org[a]);
+      BoxTest::store(p.inv[a], lanes.inv[a]);
+      std::fill_n(p.neg[a], N, neg[a] != 0 ? ~0u : 0u);
     }
-    p.tnear[i] = lane[i].tnear;
-    p.tfar[i] = lane[i].tfar;
+    std::copy_n(rays.tnear, N, p.tnear);
+    std::copy_n(rays.tfar, N, p.tfar);
+  } else {
+    for (int i = 0; i < N; ++i) {
+      lane[i] =
+          PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
+                            vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i], rays.tfar[i]);
+      if (active[i] && lane[i].valid()) mask |= 1u << i;
+      for (int a = 0; a < 3; ++a) {
+        p.org[a][i] = lane[i].org[a];
+        p.inv[a][i] = lane[i].inv_dir[a];
+        p.neg[a][i] = lane[i].neg[a] ? ~0u : 0u;
+      }
+      p.tnear[i] = lane[i].tnear;
+      p.tfar[i] = lane[i].tfar;
+    }
   }
   if (mask == 0) return;
   // Leaves test a triangle against all lanes at once when the lanes share their ray space.
-  typename BoxTest::Lanes lanes;
-  const bool simd_leaves =
-      Test == TriangleTest::watertight && BoxTest::make_lanes(lane, mask, lanes);
+  const bool simd_leaves = Test == TriangleTest::watertight &&
+                           (vector_prepared || BoxTest::make_lanes(lane, mask, lanes));
 
   struct Entry {
     std::uint32_t node, mask;

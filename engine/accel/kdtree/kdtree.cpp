@@ -15,6 +15,7 @@
 #include <limits>
 #include <memory>
 #include <stdexcept>
+#include <type_traits>
 #include <utility>
 
 namespace specula::accel {
@@ -806,37 +807,58 @@ void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const boo
   alignas(32) float tmin[N];
   alignas(32) float tmax[N];
   unsigned mask = 0;
-  for (int i = 0; i < N; ++i) {
-    tmin[i] = 0.0f;
-    tmax[i] = -1.0f;
-    if (!active[i]) continue;
-    prepared[i] =
-        PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
-                          vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i], rays.tfar[i]);
-    if (!prepared[i].valid()) continue;
-    if (!intersect_box(prepared[i], bounds_.min, bounds_.max, tmin[i], tmax[i])) continue;
-    mask |= 1u << i;
+  std::uint32_t neg[3] = {0, 0, 0};
+  // Lanes that agree on their signs and ray space are prepared in vector steps; others one by one
+  // (the same bits either way).
+  using Lanes = std::conditional_t<N == 8, simd_avx2::WatertightLanes, simd_sse::WatertightLanes>;
+  Lanes lanes;
+  bool vector_prepared;
+  if constexpr (N == 8)
+    vector_prepared = simd_avx2::prepare_coherent_lanes(rays, active, &bounds_, prepared, tmin,
+                                                        tmax, mask, neg, lanes);
+  else
+    vector_prepared = simd_sse::prepare_coherent_lanes(rays, active, &bounds_, prepared, tmin, tmax,
+                                                       mask, neg, lanes);
+  if (!vector_prepared) {
+    for (int i = 0; i < N; ++i) {
+      tmin[i] = 0.0f;
+      tmax[i] = -1.0f;
+      if (!active[i]) continue;
+      prepared[i] =
+          PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
+                            vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i], rays.tfar[i]);
+      if (!prepared[i].valid()) continue;
+      if (!intersect_box(prepared[i], bounds_.min, bounds_.max, tmin[i], tmax[i])) continue;
+      mask |= 1u << i;
+    }
   }
   if (mask == 0) return;
 
   // One direction sign per axis over the live lanes, or each lane on its own.
   bool coherent = std::popcount(mask) > 1;
-  std::uint32_t neg[3] = {0, 0, 0};
-  const int lead = std::countr_zero(mask);
-  for (int a = 0; a < 3 && coherent; ++a) {
-    neg[a] = prepared[lead].neg[a];
-    for (unsigned m = mask; m; m &= m - 1)
-      coherent = coherent && prepared[std::countr_zero(m)].neg[a] == neg[a];
+  if (!vector_prepared) {
+    const int lead = std::countr_zero(mask);
+    for (int a = 0; a < 3 && coherent; ++a) {
+      neg[a] = prepared[lead].neg[a];
+      for (unsigned m = mask; m; m &= m - 1)
+        coherent = coherent && prepared[std::countr_zero(m)].neg[a] == neg[a];
+    }
   }
 
   bool found[N] = {};
   if (coherent) {
     const KdView view{nodes_.data(), indices_.data(), &tris_};
     for (int i = 0; i < N; ++i) lane_hits[i] = TriangleHit{};
+    // The SIMD triangle test needs one ray space for all lanes (camera packets have it).
+    bool shared_axes = vector_prepared;
     if constexpr (N == 8) {
-      avx2::traverse_packet<Test>(view, prepared, lane_hits, tmin, tmax, mask, neg);
+      if (!vector_prepared) shared_axes = simd_avx2::make_watertight_lanes(prepared, mask, lanes);
+      avx2::traverse_packet<Test>(view, prepared, lane_hits, tmin, tmax, mask, neg, lanes,
+                                  shared_axes);
     } else {
-      sse::traverse_packet<Test>(view, prepared, lane_hits, tmin, tmax, mask, neg);
+      if (!vector_prepared) shared_axes = simd_sse::make_watertight_lanes(prepared, mask, lanes);
+      sse::traverse_packet<Test>(view, prepared, lane_hits, tmin, tmax, mask, neg, lanes,
+                                 shared_axes);
     }
     for (unsigned m = mask; m; m &= m - 1)
       found[std::countr_zero(m)] = lane_hits[std::countr_zero(m)].hit();

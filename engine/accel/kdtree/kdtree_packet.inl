@@ -11,22 +11,16 @@
 // their ray space: dominant axis and shear axes; simd_lanes.h) or each lane with the scalar test.
 
 /// Traverses the lanes in `mask` (bits), whose directions all have the signs `neg`, from the root
-/// over their box intervals [tmin_in, tmax_in]. Closer hits land in `hits` and rays[i].tfar.
+/// over their box intervals [tmin_in, tmax_in]. `w`: the lanes (prepare_coherent_lanes or
+/// make_watertight_lanes), `shared_axes` whether they share their ray space (then leaves test them
+/// all at once). Closer hits land in `hits` and rays[i].tfar.
 template <TriangleTest Test>
 SPECULA_SIMD_TARGET void traverse_packet(const KdView& kd, PreparedRay* rays, TriangleHit* hits,
                                        const float* tmin_in, const float* tmax_in, unsigned mask,
-                                       const std::uint32_t neg[3]) {
-  alignas(32) float lane[kLanes];
-  Vf org[3], inv[3];
-  for (int a = 0; a < 3; ++a) {
-    for (int i = 0; i < kLanes; ++i) lane[i] = rays[i].org[a];
-    org[a] = vload(lane);
-    for (int i = 0; i < kLanes; ++i) lane[i] = rays[i].inv_dir[a];
-    inv[a] = vload(lane);
-  }
-  // The SIMD triangle test needs one ray space for all lanes (camera packets have it).
-  WatertightLanes w;
-  const bool shared_axes = make_watertight_lanes(rays, mask, w);
+                                       const std::uint32_t neg[3], const WatertightLanes& w,
+                                       bool shared_axes) {
+  const Vf* org = w.org;
+  const Vf* inv = w.inv;
   const Vf down = vset1(kDown), up = vset1(kUp);
   Vf tmin = vload(tmin_in), tmax = vload(tmax_in);
   Vf tfar = load_tfar(rays);
