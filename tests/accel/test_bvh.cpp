@@ -918,3 +918,126 @@ TEST(WideBvh, EdgeFunctionsThatRoundToZeroAreRecomputedLaneByLane) {
   EXPECT_GE(cases, 100);
   EXPECT_GT(misses, cases / 5) << "the double-precision signs decide some of them";
 }
+
+namespace {
+
+/// Packets of N lanes over `rays` (in order, some lanes reversed, made invalid or inactive)
+/// against the same tree's single rays: the same hit in every lane (the same triangle with the
+/// same bits, or another one at the same distance within 1e-5), tfar its distance. Returns the
+/// lanes that disagree; `ties` counts the lanes that found the other triangle.
+template <int N>
+int wide_packet_mismatches(const WideBvh& wide, const std::vector<Ray>& rays, TriangleTest test,
+                           std::uint32_t seed, bool hard_lanes, int& ties, int& hits) {
+  std::mt19937 rng(seed);
+  int bad = 0;
+  for (std::size_t base = 0; base + N <= rays.size(); base += N) {
+    RayPacket<N> p;
+    PacketHits<N> h;
+    h.clear();
+    bool active[N];
+    for (int i = 0; i < N; ++i) {
+      Ray ray = rays[base + std::size_t(i)];
+      if (hard_lanes && rng() % 9 == 0) ray.direction = -ray.direction; // mixed signs
+      if (hard_lanes && rng() % 13 == 0) ray.direction = vec3(0);       // invalid lane
+      p.ox[i] = ray.origin.x, p.oy[i] = ray.origin.y, p.oz[i] = ray.origin.z;
+      p.dx[i] = ray.direction.x, p.dy[i] = ray.direction.y, p.dz[i] = ray.direction.z;
+      p.tnear[i] = ray.tnear, p.tfar[i] = ray.tfar;
+      active[i] = !hard_lanes || rng() % 7 != 0;
+    }
+    const RayPacket<N> before = p;
+    if constexpr (N == 4)
+      wide.intersect4(p, h, active, test);
+    else
+      wide.intersect8(p, h, active, test);
+    for (int i = 0; i < N; ++i) {
+      PreparedRay r = PreparedRay::make(vec3(before.ox[i], before.oy[i], before.oz[i]),
+                                        vec3(before.dx[i], before.dy[i], before.dz[i]),
+                                        before.tnear[i], before.tfar[i]);
+      TriangleHit single;
+      if (active[i] && r.valid()) wide.intersect(r, single, test);
+      const TriangleHit packet{h.t[i], h.u[i], h.v[i], h.prim[i]};
+      hits += single.hit() ? 1 : 0;
+      // Where two triangles meet, their hits lie an ulp or so apart, and which one a walk keeps
+      // depends on the order it meets them (as between any two structures here): same_hit.
+      const bool ok = same_hit(packet, single) && p.tfar[i] == (packet.hit() ? packet.t : r.tfar);
+      if (ok && packet.prim != single.prim) ++ties;
+      if (!ok && ++bad <= 3)
+        ADD_FAILURE() << "N=" << N << " lane " << i << " packet prim " << packet.prim << " t "
+                      << packet.t << ", single prim " << single.prim << " t " << single.t;
+    }
+  }
+  return bad;
+}
+
+} // namespace
+
+TEST(WideBvh, PacketsEqualSingleRaysPerLane) {
+  for (const Mesh& mesh : test_meshes()) {
+    SCOPED_TRACE(mesh.name);
+    const TriangleView view = mesh.view();
+    Bvh binary;
+    binary.build(view);
+    WideBvh wide;
+    wide.build(binary, view);
+    const Aabb box = mesh_bounds(mesh);
+    const auto coherent = make_rays(box, 4096, 301, true);
+    const auto incoherent = make_rays(box, 4096, 303, false);
+    int ties = 0, hits = 0, bad = 0;
+    for (TriangleTest test : {TriangleTest::watertight, TriangleTest::moller_trumbore})
+      for (const auto* rays : {&coherent, &incoherent})
+        for (bool hard : {false, true}) {
+          bad += wide_packet_mismatches<4>(wide, *rays, test, 305, hard, ties, hits);
+          bad += wide_packet_mismatches<8>(wide, *rays, test, 307, hard, ties, hits);
+        }
+    EXPECT_EQ(bad, 0);
+    EXPECT_GT(hits, 0);
+    // Two triangles at the same distance are rare away from shared edges.
+    EXPECT_LE(ties, hits / 100) << ties << " ties in " << hits << " hits";
+  }
+}
+
+TEST(WideBvh, PacketsThroughSharedEdgesAndVerticesDoNotLeak) {
+  // A closed sphere seen from outside: packets of rays aimed at its vertices and edge midpoints,
+  // grouped so that each packet's lanes share their direction signs (the packet walk, not the
+  // lane-by-lane one), must all hit, as the single rays do.
+  const vec3 c(0.1f, 0.2f, -0.3f);
+  const Mesh m = test::uv_sphere(24, 32, 1.0f, c, /*pole_slivers=*/false);
+  const TriangleView view = m.view();
+  Bvh binary;
+  binary.build(view);
+  WideBvh wide;
+  wide.build(binary, view);
+  const vec3 eye = c + vec3(0.2f, 0.3f, 3.0f);
+  std::vector<Ray> by_sign[4];
+  for (std::uint32_t t = 0; t < view.count; ++t)
+    for (int k = 0; k < 3; ++k) {
+      const vec3 a = view.vertex(t, k), b = view.vertex(t, (k + 1) % 3);
+      for (const vec3& target : {a, 0.5f * (a + b)}) {
+        if (glm::dot(glm::normalize(target - c), glm::normalize(eye - c)) < 0.5f) continue;
+        const vec3 d = target - eye;
+        by_sign[(d.x < 0.0f ? 1 : 0) + (d.y < 0.0f ? 2 : 0)].push_back(Ray{eye, 0.0f, d});
+      }
+    }
+  int rays = 0, leaks = 0;
+  for (const std::vector<Ray>& group : by_sign) {
+    for (std::size_t base = 0; base + 8 <= group.size(); base += 8) {
+      RayPacket<8> p;
+      PacketHits<8> h;
+      h.clear();
+      const bool active[8] = {true, true, true, true, true, true, true, true};
+      for (int i = 0; i < 8; ++i) {
+        const Ray& ray = group[base + std::size_t(i)];
+        p.ox[i] = ray.origin.x, p.oy[i] = ray.origin.y, p.oz[i] = ray.origin.z;
+        p.dx[i] = ray.direction.x, p.dy[i] = ray.direction.y, p.dz[i] = ray.direction.z;
+        p.tnear[i] = ray.tnear, p.tfar[i] = ray.tfar;
+      }
+      wide.intersect8(p, h, active);
+      for (int i = 0; i < 8; ++i) {
+        ++rays;
+        leaks += h.prim[i] == 0xFFFFFFFFu ? 1 : 0;
+      }
+    }
+  }
+  EXPECT_GT(rays, 1000);
+  EXPECT_EQ(leaks, 0);
+}

@@ -1,11 +1,14 @@
 #include "specula/accel/bvh/wide_bvh.h"
 
+#include "specula/accel/common/simd_lanes.h"
+
 #include <immintrin.h>
 
 #include <algorithm>
 #include <bit>
 #include <limits>
 #include <stdexcept>
+#include <type_traits>
 
 namespace specula::accel {
 
@@ -349,6 +352,108 @@ bool WideBvh::traverse(PreparedRay& r, TriangleHit* hit) const {
       if (cur.t <= r.tfar) break;
     }
   }
+}
+
+// ---- Packets ------------------------------------------------------------------------------------
+
+namespace {
+
+/// One lane's watertight test of one triangle, out of line and compiled for the baseline target
+/// like the single-ray path (a packet lane on an edge of the triangle: the double fallback).
+[[gnu::noinline]] void closest_triangle_lane(PreparedRay& r, const vec3& p0, const vec3& p1,
+                                             const vec3& p2, std::uint32_t prim, TriangleHit& hit) {
+  float t, u, v;
+  if (!intersect_watertight(r, p0, p1, p2, r.tfar, t, u, v)) return;
+  r.tfar = t;
+  hit = TriangleHit{t, u, v, prim};
+}
+
+} // namespace
+
+// The packet kernel is written once (wide_bvh_packet.inl) over the vector operations of
+// simd_lanes.h and compiled twice, for SSE and for AVX2 (chosen at run time).
+namespace wide_sse {
+namespace {
+using namespace simd_sse;
+#define SPECULA_SIMD_TARGET
+#include "wide_bvh_packet.inl"
+#undef SPECULA_SIMD_TARGET
+} // namespace
+} // namespace wide_sse
+
+namespace wide_avx2 {
+namespace {
+using namespace simd_avx2;
+#define SPECULA_SIMD_TARGET __attribute__((target("avx2")))
+#include "wide_bvh_packet.inl"
+#undef SPECULA_SIMD_TARGET
+} // namespace
+} // namespace wide_avx2
+
+template <int N, TriangleTest Test>
+void WideBvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active) const {
+  if (nodes_.empty()) return;
+  PreparedRay prepared[N];
+  TriangleHit lane_hits[N];
+  unsigned mask = 0;
+  std::uint32_t neg[3] = {0, 0, 0};
+  using Lanes = std::conditional_t<N == 8, simd_avx2::WatertightLanes, simd_sse::WatertightLanes>;
+  Lanes lanes;
+  bool vector_prepared;
+  if constexpr (N == 8)
+    vector_prepared = simd_avx2::prepare_coherent_lanes(rays, active, nullptr, prepared, nullptr,
+                                                        nullptr, mask, neg, lanes);
+  else
+    vector_prepared = simd_sse::prepare_coherent_lanes(rays, active, nullptr, prepared, nullptr,
+                                                       nullptr, mask, neg, lanes);
+  if (vector_prepared && Test == TriangleTest::watertight && std::popcount(mask) > 1) {
+    if constexpr (N == 8)
+      wide_avx2::traverse_packet(nodes_.data(), groups_.data(), prepared, lane_hits, mask, neg,
+                                 lanes);
+    else
+      wide_sse::traverse_packet(nodes_.data(), groups_.data(), prepared, lane_hits, mask, neg,
+                                lanes);
+  } else {
+    // Lanes that disagree (or the Möller–Trumbore option): each lane's own walk.
+    mask = 0;
+    for (int i = 0; i < N; ++i) {
+      if (!active[i]) continue;
+      prepared[i] =
+          PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
+                            vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i], rays.tfar[i]);
+      if (!prepared[i].valid()) continue;
+      mask |= 1u << i;
+      traverse<Test, false>(prepared[i], &lane_hits[i]);
+    }
+  }
+  for (unsigned m = mask; m; m &= m - 1) {
+    const int i = std::countr_zero(m);
+    if (!lane_hits[i].hit()) continue;
+    rays.tfar[i] = prepared[i].tfar;
+    hits.set(i, lane_hits[i]);
+  }
+}
+
+void WideBvh::intersect4(RayPacket<4>& rays, PacketHits<4>& hits, const bool active[4],
+                         TriangleTest test) const {
+  if (test == TriangleTest::watertight)
+    intersect_packet<4, TriangleTest::watertight>(rays, hits, active);
+  else
+    intersect_packet<4, TriangleTest::moller_trumbore>(rays, hits, active);
+}
+
+void WideBvh::intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[8],
+                         TriangleTest test) const {
+  if (!cpu_has_avx2()) {
+    as_two_packets_of_4(
+        rays, hits, active,
+        [&](RayPacket<4>& r4, PacketHits<4>& h4, const bool* a4) { intersect4(r4, h4, a4, test); });
+    return;
+  }
+  if (test == TriangleTest::watertight)
+    intersect_packet<8, TriangleTest::watertight>(rays, hits, active);
+  else
+    intersect_packet<8, TriangleTest::moller_trumbore>(rays, hits, active);
 }
 
 bool WideBvh::intersect(PreparedRay& r, TriangleHit& hit, TriangleTest test) const {

@@ -1,6 +1,6 @@
 #pragma once
 /// \file
-/// A 4-wide BVH for single rays, collapsed from a built binary Bvh (bvh.h): each node holds the
+/// A 4-wide BVH, collapsed from a built binary Bvh (bvh.h): each node holds the
 /// boxes of up to four children side by side (one SSE register per axis and side), so one ray
 /// tests four boxes in a handful of vector instructions and walks about half as many levels.
 /// This is how Embree's single-ray kernels work (BVH4/BVH8); Specula's binary BVH tests one box
@@ -19,9 +19,12 @@
 ///     operations and the same conservative far distance, so a box the scalar test enters is
 ///     entered here. Closest hit: hit children in order of their entry distance, the nearest
 ///     first; any hit: in any order, stopping at the first.
-///   - Used for the static set of `native-bvh` and for the BVHs of meshes that rigid instances
-///     share (every native backend), both built once and never refitted; packets and deforming
-///     meshes' BVHs (refitted every frame) keep the binary tree.
+///   - Packets (intersect4 / intersect8, wide_bvh_packet.inl): lanes that share their direction
+///     signs and ray space test the four child boxes together and a leaf's triangles one at a
+///     time against all lanes; other packets walk it lane by lane.
+///   - Used for the static set of `native-bvh` (single rays and camera packets) and for the BVHs
+///     of meshes that rigid instances share (every native backend; single rays), both built once
+///     and never refitted; deforming meshes' BVHs (refitted every frame) keep the binary tree.
 
 #include "specula/accel/bvh/bvh.h"
 #include "specula/accel/common/ray_query.h"
@@ -75,6 +78,17 @@ public:
   [[nodiscard]] bool occluded(const PreparedRay& r,
                               TriangleTest test = TriangleTest::watertight) const;
 
+  /// Packets: lanes with active[i] == false are ignored; a lane's hit and tfar are written only
+  /// where a hit closer than rays.tfar[i] is found. Lanes that share their direction signs and
+  /// their ray space (camera packets) walk the tree together (wide_bvh_packet.inl); others, and
+  /// the Möller–Trumbore option, each walk it as a single ray. A lane's closest hit is its
+  /// single ray's (at equal t, the other triangle may win). intersect8 uses AVX2 where the CPU
+  /// has it, else two packets of four.
+  void intersect4(RayPacket<4>& rays, PacketHits<4>& hits, const bool active[4],
+                  TriangleTest test = TriangleTest::watertight) const;
+  void intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[8],
+                  TriangleTest test = TriangleTest::watertight) const;
+
   [[nodiscard]] std::span<const WideBvhNode> nodes() const { return nodes_; }
   [[nodiscard]] std::span<const WideTriangles> groups() const { return groups_; }
   [[nodiscard]] const WideBvhStats& stats() const { return stats_; }
@@ -86,6 +100,8 @@ public:
 private:
   template <TriangleTest Test, bool AnyHit>
   bool traverse(PreparedRay& r, TriangleHit* hit) const;
+  template <int N, TriangleTest Test>
+  void intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active) const;
 
   std::vector<WideBvhNode> nodes_;
   std::vector<WideTriangles> groups_;

@@ -22,15 +22,16 @@ struct WatertightLanes {
   int kx, ky, kz;
 };
 
-/// PreparedRay::make and the root box's intersect_box (with a box) over a packet's lanes in vector steps, with
-/// the same operations in the same order (the same bits), for a packet whose traceable active
-/// lanes share their direction signs and their watertight ray space (kx, ky, kz), as a camera
-/// packet's do. Then `mask` gets the traceable active lanes whose interval meets `box` (all of them
-/// without one; tmin and tmax are then not written); each of them
-/// its PreparedRay in `out` and its interval in [tmin, tmax] (other lanes: tmin 0, tmax -1); `neg`
-/// the shared signs; `w` the lanes (as make_watertight_lanes gives them). Returns false, with nothing written, when the lanes do not agree: the caller
-/// then prepares them one by one. (Six divisions and a branchy axis choice per lane, one lane at a
-/// time, were about as much time as an 8-wide packet's whole traversal of a small mesh.)
+/// PreparedRay::make and the root box's intersect_box (with a box) over a packet's lanes in vector
+/// steps, with the same operations in the same order (the same bits), for a packet whose traceable
+/// active lanes share their direction signs and their watertight ray space (kx, ky, kz), as a
+/// camera packet's do. Then `mask` gets the traceable active lanes whose interval meets `box` (all
+/// of them without one; tmin and tmax are then not written); each of them its PreparedRay in `out`
+/// and its interval in [tmin, tmax] (other lanes: tmin 0, tmax -1); `neg` the shared signs; `w` the
+/// lanes (as make_watertight_lanes gives them). Returns false, with nothing written, when the lanes
+/// do not agree: the caller then prepares them one by one. (Six divisions and a branchy axis choice
+/// per lane, one lane at a time, were about as much time as an 8-wide packet's whole traversal of a
+/// small mesh.)
 SPECULA_SIMD_TARGET inline bool prepare_coherent_lanes(const RayPacket<kLanes>& rays,
                                                        const bool* active, const Aabb* box,
                                                        PreparedRay* out, float* tmin, float* tmax,
@@ -145,16 +146,15 @@ SPECULA_SIMD_TARGET inline bool prepare_coherent_lanes(const RayPacket<kLanes>& 
   return true;
 }
 
-/// One triangle against the lanes in `mask`: Woop et al.'s test with the scalar test's operations
-/// in the scalar test's order, so every lane gets the bits intersect_watertight would give it.
-/// Lanes with an edge function of exactly 0 take the scalar test (its double-precision fallback).
+/// Triangle (p0, p1, p2), number `prim`, against the lanes in `mask`: Woop et al.'s test with the
+/// scalar test's operations in the scalar test's order, so every lane gets the bits
+/// intersect_watertight would give it. Lanes with an edge function of exactly 0 go to
+/// `on_edge(i)`, which runs the scalar test (its double-precision fallback) on lane i.
+template <class OnEdge>
 SPECULA_SIMD_TARGET inline void
 intersect_watertight_lanes(const WatertightLanes& w, PreparedRay* rays, TriangleHit* hits, Vf& tfar,
-                           unsigned mask, const TriangleView& tris, std::uint32_t prim) {
-  const uvec3 tri = tris.triangles[prim];
-  const vec3& p0 = tris.positions[tri.x];
-  const vec3& p1 = tris.positions[tri.y];
-  const vec3& p2 = tris.positions[tri.z];
+                           unsigned mask, const vec3& p0, const vec3& p1, const vec3& p2,
+                           std::uint32_t prim, OnEdge&& on_edge) {
   const Vf a_kx = vsub(vset1(p0[w.kx]), w.org[w.kx]);
   const Vf a_ky = vsub(vset1(p0[w.ky]), w.org[w.ky]);
   const Vf a_kz = vsub(vset1(p0[w.kz]), w.org[w.kz]);
@@ -174,10 +174,10 @@ intersect_watertight_lanes(const WatertightLanes& w, PreparedRay* rays, Triangle
   const Vf V = vsub(vmul(ax, cy), vmul(ay, cx));
   const Vf W = vsub(vmul(bx, ay), vmul(by, ax));
   const Vf zero = vzero();
-  const unsigned on_edge = mask & vmask(vor(vor(veq(U, zero), veq(V, zero)), veq(W, zero)));
+  const unsigned edge = mask & vmask(vor(vor(veq(U, zero), veq(V, zero)), veq(W, zero)));
   const Vf outside = vand(vor(vor(vlt(U, zero), vlt(V, zero)), vlt(W, zero)),
                           vor(vor(vgt(U, zero), vgt(V, zero)), vgt(W, zero)));
-  unsigned candidates = mask & ~on_edge & ~vmask(outside);
+  unsigned candidates = mask & ~edge & ~vmask(outside);
   if (candidates != 0) {
     const Vf det = vadd(vadd(U, V), W);
     const Vf az = vmul(w.sz, a_kz);
@@ -205,17 +205,26 @@ intersect_watertight_lanes(const WatertightLanes& w, PreparedRay* rays, Triangle
       }
     }
   }
-  for (unsigned m = on_edge; m; m &= m - 1) {
-    const int i = std::countr_zero(m);
-    intersect_leaf<TriangleTest::watertight>(rays[i], tris, &prim, 1, hits[i]);
-  }
-  if ((candidates | on_edge) != 0) tfar = gather(rays, &PreparedRay::tfar);
+  for (unsigned m = edge; m; m &= m - 1) on_edge(std::countr_zero(m));
+  if ((candidates | edge) != 0) tfar = gather(rays, &PreparedRay::tfar);
+}
+
+/// Triangle `prim` of `tris` against the lanes in `mask` (as above; a lane on an edge takes
+/// intersect_leaf, compiled for the baseline target like the single-ray path).
+SPECULA_SIMD_TARGET inline void
+intersect_watertight_lanes(const WatertightLanes& w, PreparedRay* rays, TriangleHit* hits, Vf& tfar,
+                           unsigned mask, const TriangleView& tris, std::uint32_t prim) {
+  const uvec3 tri = tris.triangles[prim];
+  intersect_watertight_lanes(
+      w, rays, hits, tfar, mask, tris.positions[tri.x], tris.positions[tri.y],
+      tris.positions[tri.z], prim,
+      [&](int i) { intersect_leaf<TriangleTest::watertight>(rays[i], tris, &prim, 1, hits[i]); });
 }
 
 /// The lanes' ray space for the SIMD test: true when every lane in `mask` shares the axes kx, ky,
 /// kz (camera packets do); otherwise the lanes take the scalar test.
 SPECULA_SIMD_TARGET inline bool make_watertight_lanes(const PreparedRay* rays, unsigned mask,
-                                                       WatertightLanes& w) {
+                                                      WatertightLanes& w) {
   const int lead = std::countr_zero(mask);
   bool shared_axes = true;
   for (unsigned m = mask; m; m &= m - 1) {
@@ -242,11 +251,9 @@ SPECULA_SIMD_TARGET inline bool make_watertight_lanes(const PreparedRay* rays, u
 
 /// A leaf's triangles against the lanes in `mask` (which share their ray space): closer hits land
 /// in hits[i] and rays[i].tfar.
-SPECULA_SIMD_TARGET inline void intersect_leaf_lanes(const WatertightLanes& w, PreparedRay* rays,
-                                                      TriangleHit* hits, unsigned mask,
-                                                      const TriangleView& tris,
-                                                      const std::uint32_t* ids,
-                                                      std::uint32_t count) {
+SPECULA_SIMD_TARGET inline void
+intersect_leaf_lanes(const WatertightLanes& w, PreparedRay* rays, TriangleHit* hits, unsigned mask,
+                     const TriangleView& tris, const std::uint32_t* ids, std::uint32_t count) {
   Vf tfar = load_tfar(rays);
   for (std::uint32_t k = 0; k < count; ++k)
     intersect_watertight_lanes(w, rays, hits, tfar, mask, tris, ids[k]);

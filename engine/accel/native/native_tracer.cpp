@@ -392,6 +392,11 @@ void NativeTracer::intersect_camera_packets(const PacketTile& tile, PrimaryHits&
             kd_.intersect8(rays, ph, active, test);
           else
             kd_.intersect4(rays, ph, active, test);
+        } else if (options_.static_structure == StaticStructure::bvh && options_.wide_bvh) {
+          if constexpr (N == 8)
+            static_wide_.intersect8(rays, ph, active, test);
+          else
+            static_wide_.intersect4(rays, ph, active, test);
         } else if (options_.static_structure == StaticStructure::bvh) {
           if constexpr (N == 8)
             static_bvh_.intersect8(rays, ph, active, test);

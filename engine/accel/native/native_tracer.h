@@ -48,11 +48,11 @@ struct NativeOptions {
   /// Target cells per static triangle when the static set is a grid (accel::GridBuildOptions).
   float grid_density = accel::GridBuildOptions{}.density;
   /// Single rays traverse the 4-wide collapse (accel::WideBvh) of the static set's BVH (when
-  /// the static set is a BVH) and of each shared mesh's BVH (rigid instances; not a lazy one,
-  /// which would have to be expanded whole). Packets and deforming meshes' BVHs, refitted every
-  /// frame, keep the binary trees. Off: single rays use the binary trees too, as the Vulkan
-  /// device does — the CPU mirror of the device, hit for hit (at a shared edge, two triangles at
-  /// the same t, the wide tree may report the other one).
+  /// the static set is a BVH; its camera packets too) and of each shared mesh's BVH (rigid
+  /// instances; not a lazy one, which would have to be expanded whole). Deforming meshes' BVHs,
+  /// refitted every frame, keep the binary trees. Off: single rays use the binary trees too, as the
+  /// Vulkan device does — the CPU mirror of the device, hit for hit (at a shared edge, two
+  /// triangles at the same t, the wide tree may report the other one).
   bool wide_bvh = true;
 };
 

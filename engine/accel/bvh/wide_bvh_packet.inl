@@ -1,0 +1,84 @@
+// The 4-wide BVH's packet traversal, included by wide_bvh.cpp twice: once for SSE (Vf = __m128,
+// 4 lanes) and once for AVX2 (Vf = __m256, 8 lanes, every function with the avx2 target
+// attribute). The includer brings in kLanes, Vf, the v* operations and the lanes' watertight test
+// (simd_lanes.h), and defines SPECULA_SIMD_TARGET.
+//
+// A packet whose lanes share their direction signs and their ray space (prepare_coherent_lanes)
+// walks the tree as one: at each node the four child boxes are tested against all lanes (the
+// slab test of intersect_box, lane-wise, the same operations), each child is entered with the
+// lanes that hit it, nearest first by the least entry distance over those lanes, and a leaf's
+// triangles are tested one at a time against all its lanes. A lane tests every triangle its own
+// single-ray walk would (boxes are conservative) and perhaps more, with the single-ray test's
+// bits, keeping the nearest: its closest hit is the single ray's (at equal t across leaves, the
+// other triangle may win, as in any other visiting order).
+
+/// Walks the lanes in `mask` (their signs `neg`, their lanes `w`) from the root; closer hits land
+/// in `hits` and rays[i].tfar.
+SPECULA_SIMD_TARGET void traverse_packet(const WideBvhNode* nodes, const WideTriangles* groups,
+                                         PreparedRay* rays, TriangleHit* hits, unsigned mask,
+                                         const std::uint32_t neg[3], const WatertightLanes& w) {
+  const Vf scale = vset1(kBoxFarScale);
+  Vf tfar = load_tfar(rays);
+
+  struct Entry {
+    std::uint32_t child, count; ///< as in WideBvhNode: count 0 is an interior node
+    unsigned mask;              ///< the lanes that entered it
+    float t;                    ///< the least entry distance over those lanes
+  };
+  Entry stack[WideBvh::kStackSize];
+  int top = 0;
+  Entry cur{0, 0, mask, 0.0f};
+  for (;;) {
+    if (cur.count == 0) {
+      const WideBvhNode& n = nodes[cur.child];
+      Entry hit[4];
+      int k = 0;
+      for (int c = 0; c < 4; ++c) {
+        Vf t0 = w.tnear, t1 = tfar;
+        for (int a = 0; a < 3; ++a) {
+          const Vf lo = vset1(n.lo[a][c]);
+          const Vf hi = vset1(n.hi[a][c]);
+          const Vf tn = vmul(vsub(neg[a] != 0 ? hi : lo, w.org[a]), w.inv[a]);
+          const Vf tf = vmul(vmul(vsub(neg[a] != 0 ? lo : hi, w.org[a]), w.inv[a]), scale);
+          t0 = vmax(tn, t0); // NaN keeps the current bound, as intersect_box's comparisons do
+          t1 = vmin(tf, t1);
+        }
+        const unsigned m = cur.mask & vmask(vle(t0, t1));
+        if (m == 0) continue;
+        alignas(32) float entry[kLanes];
+        vstore(entry, t0);
+        float least = entry[std::countr_zero(m)];
+        for (unsigned r = m & (m - 1); r != 0; r &= r - 1)
+          least = std::min(least, entry[std::countr_zero(r)]);
+        // Sorted nearest first (an insertion into at most three).
+        Entry e{n.child[c], n.count[c], m, least};
+        int j = k++;
+        for (; j > 0 && hit[j - 1].t > e.t; --j) hit[j] = hit[j - 1];
+        hit[j] = e;
+      }
+      if (k > 0) {
+        for (int j = k - 1; j > 0; --j) stack[top++] = hit[j];
+        cur = hit[0];
+        continue;
+      }
+    } else {
+      const WideTriangles* g = groups + cur.child;
+      for (std::uint32_t q = 0; q < cur.count; ++q) {
+        for (int i = 0; i < 4 && g[q].prim[i] != 0xFFFFFFFFu; ++i) {
+          const vec3 p0 = vertex(g[q], 0, i), p1 = vertex(g[q], 1, i), p2 = vertex(g[q], 2, i);
+          const std::uint32_t prim = g[q].prim[i];
+          intersect_watertight_lanes(
+              w, rays, hits, tfar, cur.mask, p0, p1, p2, prim,
+              [&](int lane) { closest_triangle_lane(rays[lane], p0, p1, p2, prim, hits[lane]); });
+        }
+      }
+    }
+    // The next pending child that some of its lanes still reach (their tfar may have shrunk).
+    for (;;) {
+      if (top == 0) return;
+      cur = stack[--top];
+      cur.mask &= ~vmask(vlt(tfar, vset1(cur.t)));
+      if (cur.mask != 0) break;
+    }
+  }
+}
