@@ -991,8 +991,9 @@ TEST(WideBvh, PacketsEqualSingleRaysPerLane) {
         }
     EXPECT_EQ(bad, 0);
     EXPECT_GT(hits, 0);
-    // Two triangles at the same distance are rare away from shared edges.
-    EXPECT_LE(ties, hits / 100) << ties << " ties in " << hits << " hits";
+    // Two triangles at the same distance are rare: none on the sphere and the soup, about 1.5%
+    // of the hits among the degenerate mesh's needles and zero-area triangles.
+    EXPECT_LE(ties, hits / 40) << ties << " ties in " << hits << " hits";
   }
 }
 
