@@ -82,8 +82,8 @@ public:
   /// where a hit closer than rays.tfar[i] is found. Lanes that share their direction signs and
   /// their ray space (camera packets) walk the tree together (wide_bvh_packet.inl); others, and
   /// the Möller–Trumbore option, each walk it as a single ray. A lane's closest hit is its
-  /// single ray's (at equal t, the other triangle may win). intersect8 uses AVX2 where the CPU
-  /// has it, else two packets of four.
+  /// single ray's (where two triangles meet, their hits an ulp or so apart, the other one may
+  /// win). intersect8 uses AVX2 where the CPU has it, else two packets of four.
   void intersect4(RayPacket<4>& rays, PacketHits<4>& hits, const bool active[4],
                   TriangleTest test = TriangleTest::watertight) const;
   void intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[8],

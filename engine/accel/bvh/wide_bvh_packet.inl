@@ -7,10 +7,10 @@
 // walks the tree as one: at each node the four child boxes are tested against all lanes (the
 // slab test of intersect_box, lane-wise, the same operations), each child is entered with the
 // lanes that hit it, nearest first by the least entry distance over those lanes, and a leaf's
-// triangles are tested one at a time against all its lanes. A lane tests every triangle its own
-// single-ray walk would (boxes are conservative) and perhaps more, with the single-ray test's
-// bits, keeping the nearest: its closest hit is the single ray's (at equal t across leaves, the
-// other triangle may win, as in any other visiting order).
+// triangles are tested one at a time against all its lanes, with the single-ray test's bits. A
+// lane's closest hit is its single ray's, but where two triangles meet and their hits lie an ulp
+// or so apart: a box whose rounded entry lies past the nearer hit found so far is skipped, so the
+// order of the visit decides which of the two is kept (as between any two structures here).
 
 /// Walks the lanes in `mask` (their signs `neg`, their lanes `w`) from the root; closer hits land
 /// in `hits` and rays[i].tfar.
