@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 
 namespace specula::accel {
 
@@ -900,9 +901,11 @@ bool Bvh::occluded(const PreparedRay& r, TriangleTest test) const {
                                           : occluded_impl<TriangleTest::moller_trumbore>(r);
 }
 
-template <int N, TriangleTest Test, typename BoxTest>
-void Bvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool active[N],
-                           BoxTest box_test) const {
+template <int N, TriangleTest Test>
+void Bvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active,
+                           TestTag<Test>) const {
+  using BoxTest = std::conditional_t<N == 8, BoxTestAvx2, BoxTestSse>;
+  const BoxTest box_test{};
   if (nodes_.empty() || !over_triangles_) return;
   PacketData<N> p;
   PreparedRay lane[N];
@@ -996,26 +999,12 @@ void Bvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool a
 
 void Bvh::intersect4(RayPacket<4>& rays, PacketHits<4>& hits, const bool active[4],
                      TriangleTest test) const {
-  if (test == TriangleTest::watertight)
-    intersect_packet<4, TriangleTest::watertight>(rays, hits, active, BoxTestSse{});
-  else
-    intersect_packet<4, TriangleTest::moller_trumbore>(rays, hits, active, BoxTestSse{});
+  run_packet(rays, hits, active, test, [this](auto&&... a) { intersect_packet(a...); });
 }
 
 void Bvh::intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[8],
                      TriangleTest test) const {
-  if (cpu_has_avx2()) {
-    if (test == TriangleTest::watertight)
-      intersect_packet<8, TriangleTest::watertight>(rays, hits, active, BoxTestAvx2{});
-    else
-      intersect_packet<8, TriangleTest::moller_trumbore>(rays, hits, active, BoxTestAvx2{});
-    return;
-  }
-  // No AVX2: two 4-packets.
-  as_two_packets_of_4(rays, hits, active,
-                      [&](RayPacket<4>& r4, PacketHits<4>& h4, const bool* a4) {
-                        intersect4(r4, h4, a4, test);
-                      });
+  run_packet(rays, hits, active, test, [this](auto&&... a) { intersect_packet(a...); });
 }
 
 } // namespace specula::accel

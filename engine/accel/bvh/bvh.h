@@ -130,9 +130,9 @@ private:
   bool intersect_impl(PreparedRay& r, TriangleHit& hit) const;
   template <TriangleTest Test>
   bool occluded_impl(const PreparedRay& r) const;
-  template <int N, TriangleTest Test, typename BoxTest>
-  void intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool active[N],
-                        BoxTest box_test) const;
+  template <int N, TriangleTest Test>
+  void intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active,
+                        TestTag<Test>) const;
 
   [[nodiscard]] std::uint32_t load_count(std::uint32_t node) const {
     return std::atomic_ref<std::uint32_t>(nodes_[node].count).load(std::memory_order_acquire);

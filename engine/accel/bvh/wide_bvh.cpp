@@ -391,7 +391,8 @@ using namespace simd_avx2;
 } // namespace wide_avx2
 
 template <int N, TriangleTest Test>
-void WideBvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active) const {
+void WideBvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active,
+                               TestTag<Test>) const {
   if (nodes_.empty()) return;
   PreparedRay prepared[N];
   TriangleHit lane_hits[N];
@@ -436,24 +437,12 @@ void WideBvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bo
 
 void WideBvh::intersect4(RayPacket<4>& rays, PacketHits<4>& hits, const bool active[4],
                          TriangleTest test) const {
-  if (test == TriangleTest::watertight)
-    intersect_packet<4, TriangleTest::watertight>(rays, hits, active);
-  else
-    intersect_packet<4, TriangleTest::moller_trumbore>(rays, hits, active);
+  run_packet(rays, hits, active, test, [this](auto&&... a) { intersect_packet(a...); });
 }
 
 void WideBvh::intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[8],
                          TriangleTest test) const {
-  if (!cpu_has_avx2()) {
-    as_two_packets_of_4(
-        rays, hits, active,
-        [&](RayPacket<4>& r4, PacketHits<4>& h4, const bool* a4) { intersect4(r4, h4, a4, test); });
-    return;
-  }
-  if (test == TriangleTest::watertight)
-    intersect_packet<8, TriangleTest::watertight>(rays, hits, active);
-  else
-    intersect_packet<8, TriangleTest::moller_trumbore>(rays, hits, active);
+  run_packet(rays, hits, active, test, [this](auto&&... a) { intersect_packet(a...); });
 }
 
 bool WideBvh::intersect(PreparedRay& r, TriangleHit& hit, TriangleTest test) const {

@@ -101,7 +101,8 @@ private:
   template <TriangleTest Test, bool AnyHit>
   bool traverse(PreparedRay& r, TriangleHit* hit) const;
   template <int N, TriangleTest Test>
-  void intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active) const;
+  void intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active,
+                        TestTag<Test>) const;
 
   std::vector<WideBvhNode> nodes_;
   std::vector<WideTriangles> groups_;

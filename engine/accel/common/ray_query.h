@@ -25,6 +25,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 
 namespace specula::accel {
 
@@ -296,6 +297,30 @@ void as_two_packets_of_4(RayPacket<8>& rays, PacketHits<8>& hits, const bool act
       hits.t[j] = h4.t[i], hits.u[j] = h4.u[i], hits.v[j] = h4.v[i], hits.prim[j] = h4.prim[i];
     }
   }
+}
+
+/// The triangle test as a type, for kernels compiled once per test.
+template <TriangleTest Test>
+using TestTag = std::integral_constant<TriangleTest, Test>;
+
+/// A structure's intersect4 / intersect8: `kernel(rays, hits, active, TestTag<test>{})`, the
+/// packet of 8 as two packets of 4 on a CPU without AVX2.
+template <int N, typename Kernel>
+void run_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active, TriangleTest test,
+                const Kernel& kernel) {
+  if constexpr (N == 8) {
+    if (!cpu_has_avx2()) {
+      as_two_packets_of_4(rays, hits, active,
+                          [&](RayPacket<4>& r4, PacketHits<4>& h4, const bool* a4) {
+                            run_packet(r4, h4, a4, test, kernel);
+                          });
+      return;
+    }
+  }
+  if (test == TriangleTest::watertight)
+    kernel(rays, hits, active, TestTag<TriangleTest::watertight>{});
+  else
+    kernel(rays, hits, active, TestTag<TriangleTest::moller_trumbore>{});
 }
 
 } // namespace specula::accel

@@ -800,7 +800,8 @@ using namespace simd_avx2;
 } // namespace avx2
 
 template <int N, TriangleTest Test>
-void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active) const {
+void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active,
+                              TestTag<Test>) const {
   if (nodes_.empty()) return;
   PreparedRay prepared[N];
   TriangleHit lane_hits[N];
@@ -877,26 +878,12 @@ void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const boo
 
 void KdTree::intersect4(RayPacket<4>& rays, PacketHits<4>& hits, const bool active[4],
                         TriangleTest test) const {
-  if (test == TriangleTest::watertight)
-    intersect_packet<4, TriangleTest::watertight>(rays, hits, active);
-  else
-    intersect_packet<4, TriangleTest::moller_trumbore>(rays, hits, active);
+  run_packet(rays, hits, active, test, [this](auto&&... a) { intersect_packet(a...); });
 }
 
 void KdTree::intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[8],
                         TriangleTest test) const {
-  if (cpu_has_avx2()) {
-    if (test == TriangleTest::watertight)
-      intersect_packet<8, TriangleTest::watertight>(rays, hits, active);
-    else
-      intersect_packet<8, TriangleTest::moller_trumbore>(rays, hits, active);
-    return;
-  }
-  // No AVX2: two packets of four.
-  as_two_packets_of_4(rays, hits, active,
-                      [&](RayPacket<4>& r4, PacketHits<4>& h4, const bool* a4) {
-                        intersect4(r4, h4, a4, test);
-                      });
+  run_packet(rays, hits, active, test, [this](auto&&... a) { intersect_packet(a...); });
 }
 
 } // namespace specula::accel

@@ -87,7 +87,8 @@ private:
   template <TriangleTest Test, bool AnyHit>
   bool traverse(PreparedRay& r, TriangleHit* hit) const;
   template <int N, TriangleTest Test>
-  void intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active) const;
+  void intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active,
+                        TestTag<Test>) const;
 
   TriangleView tris_;
   Aabb bounds_;
