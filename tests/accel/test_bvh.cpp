@@ -729,6 +729,18 @@ TEST(Bvh, MovedTreeKeepsWorking) {
 
 namespace {
 
+/// A binary BVH over `view` and its 4-wide collapse.
+struct Trees {
+  Bvh binary;
+  WideBvh wide;
+};
+Trees build_trees(const TriangleView& view) {
+  Trees t;
+  t.binary.build(view);
+  t.wide.build(t.binary, view);
+  return t;
+}
+
 /// Walks the wide tree: every triangle of the binary tree in exactly one group lane, groups full
 /// but for a leaf's last, unused lanes NaN; each child box the union of its subtree's triangle
 /// boxes (finite triangles), and inside the binary root's box.
@@ -799,10 +811,7 @@ void check_wide_structure(const WideBvh& wide, const Bvh& binary, const Triangle
 } // namespace
 
 TEST(WideBvh, EmptyTreeMissesEverything) {
-  Bvh binary;
-  binary.build(TriangleView{});
-  WideBvh wide;
-  wide.build(binary, TriangleView{});
+  auto [binary, wide] = build_trees(TriangleView{});
   EXPECT_TRUE(wide.empty());
   PreparedRay r = PreparedRay::make(vec3(0), vec3(0, 0, 1), 0.0f, kInf);
   TriangleHit hit;
@@ -815,10 +824,7 @@ TEST(WideBvh, ClosestAndAnyHitEqualBruteForceToTheBit) {
   for (const Mesh& mesh : test_meshes()) {
     SCOPED_TRACE(mesh.name);
     const TriangleView view = mesh.view();
-    Bvh binary;
-    binary.build(view);
-    WideBvh wide;
-    wide.build(binary, view);
+    auto [binary, wide] = build_trees(view);
     check_wide_structure(wide, binary, view);
     // Half as deep or so: a wide node stands for up to three binary ones.
     EXPECT_LT(wide.stats().nodes, binary.stats().nodes / 2);
@@ -839,10 +845,7 @@ TEST(WideBvh, RaysThroughSharedEdgesAndVerticesDoNotLeak) {
   // watertightness, its double-precision fallback included).
   const Mesh m = test::uv_sphere(24, 32, 1.0f, vec3(0.1f, 0.2f, -0.3f), /*pole_slivers=*/false);
   const TriangleView view = m.view();
-  Bvh binary;
-  binary.build(view);
-  WideBvh wide;
-  wide.build(binary, view);
+  auto [binary, wide] = build_trees(view);
   const vec3 c(0.1f, 0.2f, -0.3f);
   int rays = 0, leaks = 0;
   for (std::uint32_t t = 0; t < view.count; ++t) {
@@ -901,10 +904,7 @@ TEST(WideBvh, EdgeFunctionsThatRoundToZeroAreRecomputedLaneByLane) {
     test::Mesh m;
     m.add(vec3(-by * s, bx * s, 0.0f), vec3(bx, by, 0.0f), vec3(cx, cy, 0.0f));
     const TriangleView view = m.view();
-    Bvh binary;
-    binary.build(view);
-    WideBvh wide;
-    wide.build(binary, view);
+    auto [binary, wide] = build_trees(view);
     const Ray ray{vec3(0.0f, 0.0f, -1.0f), 0.0f, vec3(0.0f, 0.0f, 1.0f)};
     const TriangleHit ref = brute_force_closest(view, PreparedRay::make(ray));
     PreparedRay r = PreparedRay::make(ray);
@@ -975,10 +975,7 @@ TEST(WideBvh, PacketsEqualSingleRaysPerLane) {
   for (const Mesh& mesh : test_meshes()) {
     SCOPED_TRACE(mesh.name);
     const TriangleView view = mesh.view();
-    Bvh binary;
-    binary.build(view);
-    WideBvh wide;
-    wide.build(binary, view);
+    auto [binary, wide] = build_trees(view);
     const Aabb box = mesh_bounds(mesh);
     const auto coherent = make_rays(box, 4096, 301, true);
     const auto incoherent = make_rays(box, 4096, 303, false);
@@ -1004,10 +1001,7 @@ TEST(WideBvh, PacketsThroughSharedEdgesAndVerticesDoNotLeak) {
   const vec3 c(0.1f, 0.2f, -0.3f);
   const Mesh m = test::uv_sphere(24, 32, 1.0f, c, /*pole_slivers=*/false);
   const TriangleView view = m.view();
-  Bvh binary;
-  binary.build(view);
-  WideBvh wide;
-  wide.build(binary, view);
+  auto [binary, wide] = build_trees(view);
   const vec3 eye = c + vec3(0.2f, 0.3f, 3.0f);
   std::vector<Ray> by_sign[4];
   for (std::uint32_t t = 0; t < view.count; ++t)
