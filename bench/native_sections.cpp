@@ -297,8 +297,10 @@ void section_native(const Options& o) {
     for (const vec3& p : mesh.positions) b.grow(p);
     const vec3 light = b.center() + vec3(0.3f, 2.0f, 0.4f) * glm::length(b.extent());
     const SecondaryRays sec = make_secondary(embree, layer, camera, o.size, light);
-    std::printf("\nSecondary rays from the primary hits (single rays in batches: Embree's "
-                "rtcOccluded1M/rtcIntersect1M against native single-ray traversal):\n\n");
+    std::printf("\nSecondary rays from the primary hits (batches of rays through each tracer's "
+                "occluded/intersect: Embree's rtcOccluded1M/rtcIntersect1M, which trace a batch "
+                "as packets of its SIMD width; the native 4-wide BVH's occlusion takes its batch "
+                "as packets of 8 too; every other native column one ray at a time):\n\n");
     std::printf("| rays | count | Embree (Mrays/s) | native kd-tree (Mrays/s) | kd-tree / Embree | "
                 "native BVH, 4-wide (Mrays/s) | BVH / Embree | binary BVH (Mrays/s) | binary / "
                 "Embree |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");

@@ -368,6 +368,14 @@ namespace {
   hit = TriangleHit{t, u, v, prim};
 }
 
+/// Whether one lane's ray meets triangle (p0, p1, p2) within its (tnear, tfar), by the watertight
+/// test, out of line like closest_triangle_lane (an occlusion lane on an edge of the triangle).
+[[gnu::noinline]] bool any_triangle_lane(const PreparedRay& r, const vec3& p0, const vec3& p1,
+                                         const vec3& p2) {
+  float t, u, v;
+  return intersect_watertight(r, p0, p1, p2, r.tfar, t, u, v);
+}
+
 } // namespace
 
 // The packet kernel is written once (wide_bvh_packet.inl) over the vector operations of
@@ -443,6 +451,68 @@ void WideBvh::intersect4(RayPacket<4>& rays, PacketHits<4>& hits, const bool act
 void WideBvh::intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[8],
                          TriangleTest test) const {
   run_packet(rays, hits, active, test, [this](auto&&... a) { intersect_packet(a...); });
+}
+
+template <int N, TriangleTest Test>
+unsigned WideBvh::occluded_packet(const RayPacket<N>& rays, const bool* active) const {
+  if (nodes_.empty()) return 0;
+  PreparedRay prepared[N];
+  unsigned mask = 0;
+  std::uint32_t neg[3] = {0, 0, 0};
+  using Lanes = std::conditional_t<N == 8, simd_avx2::WatertightLanes, simd_sse::WatertightLanes>;
+  Lanes lanes;
+  bool vector_prepared;
+  if constexpr (N == 8)
+    vector_prepared = simd_avx2::prepare_coherent_lanes(rays, active, nullptr, prepared, nullptr,
+                                                        nullptr, mask, neg, lanes);
+  else
+    vector_prepared = simd_sse::prepare_coherent_lanes(rays, active, nullptr, prepared, nullptr,
+                                                       nullptr, mask, neg, lanes);
+  if (vector_prepared && Test == TriangleTest::watertight && std::popcount(mask) > 1) {
+    if constexpr (N == 8)
+      return wide_avx2::occlude_packet(nodes_.data(), groups_.data(), prepared, mask, neg, lanes);
+    else
+      return wide_sse::occlude_packet(nodes_.data(), groups_.data(), prepared, mask, neg, lanes);
+  }
+  // Lanes that disagree (or the Möller–Trumbore option): each lane's own walk.
+  unsigned blocked = 0;
+  for (int i = 0; i < N; ++i) {
+    if (!active[i]) continue;
+    PreparedRay r =
+        PreparedRay::make(vec3(rays.ox[i], rays.oy[i], rays.oz[i]),
+                          vec3(rays.dx[i], rays.dy[i], rays.dz[i]), rays.tnear[i], rays.tfar[i]);
+    if (r.valid() && traverse<Test, true>(r, nullptr)) blocked |= 1u << i;
+  }
+  return blocked;
+}
+
+unsigned WideBvh::occluded4(const RayPacket<4>& rays, const bool active[4],
+                            TriangleTest test) const {
+  return test == TriangleTest::watertight
+             ? occluded_packet<4, TriangleTest::watertight>(rays, active)
+             : occluded_packet<4, TriangleTest::moller_trumbore>(rays, active);
+}
+
+unsigned WideBvh::occluded8(const RayPacket<8>& rays, const bool active[8],
+                            TriangleTest test) const {
+  if (!cpu_has_avx2()) {
+    // Two packets of four.
+    unsigned blocked = 0;
+    for (int half = 0; half < 2; ++half) {
+      RayPacket<4> r4;
+      for (int i = 0; i < 4; ++i) {
+        const int j = 4 * half + i;
+        r4.ox[i] = rays.ox[j], r4.oy[i] = rays.oy[j], r4.oz[i] = rays.oz[j];
+        r4.dx[i] = rays.dx[j], r4.dy[i] = rays.dy[j], r4.dz[i] = rays.dz[j];
+        r4.tnear[i] = rays.tnear[j], r4.tfar[i] = rays.tfar[j];
+      }
+      blocked |= occluded4(r4, active + 4 * half, test) << (4 * half);
+    }
+    return blocked;
+  }
+  return test == TriangleTest::watertight
+             ? occluded_packet<8, TriangleTest::watertight>(rays, active)
+             : occluded_packet<8, TriangleTest::moller_trumbore>(rays, active);
 }
 
 bool WideBvh::intersect(PreparedRay& r, TriangleHit& hit, TriangleTest test) const {

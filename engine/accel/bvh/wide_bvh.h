@@ -89,6 +89,16 @@ public:
   void intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[8],
                   TriangleTest test = TriangleTest::watertight) const;
 
+  /// Occlusion of a packet: the mask of active lanes whose ray meets a triangle within (tnear,
+  /// tfar), each lane's answer occluded()'s for its ray. Lanes that share their direction signs
+  /// and their ray space walk the tree together, each leaving it once blocked; others (and the
+  /// Möller–Trumbore option) walk it one by one. occluded8 uses AVX2 where the CPU has it, else
+  /// two packets of four.
+  [[nodiscard]] unsigned occluded4(const RayPacket<4>& rays, const bool active[4],
+                                   TriangleTest test = TriangleTest::watertight) const;
+  [[nodiscard]] unsigned occluded8(const RayPacket<8>& rays, const bool active[8],
+                                   TriangleTest test = TriangleTest::watertight) const;
+
   [[nodiscard]] std::span<const WideBvhNode> nodes() const { return nodes_; }
   [[nodiscard]] std::span<const WideTriangles> groups() const { return groups_; }
   [[nodiscard]] const WideBvhStats& stats() const { return stats_; }
@@ -100,6 +110,8 @@ public:
 private:
   template <TriangleTest Test, bool AnyHit>
   bool traverse(PreparedRay& r, TriangleHit* hit) const;
+  template <int N, TriangleTest Test>
+  unsigned occluded_packet(const RayPacket<N>& rays, const bool* active) const;
   template <int N, TriangleTest Test>
   void intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active,
                         TestTag<Test>) const;

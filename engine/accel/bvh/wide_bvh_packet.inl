@@ -82,3 +82,78 @@ SPECULA_SIMD_TARGET void traverse_packet(const WideBvhNode* nodes, const WideTri
     }
   }
 }
+
+/// Occlusion of the lanes in `mask` (their signs `neg`, their lanes `w`) from the root: returns
+/// the lanes that meet a triangle within (tnear, tfar). A lane leaves the walk once blocked, and
+/// the walk ends when every lane has; children are entered in their order (any hit will do, as in
+/// the single ray's occlusion walk). A lane's answer is its single ray's: the same box and
+/// triangle tests, and its tfar never shrinks before it is blocked.
+SPECULA_SIMD_TARGET unsigned occlude_packet(const WideBvhNode* nodes, const WideTriangles* groups,
+                                            PreparedRay* rays, unsigned mask,
+                                            const std::uint32_t neg[3], const WatertightLanes& w) {
+  const Vf scale = vset1(kBoxFarScale);
+  Vf tfar = load_tfar(rays);
+
+  struct Entry {
+    std::uint32_t child, count; ///< as in WideBvhNode: count 0 is an interior node
+    unsigned mask;              ///< the lanes that entered it
+  };
+  Entry stack[WideBvh::kStackSize];
+  int top = 0;
+  const unsigned all = mask;
+  unsigned blocked = 0;
+  TriangleHit scratch[kLanes];
+  Entry cur{0, 0, mask};
+  for (;;) {
+    if (cur.count == 0) {
+      const WideBvhNode& n = nodes[cur.child];
+      int taken = -1;
+      unsigned taken_mask = 0;
+      for (int c = 0; c < 4; ++c) {
+        Vf t0 = w.tnear, t1 = tfar;
+        for (int a = 0; a < 3; ++a) {
+          const Vf lo = vset1(n.lo[a][c]);
+          const Vf hi = vset1(n.hi[a][c]);
+          const Vf tn = vmul(vsub(neg[a] != 0 ? hi : lo, w.org[a]), w.inv[a]);
+          const Vf tf = vmul(vmul(vsub(neg[a] != 0 ? lo : hi, w.org[a]), w.inv[a]), scale);
+          t0 = vmax(tn, t0); // NaN keeps the current bound, as intersect_box's comparisons do
+          t1 = vmin(tf, t1);
+        }
+        const unsigned m = cur.mask & vmask(vle(t0, t1));
+        if (m == 0) continue;
+        if (taken >= 0) {
+          stack[top++] = Entry{n.child[c], n.count[c], m};
+        } else {
+          taken = c;
+          taken_mask = m;
+        }
+      }
+      if (taken >= 0) {
+        cur = Entry{n.child[taken], n.count[taken], taken_mask};
+        continue;
+      }
+    } else {
+      const WideTriangles* g = groups + cur.child;
+      for (std::uint32_t q = 0; q < cur.count && cur.mask != 0; ++q) {
+        for (int i = 0; i < 4 && g[q].prim[i] != 0xFFFFFFFFu && cur.mask != 0; ++i) {
+          const vec3 p0 = vertex(g[q], 0, i), p1 = vertex(g[q], 1, i), p2 = vertex(g[q], 2, i);
+          unsigned edge_hits = 0;
+          const unsigned hit = intersect_watertight_lanes(
+              w, rays, scratch, tfar, cur.mask, p0, p1, p2, g[q].prim[i], [&](int lane) {
+                if (any_triangle_lane(rays[lane], p0, p1, p2)) edge_hits |= 1u << lane;
+              });
+          blocked |= hit | edge_hits;
+          cur.mask &= ~(hit | edge_hits);
+        }
+      }
+      if (blocked == all) return blocked;
+    }
+    // The next pending child that some of its lanes, not yet blocked, reach.
+    for (;;) {
+      if (top == 0) return blocked;
+      cur = stack[--top];
+      cur.mask &= ~blocked;
+      if (cur.mask != 0) break;
+    }
+  }
+}

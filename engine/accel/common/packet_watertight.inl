@@ -149,9 +149,10 @@ SPECULA_SIMD_TARGET inline bool prepare_coherent_lanes(const RayPacket<kLanes>& 
 /// Triangle (p0, p1, p2), number `prim`, against the lanes in `mask`: Woop et al.'s test with the
 /// scalar test's operations in the scalar test's order, so every lane gets the bits
 /// intersect_watertight would give it. Lanes with an edge function of exactly 0 go to
-/// `on_edge(i)`, which runs the scalar test (its double-precision fallback) on lane i.
+/// `on_edge(i)`, which runs the scalar test (its double-precision fallback) on lane i. Returns the
+/// other lanes that hit it (their hits and tfar written).
 template <class OnEdge>
-SPECULA_SIMD_TARGET inline void
+SPECULA_SIMD_TARGET inline unsigned
 intersect_watertight_lanes(const WatertightLanes& w, PreparedRay* rays, TriangleHit* hits, Vf& tfar,
                            unsigned mask, const vec3& p0, const vec3& p1, const vec3& p2,
                            std::uint32_t prim, OnEdge&& on_edge) {
@@ -207,6 +208,7 @@ intersect_watertight_lanes(const WatertightLanes& w, PreparedRay* rays, Triangle
   }
   for (unsigned m = edge; m; m &= m - 1) on_edge(std::countr_zero(m));
   if ((candidates | edge) != 0) tfar = gather(rays, &PreparedRay::tfar);
+  return candidates;
 }
 
 /// Triangle `prim` of `tris` against the lanes in `mask` (as above; a lane on an edge takes

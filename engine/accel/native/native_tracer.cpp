@@ -322,6 +322,11 @@ bool NativeTracer::occluded_one(const PreparedRay& r) const {
     }
     if (blocked) return true;
   }
+  return occluded_dynamic<Test>(r);
+}
+
+template <TriangleTest Test>
+bool NativeTracer::occluded_dynamic(const PreparedRay& r) const {
   if (top_.empty()) return false;
   bool blocked = false;
   PreparedRay world = r;
@@ -349,11 +354,59 @@ void NativeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) con
 
 void NativeTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded) const {
   SPECULA_ASSERT(occluded.size() == rays.size());
+  // The static 4-wide BVH takes consecutive rays as packets, as Embree's stream calls take a
+  // batch of single rays: a tile's shadow rays towards one light mostly share their direction
+  // signs and walk the tree together (the answers are the single rays', lane by lane).
+  if (has_static_ && options_.static_structure == StaticStructure::bvh && options_.wide_bvh) {
+    if (accel::cpu_has_avx2())
+      occluded_packets<8>(rays, occluded);
+    else
+      occluded_packets<4>(rays, occluded);
+    return;
+  }
   for (std::size_t i = 0; i < rays.size(); ++i) {
     const PreparedRay r = PreparedRay::make(rays[i]);
     occluded[i] = options_.triangle_test == TriangleTest::watertight
                       ? occluded_one<TriangleTest::watertight>(r)
                       : occluded_one<TriangleTest::moller_trumbore>(r);
+  }
+}
+
+template <int N>
+void NativeTracer::occluded_packets(std::span<const Ray> rays,
+                                    std::span<std::uint8_t> occluded) const {
+  const TriangleTest test = options_.triangle_test;
+  for (std::size_t first = 0; first < rays.size(); first += N) {
+    const std::size_t count = std::min<std::size_t>(N, rays.size() - first);
+    accel::RayPacket<N> p;
+    bool active[N];
+    for (std::size_t i = 0; i < std::size_t(N); ++i) {
+      const Ray& ray = rays[first + (i < count ? i : 0)];
+      active[i] = i < count;
+      p.ox[i] = ray.origin.x;
+      p.oy[i] = ray.origin.y;
+      p.oz[i] = ray.origin.z;
+      p.dx[i] = ray.direction.x;
+      p.dy[i] = ray.direction.y;
+      p.dz[i] = ray.direction.z;
+      p.tnear[i] = ray.tnear;
+      p.tfar[i] = ray.tfar;
+    }
+    unsigned blocked;
+    if constexpr (N == 8)
+      blocked = static_wide_.occluded8(p, active, test);
+    else
+      blocked = static_wide_.occluded4(p, active, test);
+    for (std::size_t i = 0; i < count; ++i) {
+      bool b = ((blocked >> i) & 1u) != 0;
+      if (!b && !top_.empty()) {
+        const PreparedRay r = PreparedRay::make(rays[first + i]);
+        b = r.valid() &&
+            (test == TriangleTest::watertight ? occluded_dynamic<TriangleTest::watertight>(r)
+                                              : occluded_dynamic<TriangleTest::moller_trumbore>(r));
+      }
+      occluded[first + i] = b ? 1 : 0;
+    }
   }
 }
 
