@@ -4,6 +4,7 @@
 #include "specula/accel/kdtree/kdtree.h"
 
 #include "accel_test_meshes.h"
+#include "packet_occlusion_check.h"
 
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
@@ -308,6 +309,29 @@ TEST(KdTree, PacketsMatchSingleRays) {
     check_packets<8>(mesh, rays, false);
     check_packets<4>(mesh, rays, true, TriangleTest::moller_trumbore);
     check_packets<8>(mesh, rays, false, TriangleTest::moller_trumbore);
+  }
+}
+
+TEST(KdTree, PacketOcclusionEqualsSingleRaysPerLane) {
+  for (const Mesh& mesh : test_meshes()) {
+    const TriangleView view = mesh.view();
+    KdTree tree;
+    tree.build(view);
+    Aabb box;
+    for (const vec3& p : mesh.positions)
+      if (is_finite(p)) box.grow(p);
+    int bad = 0, blocked = 0, clear = 0, coherent4 = 0, coherent8 = 0;
+    for (TriangleTest test : {TriangleTest::watertight, TriangleTest::moller_trumbore}) {
+      bad += test::occlusion_mismatches<4>(tree, view, box, test, 331, blocked, clear, coherent4);
+      bad += test::occlusion_mismatches<8>(tree, view, box, test, 337, blocked, clear, coherent8);
+    }
+    EXPECT_EQ(bad, 0);
+    EXPECT_GT(blocked, 1000);
+    EXPECT_GT(clear, 1000);
+    EXPECT_GT(coherent4, 400);
+    if (cpu_has_avx2()) {
+      EXPECT_GT(coherent8, 100);
+    }
   }
 }
 

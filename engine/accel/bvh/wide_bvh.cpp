@@ -454,7 +454,8 @@ void WideBvh::intersect8(RayPacket<8>& rays, PacketHits<8>& hits, const bool act
 }
 
 template <int N, TriangleTest Test>
-unsigned WideBvh::occluded_packet(const RayPacket<N>& rays, const bool* active) const {
+unsigned WideBvh::occluded_packet(const RayPacket<N>& rays, const bool* active,
+                                  TestTag<Test>) const {
   if (nodes_.empty()) return 0;
   PreparedRay prepared[N];
   unsigned mask = 0;
@@ -488,31 +489,14 @@ unsigned WideBvh::occluded_packet(const RayPacket<N>& rays, const bool* active) 
 
 unsigned WideBvh::occluded4(const RayPacket<4>& rays, const bool active[4],
                             TriangleTest test) const {
-  return test == TriangleTest::watertight
-             ? occluded_packet<4, TriangleTest::watertight>(rays, active)
-             : occluded_packet<4, TriangleTest::moller_trumbore>(rays, active);
+  return run_occlusion_packet(rays, active, test,
+                              [this](auto&&... a) { return occluded_packet(a...); });
 }
 
 unsigned WideBvh::occluded8(const RayPacket<8>& rays, const bool active[8],
                             TriangleTest test) const {
-  if (!cpu_has_avx2()) {
-    // Two packets of four.
-    unsigned blocked = 0;
-    for (int half = 0; half < 2; ++half) {
-      RayPacket<4> r4;
-      for (int i = 0; i < 4; ++i) {
-        const int j = 4 * half + i;
-        r4.ox[i] = rays.ox[j], r4.oy[i] = rays.oy[j], r4.oz[i] = rays.oz[j];
-        r4.dx[i] = rays.dx[j], r4.dy[i] = rays.dy[j], r4.dz[i] = rays.dz[j];
-        r4.tnear[i] = rays.tnear[j], r4.tfar[i] = rays.tfar[j];
-      }
-      blocked |= occluded4(r4, active + 4 * half, test) << (4 * half);
-    }
-    return blocked;
-  }
-  return test == TriangleTest::watertight
-             ? occluded_packet<8, TriangleTest::watertight>(rays, active)
-             : occluded_packet<8, TriangleTest::moller_trumbore>(rays, active);
+  return run_occlusion_packet(rays, active, test,
+                              [this](auto&&... a) { return occluded_packet(a...); });
 }
 
 bool WideBvh::intersect(PreparedRay& r, TriangleHit& hit, TriangleTest test) const {

@@ -111,7 +111,7 @@ private:
   template <TriangleTest Test, bool AnyHit>
   bool traverse(PreparedRay& r, TriangleHit* hit) const;
   template <int N, TriangleTest Test>
-  unsigned occluded_packet(const RayPacket<N>& rays, const bool* active) const;
+  unsigned occluded_packet(const RayPacket<N>& rays, const bool* active, TestTag<Test>) const;
   template <int N, TriangleTest Test>
   void intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active,
                         TestTag<Test>) const;

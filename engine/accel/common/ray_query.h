@@ -323,4 +323,30 @@ void run_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active, Tri
     kernel(rays, hits, active, TestTag<TriangleTest::moller_trumbore>{});
 }
 
+/// A structure's occluded4 / occluded8: `kernel(rays, active, TestTag<test>{})` returns the mask of
+/// blocked lanes; the packet of 8 as two packets of 4 on a CPU without AVX2.
+template <int N, typename Kernel>
+unsigned run_occlusion_packet(const RayPacket<N>& rays, const bool* active, TriangleTest test,
+                              const Kernel& kernel) {
+  if constexpr (N == 8) {
+    if (!cpu_has_avx2()) {
+      unsigned blocked = 0;
+      for (int half = 0; half < 2; ++half) {
+        RayPacket<4> r4;
+        for (int i = 0; i < 4; ++i) {
+          const int j = 4 * half + i;
+          r4.ox[i] = rays.ox[j], r4.oy[i] = rays.oy[j], r4.oz[i] = rays.oz[j];
+          r4.dx[i] = rays.dx[j], r4.dy[i] = rays.dy[j], r4.dz[i] = rays.dz[j];
+          r4.tnear[i] = rays.tnear[j], r4.tfar[i] = rays.tfar[j];
+        }
+        blocked |= run_occlusion_packet(r4, active + 4 * half, test, kernel) << (4 * half);
+      }
+      return blocked;
+    }
+  }
+  if (test == TriangleTest::watertight)
+    return kernel(rays, active, TestTag<TriangleTest::watertight>{});
+  return kernel(rays, active, TestTag<TriangleTest::moller_trumbore>{});
+}
+
 } // namespace specula::accel

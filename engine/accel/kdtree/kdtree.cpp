@@ -799,12 +799,10 @@ using namespace simd_avx2;
 } // namespace
 } // namespace avx2
 
-template <int N, TriangleTest Test>
-void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active,
-                              TestTag<Test>) const {
-  if (nodes_.empty()) return;
-  PreparedRay prepared[N];
-  TriangleHit lane_hits[N];
+template <int N, TriangleTest Test, bool AnyHit>
+unsigned KdTree::walk_packet(const RayPacket<N>& rays, const bool* active, PreparedRay* prepared,
+                             TriangleHit* lane_hits) const {
+  if (nodes_.empty()) return 0;
   alignas(32) float tmin[N];
   alignas(32) float tmax[N];
   unsigned mask = 0;
@@ -833,7 +831,7 @@ void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const boo
       mask |= 1u << i;
     }
   }
-  if (mask == 0) return;
+  if (mask == 0) return 0;
 
   // One direction sign per axis over the live lanes, or each lane on its own.
   bool coherent = std::popcount(mask) > 1;
@@ -846,34 +844,64 @@ void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const boo
     }
   }
 
-  bool found[N] = {};
+  unsigned found = 0;
   if (coherent) {
     const KdView view{nodes_.data(), indices_.data(), &tris_};
-    for (int i = 0; i < N; ++i) lane_hits[i] = TriangleHit{};
     // The SIMD triangle test needs one ray space for all lanes (camera packets have it).
     bool shared_axes = vector_prepared;
     if constexpr (N == 8) {
       if (!vector_prepared) shared_axes = simd_avx2::make_watertight_lanes(prepared, mask, lanes);
-      avx2::traverse_packet<Test>(view, prepared, lane_hits, tmin, tmax, mask, neg, lanes,
-                                  shared_axes);
+      found = avx2::traverse_packet<Test, AnyHit>(view, prepared, lane_hits, tmin, tmax, mask, neg,
+                                                  lanes, shared_axes);
     } else {
       if (!vector_prepared) shared_axes = simd_sse::make_watertight_lanes(prepared, mask, lanes);
-      sse::traverse_packet<Test>(view, prepared, lane_hits, tmin, tmax, mask, neg, lanes,
-                                 shared_axes);
+      found = sse::traverse_packet<Test, AnyHit>(view, prepared, lane_hits, tmin, tmax, mask, neg,
+                                                 lanes, shared_axes);
     }
-    for (unsigned m = mask; m; m &= m - 1)
-      found[std::countr_zero(m)] = lane_hits[std::countr_zero(m)].hit();
+    if constexpr (!AnyHit) {
+      found = 0;
+      for (unsigned m = mask; m; m &= m - 1)
+        if (lane_hits[std::countr_zero(m)].hit()) found |= 1u << std::countr_zero(m);
+    }
   } else {
     for (unsigned m = mask; m; m &= m - 1) {
       const int i = std::countr_zero(m);
-      found[i] = traverse<Test, false>(prepared[i], &lane_hits[i]);
+      if (traverse<Test, AnyHit>(prepared[i], AnyHit ? nullptr : &lane_hits[i])) found |= 1u << i;
     }
   }
-  for (int i = 0; i < N; ++i) {
-    if (!found[i]) continue;
+  return found;
+}
+
+template <int N, TriangleTest Test>
+void KdTree::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active,
+                              TestTag<Test>) const {
+  PreparedRay prepared[N];
+  TriangleHit lane_hits[N];
+  for (unsigned m = walk_packet<N, Test, false>(rays, active, prepared, lane_hits); m; m &= m - 1) {
+    const int i = std::countr_zero(m);
     rays.tfar[i] = prepared[i].tfar;
     hits.set(i, lane_hits[i]);
   }
+}
+
+template <int N, TriangleTest Test>
+unsigned KdTree::occluded_packet(const RayPacket<N>& rays, const bool* active,
+                                 TestTag<Test>) const {
+  PreparedRay prepared[N];
+  TriangleHit lane_hits[N];
+  return walk_packet<N, Test, true>(rays, active, prepared, lane_hits);
+}
+
+unsigned KdTree::occluded4(const RayPacket<4>& rays, const bool active[4],
+                           TriangleTest test) const {
+  return run_occlusion_packet(rays, active, test,
+                              [this](auto&&... a) { return occluded_packet(a...); });
+}
+
+unsigned KdTree::occluded8(const RayPacket<8>& rays, const bool active[8],
+                           TriangleTest test) const {
+  return run_occlusion_packet(rays, active, test,
+                              [this](auto&&... a) { return occluded_packet(a...); });
 }
 
 void KdTree::intersect4(RayPacket<4>& rays, PacketHits<4>& hits, const bool active[4],

@@ -13,12 +13,13 @@
 /// Traverses the lanes in `mask` (bits), whose directions all have the signs `neg`, from the root
 /// over their box intervals [tmin_in, tmax_in]. `w`: the lanes (prepare_coherent_lanes or
 /// make_watertight_lanes), `shared_axes` whether they share their ray space (then leaves test them
-/// all at once). Closer hits land in `hits` and rays[i].tfar.
-template <TriangleTest Test>
-SPECULA_SIMD_TARGET void traverse_packet(const KdView& kd, PreparedRay* rays, TriangleHit* hits,
-                                       const float* tmin_in, const float* tmax_in, unsigned mask,
-                                       const std::uint32_t neg[3], const WatertightLanes& w,
-                                       bool shared_axes) {
+/// all at once). Closer hits land in `hits` and rays[i].tfar. AnyHit (occlusion): a lane that
+/// finds a hit in a leaf leaves the walk, which ends when every lane has; returns those lanes.
+template <TriangleTest Test, bool AnyHit = false>
+SPECULA_SIMD_TARGET unsigned traverse_packet(const KdView& kd, PreparedRay* rays, TriangleHit* hits,
+                                             const float* tmin_in, const float* tmax_in,
+                                             unsigned mask, const std::uint32_t neg[3],
+                                             const WatertightLanes& w, bool shared_axes) {
   const Vf* org = w.org;
   const Vf* inv = w.inv;
   const Vf down = vset1(kDown), up = vset1(kUp);
@@ -33,14 +34,18 @@ SPECULA_SIMD_TARGET void traverse_packet(const KdView& kd, PreparedRay* rays, Tr
   Entry stack[kStackSize];
   int sp = 0;
   std::uint32_t node = 0;
+  unsigned blocked = 0;
   for (;;) {
     const gpu::KdNode n = kd.nodes[node];
     const std::uint32_t axis = n.bits & 3u;
     if (axis != gpu::kKdLeaf) {
       const Vf t_split = vmul(vsub(vset1(n.split), org[axis]), inv[axis]);
-      // A NaN split distance (a ray in the plane, parallel to it) needs both children.
+      // A NaN split distance (a ray in the plane, parallel to it) needs both children. As in the
+      // single-ray walk, a plane at or behind the origin leaves only the far child (a lane that
+      // starts on the plane and moves away does not visit the near one over an empty interval).
       const Vf nan = vnan(t_split);
-      const unsigned need_near = mask & vmask(vor(vge(t_split, vmul(tmin, down)), nan));
+      const unsigned need_near =
+          mask & vmask(vor(vand(vge(t_split, vmul(tmin, down)), vgt(t_split, vzero())), nan));
       const unsigned need_far = mask & vmask(vor(vle(t_split, vmul(tmax, up)), nan));
       const std::uint32_t below = node + 1, above = n.bits >> 2;
       const std::uint32_t near_child = neg[axis] ? above : below;
@@ -76,13 +81,17 @@ SPECULA_SIMD_TARGET void traverse_packet(const KdView& kd, PreparedRay* rays, Tr
         }
       }
       if (count != 0) tfar = load_tfar(rays);
+      if constexpr (AnyHit) {
+        for (unsigned m = mask; m; m &= m - 1)
+          if (hits[std::countr_zero(m)].hit()) blocked |= 1u << std::countr_zero(m);
+      }
     }
     // Pop the nearest pending cell with lanes that still reach it (each entry culled on its own,
     // as in the single-ray traversal: lanes in a split plane make the stack unsorted).
     for (;;) {
-      if (sp == 0) return;
+      if (sp == 0) return blocked;
       const Entry& e = stack[--sp];
-      mask = e.mask & ~vmask(vlt(tfar, vmul(e.tmin, down)));
+      mask = e.mask & ~blocked & ~vmask(vlt(tfar, vmul(e.tmin, down)));
       if (mask == 0) continue;
       node = e.node;
       tmin = e.tmin;

@@ -354,10 +354,11 @@ void NativeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) con
 
 void NativeTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> occluded) const {
   SPECULA_ASSERT(occluded.size() == rays.size());
-  // The static 4-wide BVH takes consecutive rays as packets, as Embree's stream calls take a
-  // batch of single rays: a tile's shadow rays towards one light mostly share their direction
-  // signs and walk the tree together (the answers are the single rays', lane by lane).
-  if (has_static_ && options_.static_structure == StaticStructure::bvh && options_.wide_bvh) {
+  // The kd-tree and the 4-wide BVH take consecutive rays as packets, as Embree's stream calls
+  // take a batch of single rays: a tile's shadow rays towards one light mostly share their
+  // direction signs and walk the tree together (the answers are the single rays', lane by lane).
+  if (has_static_ && (options_.static_structure == StaticStructure::kdtree ||
+                      (options_.static_structure == StaticStructure::bvh && options_.wide_bvh))) {
     if (accel::cpu_has_avx2())
       occluded_packets<8>(rays, occluded);
     else
@@ -392,11 +393,12 @@ void NativeTracer::occluded_packets(std::span<const Ray> rays,
       p.tnear[i] = ray.tnear;
       p.tfar[i] = ray.tfar;
     }
+    const bool kd = options_.static_structure == StaticStructure::kdtree;
     unsigned blocked;
     if constexpr (N == 8)
-      blocked = static_wide_.occluded8(p, active, test);
+      blocked = kd ? kd_.occluded8(p, active, test) : static_wide_.occluded8(p, active, test);
     else
-      blocked = static_wide_.occluded4(p, active, test);
+      blocked = kd ? kd_.occluded4(p, active, test) : static_wide_.occluded4(p, active, test);
     for (std::size_t i = 0; i < count; ++i) {
       bool b = ((blocked >> i) & 1u) != 0;
       if (!b && !top_.empty()) {

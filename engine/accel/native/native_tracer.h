@@ -129,7 +129,7 @@ private:
   /// Whether a dynamic instance blocks r.
   template <accel::TriangleTest Test>
   [[nodiscard]] bool occluded_dynamic(const accel::PreparedRay& r) const;
-  /// occluded() over the static 4-wide BVH: consecutive rays as packets of N.
+  /// occluded() over the static kd-tree or 4-wide BVH: consecutive rays as packets of N.
   template <int N>
   void occluded_packets(std::span<const Ray> rays, std::span<std::uint8_t> occluded) const;
   /// Closest hit among the dynamic instances, closer than r.tfar (which it shrinks).
