@@ -269,7 +269,8 @@ void WideBvh::build(const Bvh& binary, const TriangleView& tris) {
 }
 
 template <TriangleTest Test, bool AnyHit>
-bool WideBvh::traverse(PreparedRay& r, TriangleHit* hit) const {
+bool WideBvh::traverse(PreparedRay& r, TriangleHit* hit, std::uint32_t start_child,
+                       std::uint32_t start_count) const {
   if (nodes_.empty() || !r.valid()) return false;
   __m128 org[3], inv[3];
   for (int a = 0; a < 3; ++a) {
@@ -286,7 +287,7 @@ bool WideBvh::traverse(PreparedRay& r, TriangleHit* hit) const {
   };
   Entry stack[kStackSize];
   int top = 0;
-  Entry cur{0, 0, r.tnear};
+  Entry cur{start_child, start_count, r.tnear};
   bool found = false;
   const WideBvhNode* nodes = nodes_.data();
   for (;;) {
@@ -470,10 +471,16 @@ unsigned WideBvh::occluded_packet(const RayPacket<N>& rays, const bool* active,
     vector_prepared = simd_sse::prepare_coherent_lanes(rays, active, nullptr, prepared, nullptr,
                                                        nullptr, mask, neg, lanes);
   if (vector_prepared && Test == TriangleTest::watertight && std::popcount(mask) > 1) {
+    // A subtree that one lane alone enters is left to that lane's single-ray walk.
+    const auto single = [&](int lane, std::uint32_t child, std::uint32_t count) {
+      return traverse<TriangleTest::watertight, true>(prepared[lane], nullptr, child, count);
+    };
     if constexpr (N == 8)
-      return wide_avx2::occlude_packet(nodes_.data(), groups_.data(), prepared, mask, neg, lanes);
+      return wide_avx2::occlude_packet(nodes_.data(), groups_.data(), prepared, mask, neg, lanes,
+                                       single);
     else
-      return wide_sse::occlude_packet(nodes_.data(), groups_.data(), prepared, mask, neg, lanes);
+      return wide_sse::occlude_packet(nodes_.data(), groups_.data(), prepared, mask, neg, lanes,
+                                      single);
   }
   // Lanes that disagree (or the Möller–Trumbore option): each lane's own walk.
   unsigned blocked = 0;

@@ -108,8 +108,11 @@ public:
   static constexpr int kStackSize = 256;
 
 private:
+  /// From the root, or from the subtree (start_child, start_count) as a WideBvhNode's child
+  /// entry gives it.
   template <TriangleTest Test, bool AnyHit>
-  bool traverse(PreparedRay& r, TriangleHit* hit) const;
+  bool traverse(PreparedRay& r, TriangleHit* hit, std::uint32_t start_child = 0,
+                std::uint32_t start_count = 0) const;
   template <int N, TriangleTest Test>
   unsigned occluded_packet(const RayPacket<N>& rays, const bool* active, TestTag<Test>) const;
   template <int N, TriangleTest Test>

@@ -86,11 +86,16 @@ SPECULA_SIMD_TARGET void traverse_packet(const WideBvhNode* nodes, const WideTri
 /// Occlusion of the lanes in `mask` (their signs `neg`, their lanes `w`) from the root: returns
 /// the lanes that meet a triangle within (tnear, tfar). A lane leaves the walk once blocked, and
 /// the walk ends when every lane has; children are entered in their order (any hit will do, as in
-/// the single ray's occlusion walk). A lane's answer is its single ray's: the same box and
-/// triangle tests, and its tfar never shrinks before it is blocked.
+/// the single ray's occlusion walk). A subtree that one lane alone enters goes to
+/// `single(lane, child, count)`, that lane's single-ray walk from there (it returns whether the
+/// lane is blocked): divergent shadow rays soon leave one lane per subtree, and the vector steps
+/// would work for the idle ones. A lane's answer is its single ray's: the same box and triangle
+/// tests, and its tfar never shrinks before it is blocked.
+template <class Single>
 SPECULA_SIMD_TARGET unsigned occlude_packet(const WideBvhNode* nodes, const WideTriangles* groups,
                                             PreparedRay* rays, unsigned mask,
-                                            const std::uint32_t neg[3], const WatertightLanes& w) {
+                                            const std::uint32_t neg[3], const WatertightLanes& w,
+                                            Single&& single) {
   const Vf scale = vset1(kBoxFarScale);
   Vf tfar = load_tfar(rays);
 
@@ -105,7 +110,13 @@ SPECULA_SIMD_TARGET unsigned occlude_packet(const WideBvhNode* nodes, const Wide
   TriangleHit scratch[kLanes];
   Entry cur{0, 0, mask};
   for (;;) {
-    if (cur.count == 0) {
+    if (std::has_single_bit(cur.mask)) {
+      // One lane left in this subtree: its own walk (no vector work for seven idle lanes).
+      if (single(std::countr_zero(cur.mask), cur.child, cur.count)) {
+        blocked |= cur.mask;
+        if (blocked == all) return blocked;
+      }
+    } else if (cur.count == 0) {
       const WideBvhNode& n = nodes[cur.child];
       int taken = -1;
       unsigned taken_mask = 0;
