@@ -206,7 +206,13 @@ void check_packets(const Mesh& mesh, const std::vector<PreparedRay>& rays, bool 
       got.t = hits.t[i];
       got.u = hits.u[i];
       got.v = hits.v[i];
-      bool ok = same_hit(got, want) && packet.tfar[i] == (want.hit() ? got.t : original.tfar[i]);
+      // The same hit to the bit: a lane walks the cells its single ray walks, in the same order
+      // (the lanes share their signs), over the same intervals, with the same triangle tests
+      // (NativeTracer's intersect batches rely on it: a ray's hit must not depend on the rays
+      // packed beside it).
+      bool ok = got.prim == want.prim &&
+                (!want.hit() || (got.t == want.t && got.u == want.u && got.v == want.v)) &&
+                packet.tfar[i] == (want.hit() ? got.t : original.tfar[i]);
       if (!want.hit()) ok = ok && got.u == -7.0f;
       if (!ok && ++wrong <= 5)
         ADD_FAILURE() << mesh.name << " packet " << N << " lane " << i << " active " << active[i]

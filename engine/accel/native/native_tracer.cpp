@@ -341,8 +341,41 @@ bool NativeTracer::occluded_dynamic(const PreparedRay& r) const {
   return blocked;
 }
 
+namespace {
+
+/// Rays [first, first + count) of a batch as a packet (the lanes past count inactive copies).
+template <int N>
+void fill_packet(std::span<const Ray> rays, std::size_t first, std::size_t count,
+                 accel::RayPacket<N>& p, bool* active) {
+  for (std::size_t i = 0; i < std::size_t(N); ++i) {
+    const Ray& ray = rays[first + (i < count ? i : 0)];
+    active[i] = i < count;
+    p.ox[i] = ray.origin.x;
+    p.oy[i] = ray.origin.y;
+    p.oz[i] = ray.origin.z;
+    p.dx[i] = ray.direction.x;
+    p.dy[i] = ray.direction.y;
+    p.dz[i] = ray.direction.z;
+    p.tnear[i] = ray.tnear;
+    p.tfar[i] = ray.tfar;
+  }
+}
+
+} // namespace
+
 void NativeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
   SPECULA_ASSERT(hits.size() == rays.size());
+  // The kd-tree takes consecutive rays as packets too: its packet walk gives each lane its single
+  // ray's hit to the bit (KdTree.PacketsMatchSingleRays), so a ray's hit does not depend on the
+  // rays beside it in the batch. (The wide BVH's closest-hit packets may keep the other of two
+  // triangles an ulp apart: its batches stay one ray at a time.)
+  if (has_static_ && options_.static_structure == StaticStructure::kdtree) {
+    if (accel::cpu_has_avx2())
+      intersect_packets<8>(rays, hits);
+    else
+      intersect_packets<4>(rays, hits);
+    return;
+  }
   for (std::size_t i = 0; i < rays.size(); ++i) {
     PreparedRay r = PreparedRay::make(rays[i]);
     if (options_.triangle_test == TriangleTest::watertight)
@@ -374,6 +407,39 @@ void NativeTracer::occluded(std::span<const Ray> rays, std::span<std::uint8_t> o
 }
 
 template <int N>
+void NativeTracer::intersect_packets(std::span<const Ray> rays, std::span<Hit> hits) const {
+  const TriangleTest test = options_.triangle_test;
+  for (std::size_t first = 0; first < rays.size(); first += N) {
+    const std::size_t count = std::min<std::size_t>(N, rays.size() - first);
+    accel::RayPacket<N> p;
+    accel::PacketHits<N> ph;
+    ph.clear();
+    bool active[N];
+    fill_packet(rays, first, count, p, active);
+    if constexpr (N == 8)
+      kd_.intersect8(p, ph, active, test);
+    else
+      kd_.intersect4(p, ph, active, test);
+    for (std::size_t i = 0; i < count; ++i) {
+      Hit& hit = hits[first + i];
+      hit = Hit{};
+      if (ph.prim[i] != 0xFFFFFFFFu)
+        resolve_static(accel::TriangleHit{ph.t[i], ph.u[i], ph.v[i], ph.prim[i]}, hit);
+      if (top_.empty()) continue;
+      // The dynamic instances within what the static set left of the interval, as
+      // intersect_one asks them.
+      const Ray& ray = rays[first + i];
+      PreparedRay r = PreparedRay::make(ray.origin, ray.direction, ray.tnear, p.tfar[i]);
+      if (!r.valid()) continue;
+      if (test == TriangleTest::watertight)
+        intersect_dynamic<TriangleTest::watertight>(r, hit);
+      else
+        intersect_dynamic<TriangleTest::moller_trumbore>(r, hit);
+    }
+  }
+}
+
+template <int N>
 void NativeTracer::occluded_packets(std::span<const Ray> rays,
                                     std::span<std::uint8_t> occluded) const {
   const TriangleTest test = options_.triangle_test;
@@ -381,18 +447,7 @@ void NativeTracer::occluded_packets(std::span<const Ray> rays,
     const std::size_t count = std::min<std::size_t>(N, rays.size() - first);
     accel::RayPacket<N> p;
     bool active[N];
-    for (std::size_t i = 0; i < std::size_t(N); ++i) {
-      const Ray& ray = rays[first + (i < count ? i : 0)];
-      active[i] = i < count;
-      p.ox[i] = ray.origin.x;
-      p.oy[i] = ray.origin.y;
-      p.oz[i] = ray.origin.z;
-      p.dx[i] = ray.direction.x;
-      p.dy[i] = ray.direction.y;
-      p.dz[i] = ray.direction.z;
-      p.tnear[i] = ray.tnear;
-      p.tfar[i] = ray.tfar;
-    }
+    fill_packet(rays, first, count, p, active);
     const bool kd = options_.static_structure == StaticStructure::kdtree;
     unsigned blocked;
     if constexpr (N == 8)

@@ -129,6 +129,9 @@ private:
   /// Whether a dynamic instance blocks r.
   template <accel::TriangleTest Test>
   [[nodiscard]] bool occluded_dynamic(const accel::PreparedRay& r) const;
+  /// intersect() over the static kd-tree: consecutive rays as packets of N.
+  template <int N>
+  void intersect_packets(std::span<const Ray> rays, std::span<Hit> hits) const;
   /// occluded() over the static kd-tree or 4-wide BVH: consecutive rays as packets of N.
   template <int N>
   void occluded_packets(std::span<const Ray> rays, std::span<std::uint8_t> occluded) const;
