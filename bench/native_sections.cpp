@@ -299,9 +299,9 @@ void section_native(const Options& o) {
     const SecondaryRays sec = make_secondary(embree, layer, camera, o.size, light);
     std::printf("\nSecondary rays from the primary hits (batches of rays through each tracer's "
                 "occluded/intersect: Embree's rtcOccluded1M/rtcIntersect1M, which trace a batch "
-                "as packets of its SIMD width; the native kd-tree's and 4-wide BVH's occlusion "
-                "take their batch as packets of 8 too (4 without AVX2); the binary BVH column "
-                "and every reflection column one ray at a time):\n\n");
+                "as packets of its SIMD width; the native kd-tree takes both kinds of batch as "
+                "packets of 8 too (4 without AVX2), the 4-wide BVH its occlusion batches; the "
+                "binary BVH column and the wide BVH's reflection rays one ray at a time):\n\n");
     std::printf("| rays | count | Embree (Mrays/s) | native kd-tree (Mrays/s) | kd-tree / Embree | "
                 "native BVH, 4-wide (Mrays/s) | BVH / Embree | binary BVH (Mrays/s) | binary / "
                 "Embree |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
