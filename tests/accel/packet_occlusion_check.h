@@ -147,4 +147,24 @@ int occlusion_mismatches(const Tree& tree, const TriangleView& view, const Aabb&
   return bad;
 }
 
+/// Both widths and both triangle tests of `tree` over one mesh (`box`: its finite bounds): no lane
+/// disagrees, both answers are common, and most packets walk as one (else only the lane-by-lane
+/// walk would be checked).
+template <class Tree>
+void expect_occlusion_packets_match(const Tree& tree, const TriangleView& view, const Aabb& box,
+                                    std::uint32_t seed) {
+  int bad = 0, blocked = 0, clear = 0, coherent4 = 0, coherent8 = 0;
+  for (TriangleTest test : {TriangleTest::watertight, TriangleTest::moller_trumbore}) {
+    bad += occlusion_mismatches<4>(tree, view, box, test, seed, blocked, clear, coherent4);
+    bad += occlusion_mismatches<8>(tree, view, box, test, seed + 1, blocked, clear, coherent8);
+  }
+  EXPECT_EQ(bad, 0);
+  EXPECT_GT(blocked, 1000);
+  EXPECT_GT(clear, 1000);
+  EXPECT_GT(coherent4, 400);
+  if (cpu_has_avx2()) {
+    EXPECT_GT(coherent8, 100);
+  }
+}
+
 } // namespace specula::accel::test

@@ -1000,20 +1000,7 @@ TEST(WideBvh, PacketOcclusionEqualsSingleRaysPerLane) {
     SCOPED_TRACE(mesh.name);
     const TriangleView view = mesh.view();
     auto [binary, wide] = build_trees(view);
-    const Aabb box = mesh_bounds(mesh);
-    int bad = 0, blocked = 0, clear = 0, coherent4 = 0, coherent8 = 0;
-    for (TriangleTest test : {TriangleTest::watertight, TriangleTest::moller_trumbore}) {
-      bad += test::occlusion_mismatches<4>(wide, view, box, test, 313, blocked, clear, coherent4);
-      bad += test::occlusion_mismatches<8>(wide, view, box, test, 317, blocked, clear, coherent8);
-    }
-    EXPECT_EQ(bad, 0);
-    EXPECT_GT(blocked, 1000);
-    EXPECT_GT(clear, 1000);
-    // Most packets walk as one (else the test would check the lane-by-lane walk alone).
-    EXPECT_GT(coherent4, 400);
-    if (cpu_has_avx2()) {
-      EXPECT_GT(coherent8, 100);
-    }
+    test::expect_occlusion_packets_match(wide, view, mesh_bounds(mesh), 313);
   }
 }
 

@@ -407,15 +407,9 @@ void WideBvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bo
   TriangleHit lane_hits[N];
   unsigned mask = 0;
   std::uint32_t neg[3] = {0, 0, 0};
-  using Lanes = std::conditional_t<N == 8, simd_avx2::WatertightLanes, simd_sse::WatertightLanes>;
-  Lanes lanes;
-  bool vector_prepared;
-  if constexpr (N == 8)
-    vector_prepared = simd_avx2::prepare_coherent_lanes(rays, active, nullptr, prepared, nullptr,
-                                                        nullptr, mask, neg, lanes);
-  else
-    vector_prepared = simd_sse::prepare_coherent_lanes(rays, active, nullptr, prepared, nullptr,
-                                                       nullptr, mask, neg, lanes);
+  WatertightLanesOf<N> lanes;
+  const bool vector_prepared = prepare_coherent_lanes<N>(rays, active, nullptr, prepared, nullptr,
+                                                         nullptr, mask, neg, lanes);
   if (vector_prepared && Test == TriangleTest::watertight && std::popcount(mask) > 1) {
     if constexpr (N == 8)
       wide_avx2::traverse_packet(nodes_.data(), groups_.data(), prepared, lane_hits, mask, neg,
@@ -461,15 +455,9 @@ unsigned WideBvh::occluded_packet(const RayPacket<N>& rays, const bool* active,
   PreparedRay prepared[N];
   unsigned mask = 0;
   std::uint32_t neg[3] = {0, 0, 0};
-  using Lanes = std::conditional_t<N == 8, simd_avx2::WatertightLanes, simd_sse::WatertightLanes>;
-  Lanes lanes;
-  bool vector_prepared;
-  if constexpr (N == 8)
-    vector_prepared = simd_avx2::prepare_coherent_lanes(rays, active, nullptr, prepared, nullptr,
-                                                        nullptr, mask, neg, lanes);
-  else
-    vector_prepared = simd_sse::prepare_coherent_lanes(rays, active, nullptr, prepared, nullptr,
-                                                       nullptr, mask, neg, lanes);
+  WatertightLanesOf<N> lanes;
+  const bool vector_prepared = prepare_coherent_lanes<N>(rays, active, nullptr, prepared, nullptr,
+                                                         nullptr, mask, neg, lanes);
   if (vector_prepared && Test == TriangleTest::watertight && std::popcount(mask) > 1) {
     // A subtree that one lane alone enters is left to that lane's single-ray walk.
     const auto single = [&](int lane, std::uint32_t child, std::uint32_t count) {

@@ -13,6 +13,7 @@
 
 #include <bit>
 #include <cstdint>
+#include <type_traits>
 
 namespace specula::accel {
 
@@ -83,5 +84,21 @@ SPECULA_SIMD_TARGET inline void vstore(float* p, Vf a) { _mm256_store_ps(p, a); 
 #include "packet_watertight.inl"
 #undef SPECULA_SIMD_TARGET
 } // namespace simd_avx2
+
+/// The lanes of a packet of N (4: SSE, 8: AVX2).
+template <int N>
+using WatertightLanesOf =
+    std::conditional_t<N == 8, simd_avx2::WatertightLanes, simd_sse::WatertightLanes>;
+
+/// prepare_coherent_lanes of the packet's width.
+template <int N>
+bool prepare_coherent_lanes(const RayPacket<N>& rays, const bool* active, const Aabb* box,
+                            PreparedRay* out, float* tmin, float* tmax, unsigned& mask,
+                            std::uint32_t neg[3], WatertightLanesOf<N>& w) {
+  if constexpr (N == 8)
+    return simd_avx2::prepare_coherent_lanes(rays, active, box, out, tmin, tmax, mask, neg, w);
+  else
+    return simd_sse::prepare_coherent_lanes(rays, active, box, out, tmin, tmax, mask, neg, w);
+}
 
 } // namespace specula::accel

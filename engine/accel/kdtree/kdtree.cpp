@@ -809,15 +809,9 @@ unsigned KdTree::walk_packet(const RayPacket<N>& rays, const bool* active, Prepa
   std::uint32_t neg[3] = {0, 0, 0};
   // Lanes that agree on their signs and ray space are prepared in vector steps; others one by one
   // (the same bits either way).
-  using Lanes = std::conditional_t<N == 8, simd_avx2::WatertightLanes, simd_sse::WatertightLanes>;
-  Lanes lanes;
-  bool vector_prepared;
-  if constexpr (N == 8)
-    vector_prepared = simd_avx2::prepare_coherent_lanes(rays, active, &bounds_, prepared, tmin,
-                                                        tmax, mask, neg, lanes);
-  else
-    vector_prepared = simd_sse::prepare_coherent_lanes(rays, active, &bounds_, prepared, tmin, tmax,
-                                                       mask, neg, lanes);
+  WatertightLanesOf<N> lanes;
+  const bool vector_prepared =
+      prepare_coherent_lanes<N>(rays, active, &bounds_, prepared, tmin, tmax, mask, neg, lanes);
   if (!vector_prepared) {
     for (int i = 0; i < N; ++i) {
       tmin[i] = 0.0f;
