@@ -275,19 +275,28 @@ struct PacketHits {
   return has;
 }
 
+/// Lanes 4·half … 4·half + 3 of an 8-ray packet as a packet of 4.
+[[nodiscard]] inline RayPacket<4> half_packet(const RayPacket<8>& rays, int half) {
+  RayPacket<4> r4;
+  for (int i = 0; i < 4; ++i) {
+    const int j = 4 * half + i;
+    r4.ox[i] = rays.ox[j], r4.oy[i] = rays.oy[j], r4.oz[i] = rays.oz[j];
+    r4.dx[i] = rays.dx[j], r4.dy[i] = rays.dy[j], r4.dz[i] = rays.dz[j];
+    r4.tnear[i] = rays.tnear[j], r4.tfar[i] = rays.tfar[j];
+  }
+  return r4;
+}
+
 /// An 8-ray packet traced as two packets of 4 by `intersect4(rays, hits, active)` (CPUs without
 /// AVX2): lanes copied out and back, tfar and hits included.
 template <typename Intersect4>
 void as_two_packets_of_4(RayPacket<8>& rays, PacketHits<8>& hits, const bool active[8],
                          Intersect4&& intersect4) {
   for (int half = 0; half < 2; ++half) {
-    RayPacket<4> r4;
+    RayPacket<4> r4 = half_packet(rays, half);
     PacketHits<4> h4;
     for (int i = 0; i < 4; ++i) {
       const int j = 4 * half + i;
-      r4.ox[i] = rays.ox[j], r4.oy[i] = rays.oy[j], r4.oz[i] = rays.oz[j];
-      r4.dx[i] = rays.dx[j], r4.dy[i] = rays.dy[j], r4.dz[i] = rays.dz[j];
-      r4.tnear[i] = rays.tnear[j], r4.tfar[i] = rays.tfar[j];
       h4.t[i] = hits.t[j], h4.u[i] = hits.u[j], h4.v[i] = hits.v[j], h4.prim[i] = hits.prim[j];
     }
     intersect4(r4, h4, active + 4 * half);
@@ -331,16 +340,9 @@ unsigned run_occlusion_packet(const RayPacket<N>& rays, const bool* active, Tria
   if constexpr (N == 8) {
     if (!cpu_has_avx2()) {
       unsigned blocked = 0;
-      for (int half = 0; half < 2; ++half) {
-        RayPacket<4> r4;
-        for (int i = 0; i < 4; ++i) {
-          const int j = 4 * half + i;
-          r4.ox[i] = rays.ox[j], r4.oy[i] = rays.oy[j], r4.oz[i] = rays.oz[j];
-          r4.dx[i] = rays.dx[j], r4.dy[i] = rays.dy[j], r4.dz[i] = rays.dz[j];
-          r4.tnear[i] = rays.tnear[j], r4.tfar[i] = rays.tfar[j];
-        }
-        blocked |= run_occlusion_packet(r4, active + 4 * half, test, kernel) << (4 * half);
-      }
+      for (int half = 0; half < 2; ++half)
+        blocked |= run_occlusion_packet(half_packet(rays, half), active + 4 * half, test, kernel)
+                   << (4 * half);
       return blocked;
     }
   }

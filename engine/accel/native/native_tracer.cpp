@@ -443,12 +443,12 @@ template <int N>
 void NativeTracer::occluded_packets(std::span<const Ray> rays,
                                     std::span<std::uint8_t> occluded) const {
   const TriangleTest test = options_.triangle_test;
+  const bool kd = options_.static_structure == StaticStructure::kdtree;
   for (std::size_t first = 0; first < rays.size(); first += N) {
     const std::size_t count = std::min<std::size_t>(N, rays.size() - first);
     accel::RayPacket<N> p;
     bool active[N];
     fill_packet(rays, first, count, p, active);
-    const bool kd = options_.static_structure == StaticStructure::kdtree;
     unsigned blocked;
     if constexpr (N == 8)
       blocked = kd ? kd_.occluded8(p, active, test) : static_wide_.occluded8(p, active, test);
