@@ -86,10 +86,20 @@ struct Path {
   vec3 previous;        ///< the vertex the ray leaves (MIS: light-sampling density from there)
   std::uint32_t slot;   ///< its sample's radiance entry (PathWave::radiance)
   std::uint32_t pixel;  ///< image index: the sampler's stream
+  std::uint32_t stream; ///< PixelSampler(pixel, seed).stream_seed(), hashed once per path
   std::uint32_t sample; ///< index in the pixel's sequence
   /// With a radiance hook: the innermost open leaving record of the path (PathWave::records;
   /// kNoInstance: none), whose `parent` links lead to the enclosing ones.
   std::uint32_t leaving;
+};
+
+/// The sample dimensions a path vertex may use, drawn for a whole wave at once
+/// (sample_batch.h): the area-light sample (pick, then the point), the roulette decision, the
+/// continuation (lobe, reflect or refract, then the diffuse direction).
+struct VertexSamples {
+  float light[3];
+  float roulette;
+  float bsdf[4];
 };
 
 /// A ray that left an object on a path (with a radiance hook), from the wave that spawned it to
@@ -117,6 +127,7 @@ struct PathWave {
   std::vector<vec3> sum;            ///< per tile pixel: sum of its finished samples
   std::vector<vec3> radiance;       ///< per sample of the batch
   std::vector<Path> paths, wave_paths, hit_paths;
+  std::vector<VertexSamples> samples; ///< per path of the wave being shaded
   std::vector<Ray> rays, wave_rays;
   std::vector<Hit> hits;
   std::vector<Ray> shadow_rays;

@@ -13,6 +13,7 @@
 
 #include "specula/trace/area_lights.h"
 #include "specula/trace/integrators.h"
+#include "specula/trace/sample_batch.h"
 #include "specula/trace/sampler.h"
 #include "specula/trace/shading.h"
 
@@ -100,9 +101,9 @@ private:
     w_.records.clear();
     w_.exits.clear();
     // Wave 0: the primary hits, shaded once per pixel and continued by each of its samples.
+    w_.hit_paths.clear();
     for (std::uint32_t i = 0; i < n; ++i) {
-      const Hit hit = primary_.hit(i);
-      const vec3 d = primary_.direction(i);
+      const std::uint32_t stream = PixelSampler(w_.pixel[i], settings_.seed).stream_seed();
       for (std::uint32_t s = 0; s < count; ++s) {
         Path p;
         p.throughput = vec3(1.0f);
@@ -110,12 +111,15 @@ private:
         p.previous = vec3(0.0f);
         p.slot = i * count + s;
         p.pixel = w_.pixel[i];
+        p.stream = stream;
         p.sample = settings_.sample_offset + first + s;
         p.leaving = kNoInstance;
         w_.hit_paths.push_back(p);
       }
-      shade_pixel(hit, d, count);
     }
+    draw_samples(w_.hit_paths, 0);
+    for (std::uint32_t i = 0; i < n; ++i)
+      shade_pixel(primary_.hit(i), primary_.direction(i), i * count, count);
     trace_shadows();
     for (std::uint32_t depth = 1; !w_.paths.empty(); ++depth) {
       w_.wave_paths.swap(w_.paths);
@@ -135,12 +139,14 @@ private:
           note_hit(w_.wave_paths[k].leaving, w_.hits[k]);
         look_up_leaving(depth);
       }
+      draw_samples(w_.wave_paths, depth);
       for (std::size_t k = 0; k < w_.wave_paths.size(); ++k) {
         const std::uint32_t e = hook_ != nullptr ? w_.exit_of[k] : kNoInstance;
         if (e == kNoInstance)
-          shade(w_.wave_paths[k], w_.hits[k], w_.wave_rays[k].direction, depth);
+          shade(w_.wave_paths[k], w_.samples[k], w_.hits[k], w_.wave_rays[k].direction, depth);
         else
-          shade_leaving(w_.wave_paths[k], w_.hits[k], w_.wave_rays[k].direction, depth);
+          shade_leaving(w_.wave_paths[k], w_.samples[k], w_.hits[k], w_.wave_rays[k].direction,
+                        depth);
       }
       trace_shadows();
     }
@@ -168,32 +174,58 @@ private:
     return tables_.materials[tables_.instances[hit.instance].material];
   }
 
-  /// The primary hit of one pixel for the `count` paths last pushed to w_.hit_paths.
-  void shade_pixel(const Hit& hit, const vec3& d, std::uint32_t count) {
+  /// The sample dimensions the vertices of a wave's paths may use (VertexSamples), for the whole
+  /// wave at once: only the sets and dimensions this scene's vertices at `depth` can read.
+  void draw_samples(const std::vector<Path>& paths, std::uint32_t depth) {
+    w_.samples.resize(paths.size());
+    if (paths.empty() || depth >= settings_.max_depth) return; // the last vertex draws none
+    static_assert(sizeof(Path) % sizeof(std::uint32_t) == 0 &&
+                  sizeof(VertexSamples) % sizeof(float) == 0);
+    const SampleKeys keys{&paths[0].stream, &paths[0].sample, sizeof(Path) / sizeof(std::uint32_t),
+                          paths.size()};
+    constexpr std::size_t kStride = sizeof(VertexSamples) / sizeof(float);
+    VertexSamples& first = w_.samples[0];
+    const std::uint32_t set = depth * kSetsPerVertex;
+    if (kArea && settings_.sampling != LightSampling::Bsdf)
+      draw_sample_dims(keys, set + kSetLight, 0b0111u, first.light, kStride);
+    // Dimension 0 picks a lobe only where a material has a specular one, 1 chooses between
+    // reflection and refraction only with dielectrics.
+    const std::uint32_t bsdf =
+        0b1100u | (kMirror || kDielectric ? 0b0001u : 0u) | (kDielectric ? 0b0010u : 0u);
+    draw_sample_dims(keys, set + kSetBsdf, bsdf, first.bsdf, kStride);
+    if (depth >= kRouletteDepth)
+      draw_sample_dims(keys, set + kSetRoulette, 0b0001u, &first.roulette, kStride);
+  }
+
+  /// The primary hit of one pixel for its `count` paths w_.hit_paths[first …].
+  void shade_pixel(const Hit& hit, const vec3& d, std::uint32_t first, std::uint32_t count) {
     if (!hit.hit()) {
-      for (const Path& p : w_.hit_paths)
+      for (std::uint32_t s = first; s < first + count; ++s) {
+        const Path& p = w_.hit_paths[s];
         contribute(p.slot, p.leaving, p.throughput * settings_.background);
-      w_.hit_paths.clear();
+      }
       return;
     }
     const Vertex v = vertex(hit, d);
-    for (std::uint32_t s = 0; s < count; ++s) shade_vertex(w_.hit_paths[s], v, d, 0);
-    w_.hit_paths.clear();
+    for (std::uint32_t s = first; s < first + count; ++s)
+      shade_vertex(w_.hit_paths[s], w_.samples[s], v, d, 0);
   }
 
-  void shade(const Path& p, const Hit& hit, const vec3& d, std::uint32_t depth) {
+  void shade(const Path& p, const VertexSamples& u, const Hit& hit, const vec3& d,
+             std::uint32_t depth) {
     if (!hit.hit()) {
       contribute(p.slot, p.leaving, p.throughput * settings_.background);
       return;
     }
-    shade_vertex(p, vertex(hit, d), d, depth);
+    shade_vertex(p, u, vertex(hit, d), d, depth);
   }
 
   /// The first hit of a ray that left a cached object (its record is p.leaving), as the hook
   /// answered for it: traced on (its emission noted, so the record's radiance can leave it out);
   /// served (the sample takes emission + the cached radiance, the path ends); or refreshed (the
   /// sample takes the same, and the path goes on for the record alone).
-  void shade_leaving(Path& p, const Hit& hit, const vec3& d, std::uint32_t depth) {
+  void shade_leaving(Path& p, const VertexSamples& u, const Hit& hit, const vec3& d,
+                     std::uint32_t depth) {
     PathLeaving& rec = w_.records[p.leaving];
     const CacheAnswer answer = rec.ray.answer;
     if (!hit.hit() || answer == CacheAnswer::Trace) {
@@ -201,7 +233,7 @@ private:
         contribute(p.slot, p.leaving, p.throughput * settings_.background);
         return;
       }
-      shade_vertex(p, vertex(hit, d), d, depth, p.leaving);
+      shade_vertex(p, u, vertex(hit, d), d, depth, p.leaving);
       return;
     }
     const Vertex v = vertex(hit, d);
@@ -218,7 +250,7 @@ private:
     // Refreshed: what the path gathers from here on is the record's alone.
     rec.parent = kNoInstance;
     p.slot = kDetached;
-    shade_vertex(p, v, d, depth, kNoInstance, false);
+    shade_vertex(p, u, v, d, depth, kNoInstance, false);
   }
 
   /// What a hit's shading needs, computed once per hit.
@@ -237,8 +269,10 @@ private:
   /// vertex), next-event estimation of every light at the diffuse part, then, below the depth
   /// limit, the sampled continuation. `first_of`: the leaving record whose first hit this is
   /// (its emission is noted apart); `emission` false when the caller has counted it.
-  void shade_vertex(const Path& p, const Vertex& v, const vec3& d, std::uint32_t depth,
-                    std::uint32_t first_of = kNoInstance, bool emission = true) {
+  /// `u`: the path's samples at this vertex (draw_samples).
+  void shade_vertex(const Path& p, const VertexSamples& u, const Vertex& v, const vec3& d,
+                    std::uint32_t depth, std::uint32_t first_of = kNoInstance,
+                    bool emission = true) {
     const gpu::GpuMaterial& m = *v.m;
     const ShadingPoint& sp = v.sp;
     if constexpr (kArea) {
@@ -271,8 +305,6 @@ private:
     // Probability of the diffuse lobe: with it, the mixture's density of a direction.
     const float p_diffuse = total > 0.0f ? diffuse / total : 0.0f;
     const bool last = depth >= settings_.max_depth;
-    const PixelSampler sampler(p.pixel, settings_.seed);
-    const std::uint32_t set = depth * kSetsPerVertex;
 
     vec3 origin(0.0f);
     if (diffuse > 0.0f) {
@@ -288,9 +320,8 @@ private:
       // BSDF strategy would need a ray beyond the depth limit).
       if constexpr (kArea) {
         if (!last && settings_.sampling != LightSampling::Bsdf) {
-          const SampleSet u = sampler.set(p.sample, set + kSetLight);
           const AreaLightSample ls =
-              sample_area_light(emitters_, sp.position, u.dim(0), u.dim(1), u.dim(2));
+              sample_area_light(emitters_, sp.position, u.light[0], u.light[1], u.light[2]);
           const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
           if (ls.pdf > 0.0f && glm::dot(ls.to_light, sp.geometric_normal) > 0.0f &&
               cos_theta > 0.0f && max_component(ls.emission) > 0.0f) {
@@ -308,13 +339,12 @@ private:
 
     // The continuation: a lobe picked by its weight, the throughput divided by its probability.
     // Dimensions: 0 the lobe, 1 reflect or refract, 2 and 3 the diffuse direction.
-    const SampleSet u = sampler.set(p.sample, set + kSetBsdf);
     Path next = p;
     Ray ray;
     RayKind kind = RayKind::Reflection;
     bool exits = false; // a specular ray leaving the object outwards
-    if (!(kMirror || kDielectric) || u.dim(0) * total < diffuse) {
-      const vec3 wi = cosine_direction(sp.shading_normal, u.dim(2), u.dim(3));
+    if (!(kMirror || kDielectric) || u.bsdf[0] * total < diffuse) {
+      const vec3 wi = cosine_direction(sp.shading_normal, u.bsdf[2], u.bsdf[3]);
       const float cos_theta = glm::dot(wi, sp.shading_normal);
       if (glm::dot(wi, sp.geometric_normal) <= 0.0f || !(cos_theta > 0.0f)) return;
       // f·cos / pdf = (diffuse·base/π·cos) / (p_diffuse·cos/π).
@@ -329,7 +359,7 @@ private:
       if constexpr (kDielectric) {
         const SpecularSplit split = split_specular(m, sp, d);
         const float both = split.reflect_weight + split.refract_weight;
-        reflect = u.dim(1) * both < split.reflect_weight;
+        reflect = u.bsdf[1] * both < split.reflect_weight;
         direction = reflect ? split.reflect_direction : split.refract_direction;
       } else {
         vec3 r = reflect_direction(d, sp.shading_normal);
@@ -344,7 +374,7 @@ private:
     }
     if (depth >= kRouletteDepth) {
       const float survival = std::clamp(max_component(next.throughput), 0.05f, 1.0f);
-      if (sampler.set(p.sample, set + kSetRoulette).dim(0) >= survival) return;
+      if (u.roulette >= survival) return;
       next.throughput /= survival;
     }
     if (!(max_component(next.throughput) > 0.0f)) return; // a black surface ends it

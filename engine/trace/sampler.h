@@ -162,6 +162,16 @@ public:
   constexpr PixelSampler(std::uint32_t stream, std::uint32_t seed)
       : seed_(hash_combine(hash_u32(seed), stream)) {}
 
+  /// The sampler whose stream_seed() is `stream_seed`: kept by a path, it spares the two hashes
+  /// of the constructor at every vertex.
+  [[nodiscard]] static constexpr PixelSampler from_stream_seed(std::uint32_t stream_seed) {
+    PixelSampler s(0, 0);
+    s.seed_ = stream_seed;
+    return s;
+  }
+  /// The stream's own seed (the render's seed and the stream hashed together).
+  [[nodiscard]] constexpr std::uint32_t stream_seed() const { return seed_; }
+
   /// Dimensions 4·set … 4·set+3 of the pixel's sample `index`: an Owen-scrambled, shuffled 4-D
   /// Sobol point, each set scrambled with its own seed.
   [[nodiscard]] constexpr vec4 get4(std::uint32_t index, std::uint32_t set) const {

@@ -2,10 +2,12 @@
 // 2^m samples, the range, determinism, independence of streams, and the Sobol construction
 // against the standard direction numbers.
 
+#include "specula/trace/sample_batch.h"
 #include "specula/trace/sampler.h"
 
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <random>
 #include <set>
 #include <vector>
@@ -153,6 +155,52 @@ TEST(Sampler, TheByteTablesAreTheGeneratorMatrices) {
   }
   for (std::uint32_t d = 0; d < 4; ++d)
     EXPECT_EQ(sobol_u32(0xFFFFFFFFu, d), by_bits(0xFFFFFFFFu, d));
+}
+
+/// Keys as a path tracer's wave holds them: fields of an array of structures.
+struct Key {
+  std::uint32_t other;
+  std::uint32_t seed;
+  std::uint32_t index;
+};
+
+TEST(Sampler, BatchedDimensionsAreTheScalarSamplersBitForBit) {
+  std::mt19937 rng(20261128);
+  for (const std::size_t count : {std::size_t(1), std::size_t(7), std::size_t(8), std::size_t(61)})
+    for (const std::uint32_t dims : {0b0001u, 0b0111u, 0b1101u, 0b1111u})
+      for (const bool simd : {false, true}) {
+        std::vector<Key> keys(count);
+        for (Key& k : keys) {
+          k.other = rng();
+          k.seed = PixelSampler(rng() % 204800u, rng() % 4u).stream_seed();
+          // Small indices (the first frames), and any 32-bit one.
+          k.index = rng() % 2 == 0 ? rng() % 64u : std::uint32_t(rng());
+        }
+        const std::uint32_t set = rng() % 30u;
+        constexpr std::size_t kStride = 5; // out: 4 dimensions and an untouched word
+        std::vector<float> out(count * kStride, -1.0f);
+        detail::draw_sample_dims(detail::SampleKeys{&keys[0].seed, &keys[0].index, 3, count}, set,
+                                 dims, out.data(), kStride, simd);
+        for (std::size_t i = 0; i < count; ++i) {
+          const SampleSet s = PixelSampler::from_stream_seed(keys[i].seed).set(keys[i].index, set);
+          for (std::uint32_t d = 0; d < 4; ++d) {
+            const float expected = (dims >> d & 1u) != 0 ? s.dim(d) : -1.0f;
+            ASSERT_EQ(std::bit_cast<std::uint32_t>(out[i * kStride + d]),
+                      std::bit_cast<std::uint32_t>(expected))
+                << "sample " << i << " of " << count << ", dimension " << d << ", simd " << simd;
+          }
+          ASSERT_EQ(out[i * kStride + 4], -1.0f) << "a word outside the dimensions was written";
+        }
+      }
+}
+
+TEST(Sampler, AStreamSeedGivesBackItsSampler) {
+  for (const std::uint32_t pixel : {0u, 9u, 204799u})
+    for (const std::uint32_t seed : {0u, 77u}) {
+      const PixelSampler a(pixel, seed);
+      const PixelSampler b = PixelSampler::from_stream_seed(a.stream_seed());
+      for (std::uint32_t k = 0; k < 16; ++k) EXPECT_EQ(a.get4(k, 3), b.get4(k, 3));
+    }
 }
 
 } // namespace
