@@ -186,15 +186,18 @@ private:
     constexpr std::size_t kStride = sizeof(VertexSamples) / sizeof(float);
     VertexSamples& first = w_.samples[0];
     const std::uint32_t set = depth * kSetsPerVertex;
+    std::array<SampleRequest, 3> requests;
+    std::size_t count = 0;
     if (kArea && settings_.sampling != LightSampling::Bsdf)
-      draw_sample_dims(keys, set + kSetLight, 0b0111u, first.light, kStride);
+      requests[count++] = {set + kSetLight, 0b0111u, first.light};
     // Dimension 0 picks a lobe only where a material has a specular one, 1 chooses between
     // reflection and refraction only with dielectrics.
-    const std::uint32_t bsdf =
-        0b1100u | (kMirror || kDielectric ? 0b0001u : 0u) | (kDielectric ? 0b0010u : 0u);
-    draw_sample_dims(keys, set + kSetBsdf, bsdf, first.bsdf, kStride);
-    if (depth >= kRouletteDepth)
-      draw_sample_dims(keys, set + kSetRoulette, 0b0001u, &first.roulette, kStride);
+    requests[count++] = {set + kSetBsdf,
+                         0b1100u | (kMirror || kDielectric ? 0b0001u : 0u) |
+                             (kDielectric ? 0b0010u : 0u),
+                         first.bsdf};
+    if (depth >= kRouletteDepth) requests[count++] = {set + kSetRoulette, 0b0001u, &first.roulette};
+    draw_sample_dims(keys, std::span(requests.data(), count), kStride);
   }
 
   /// The primary hit of one pixel for its `count` paths w_.hit_paths[first …].

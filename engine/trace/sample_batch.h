@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <span>
 
 namespace specula::detail {
 
@@ -20,10 +21,18 @@ struct SampleKeys {
   std::size_t count = 0;
 };
 
-/// For every sample i of `keys` and every dimension d in `dims` (bit d, d < 4):
-/// out[i · out_stride + d] = PixelSampler::from_stream_seed(seed).set(index, set).dim(d).
+/// Dimensions of one set of every sample: bit d of `dims` (d < 4) asks for dimension d, written
+/// to out[i · out_stride + d] for sample i.
+struct SampleRequest {
+  std::uint32_t set = 0;
+  std::uint32_t dims = 0;
+  float* out = nullptr;
+};
+
+/// For every sample i of `keys` and every request r, every dimension d that r asks for:
+/// r.out[i · out_stride + d] = PixelSampler::from_stream_seed(seed).set(index, r.set).dim(d).
 /// `simd` false: one sample at a time (the tests compare the two).
-void draw_sample_dims(const SampleKeys& keys, std::uint32_t set, std::uint32_t dims, float* out,
+void draw_sample_dims(const SampleKeys& keys, std::span<const SampleRequest> requests,
                       std::size_t out_stride, bool simd = true);
 
 /// Whether draw_sample_dims(…, simd = true) runs the AVX2 code on this CPU.

@@ -128,8 +128,10 @@ constexpr std::uint32_t owen_scramble(std::uint32_t x, std::uint32_t seed) {
          t[3][index >> 24];
 }
 
-/// reverse_bits(sobol_u32(index, d)), from the reversed tables.
+/// reverse_bits(sobol_u32(index, d)), from the reversed tables; dimension 0 (van der Corput,
+/// the index reversed) is the index itself.
 [[nodiscard]] constexpr std::uint32_t sobol_reversed_u32(std::uint32_t index, std::uint32_t d) {
+  if (d == 0) return index;
   const auto& t = sobol_detail::kReversedByteTables[d];
   return t[0][index & 0xFFu] ^ t[1][(index >> 8) & 0xFFu] ^ t[2][(index >> 16) & 0xFFu] ^
          t[3][index >> 24];

@@ -49,6 +49,7 @@ SPECULA_AVX2 inline __m256i lookup(const std::array<std::uint32_t, 256>& table, 
 }
 
 SPECULA_AVX2 inline __m256i sobol_reversed8(__m256i index, std::uint32_t d) {
+  if (d == 0) return index; // van der Corput reversed
   const auto& t = sobol_detail::kReversedByteTables[d];
   const __m256i ff = _mm256_set1_epi32(0xFF);
   __m256i r = lookup(t[0], _mm256_and_si256(index, ff));

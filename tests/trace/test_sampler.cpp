@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <bit>
 #include <random>
 #include <set>
@@ -177,19 +178,25 @@ TEST(Sampler, BatchedDimensionsAreTheScalarSamplersBitForBit) {
           k.index = rng() % 2 == 0 ? rng() % 64u : std::uint32_t(rng());
         }
         const std::uint32_t set = rng() % 30u;
-        constexpr std::size_t kStride = 5; // out: 4 dimensions and an untouched word
+        constexpr std::size_t kStride = 9; // two requests of 4 dimensions, and an untouched word
         std::vector<float> out(count * kStride, -1.0f);
-        detail::draw_sample_dims(detail::SampleKeys{&keys[0].seed, &keys[0].index, 3, count}, set,
-                                 dims, out.data(), kStride, simd);
+        const std::array<detail::SampleRequest, 2> requests{
+            detail::SampleRequest{set, dims, out.data()},
+            detail::SampleRequest{set + 1, 0b1111u & ~dims, out.data() + 4}};
+        detail::draw_sample_dims(detail::SampleKeys{&keys[0].seed, &keys[0].index, 3, count},
+                                 requests, kStride, simd);
         for (std::size_t i = 0; i < count; ++i) {
-          const SampleSet s = PixelSampler::from_stream_seed(keys[i].seed).set(keys[i].index, set);
-          for (std::uint32_t d = 0; d < 4; ++d) {
-            const float expected = (dims >> d & 1u) != 0 ? s.dim(d) : -1.0f;
+          const PixelSampler sampler = PixelSampler::from_stream_seed(keys[i].seed);
+          for (std::uint32_t d = 0; d < 8; ++d) {
+            const std::uint32_t mask = d < 4 ? dims : 0b1111u & ~dims;
+            const float expected = (mask >> d % 4 & 1u) != 0
+                                       ? sampler.set(keys[i].index, set + d / 4).dim(d % 4)
+                                       : -1.0f;
             ASSERT_EQ(std::bit_cast<std::uint32_t>(out[i * kStride + d]),
                       std::bit_cast<std::uint32_t>(expected))
                 << "sample " << i << " of " << count << ", dimension " << d << ", simd " << simd;
           }
-          ASSERT_EQ(out[i * kStride + 4], -1.0f) << "a word outside the dimensions was written";
+          ASSERT_EQ(out[i * kStride + 8], -1.0f) << "a word outside the dimensions was written";
         }
       }
 }
