@@ -263,7 +263,7 @@ private:
     std::uint32_t instance, primitive;
   };
 
-  [[nodiscard]] Vertex vertex(const Hit& hit, const vec3& d) const {
+  [[nodiscard, gnu::flatten]] Vertex vertex(const Hit& hit, const vec3& d) const {
     return Vertex{shading_point(tables_, hit, d, true), &material(hit), hit.instance,
                   hit.primitive};
   }
@@ -273,9 +273,9 @@ private:
   /// limit, the sampled continuation. `first_of`: the leaving record whose first hit this is
   /// (its emission is noted apart); `emission` false when the caller has counted it.
   /// `u`: the path's samples at this vertex (draw_samples).
-  void shade_vertex(const Path& p, const VertexSamples& u, const Vertex& v, const vec3& d,
-                    std::uint32_t depth, std::uint32_t first_of = kNoInstance,
-                    bool emission = true) {
+  [[gnu::flatten]] void shade_vertex(const Path& p, const VertexSamples& u, const Vertex& v,
+                                     const vec3& d, std::uint32_t depth,
+                                     std::uint32_t first_of = kNoInstance, bool emission = true) {
     const gpu::GpuMaterial& m = *v.m;
     const ShadingPoint& sp = v.sp;
     if constexpr (kArea) {
