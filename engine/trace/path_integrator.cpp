@@ -16,6 +16,7 @@
 #include "specula/trace/sample_batch.h"
 #include "specula/trace/sampler.h"
 #include "specula/trace/shading.h"
+#include "specula/trace/shading_batch.h"
 
 #include <algorithm>
 #include <array>
@@ -118,8 +119,16 @@ private:
       }
     }
     draw_samples(w_.hit_paths, 0);
+    w_.primary_hits.resize(n);
+    w_.primary_directions.resize(n);
+    for (std::uint32_t i = 0; i < n; ++i) {
+      w_.primary_hits[i] = primary_.hit(i);
+      w_.primary_directions[i] = primary_.direction(i);
+    }
+    shading_points(w_.primary_hits, reinterpret_cast<const float*>(w_.primary_directions.data()),
+                   3);
     for (std::uint32_t i = 0; i < n; ++i)
-      shade_pixel(primary_.hit(i), primary_.direction(i), i * count, count);
+      shade_pixel(w_.primary_hits[i], w_.primary_directions[i], w_.points[i], i * count, count);
     trace_shadows();
     for (std::uint32_t depth = 1; !w_.paths.empty(); ++depth) {
       w_.wave_paths.swap(w_.paths);
@@ -140,13 +149,20 @@ private:
         look_up_leaving(depth);
       }
       draw_samples(w_.wave_paths, depth);
+      static_assert(sizeof(Ray) % sizeof(float) == 0 &&
+                    offsetof(Ray, direction) % sizeof(float) == 0);
+      shading_points(w_.hits,
+                     reinterpret_cast<const float*>(w_.wave_rays.data()) +
+                         offsetof(Ray, direction) / sizeof(float),
+                     sizeof(Ray) / sizeof(float));
       for (std::size_t k = 0; k < w_.wave_paths.size(); ++k) {
         const std::uint32_t e = hook_ != nullptr ? w_.exit_of[k] : kNoInstance;
+        const Hit& hit = w_.hits[k];
+        const vec3& d = w_.wave_rays[k].direction;
         if (e == kNoInstance)
-          shade(w_.wave_paths[k], w_.samples[k], w_.hits[k], w_.wave_rays[k].direction, depth);
+          shade(w_.wave_paths[k], w_.samples[k], hit, d, w_.points[k], depth);
         else
-          shade_leaving(w_.wave_paths[k], w_.samples[k], w_.hits[k], w_.wave_rays[k].direction,
-                        depth);
+          shade_leaving(w_.wave_paths[k], w_.samples[k], hit, d, w_.points[k], depth);
       }
       trace_shadows();
     }
@@ -200,8 +216,17 @@ private:
     draw_sample_dims(keys, std::span(requests.data(), count), kStride);
   }
 
-  /// The primary hit of one pixel for its `count` paths w_.hit_paths[first …].
-  void shade_pixel(const Hit& hit, const vec3& d, std::uint32_t first, std::uint32_t count) {
+  /// The shading points of a wave's hits (misses skipped), into w_.points: direction k is at
+  /// directions[k · stride].
+  void shading_points(std::span<const Hit> hits, const float* directions, std::size_t stride) {
+    w_.points.resize(hits.size());
+    if (!hits.empty()) detail::shading_points(tables_, hits, directions, stride, w_.points);
+  }
+
+  /// The primary hit of one pixel (its shading point `sp`) for its `count` paths
+  /// w_.hit_paths[first …].
+  void shade_pixel(const Hit& hit, const vec3& d, const ShadingPoint& sp, std::uint32_t first,
+                   std::uint32_t count) {
     if (!hit.hit()) {
       for (std::uint32_t s = first; s < first + count; ++s) {
         const Path& p = w_.hit_paths[s];
@@ -209,18 +234,18 @@ private:
       }
       return;
     }
-    const Vertex v = vertex(hit, d);
+    const Vertex v = vertex(hit, sp);
     for (std::uint32_t s = first; s < first + count; ++s)
       shade_vertex(w_.hit_paths[s], w_.samples[s], v, d, 0);
   }
 
   void shade(const Path& p, const VertexSamples& u, const Hit& hit, const vec3& d,
-             std::uint32_t depth) {
+             const ShadingPoint& sp, std::uint32_t depth) {
     if (!hit.hit()) {
       contribute(p.slot, p.leaving, p.throughput * settings_.background);
       return;
     }
-    shade_vertex(p, u, vertex(hit, d), d, depth);
+    shade_vertex(p, u, vertex(hit, sp), d, depth);
   }
 
   /// The first hit of a ray that left a cached object (its record is p.leaving), as the hook
@@ -228,7 +253,7 @@ private:
   /// served (the sample takes emission + the cached radiance, the path ends); or refreshed (the
   /// sample takes the same, and the path goes on for the record alone).
   void shade_leaving(Path& p, const VertexSamples& u, const Hit& hit, const vec3& d,
-                     std::uint32_t depth) {
+                     const ShadingPoint& sp, std::uint32_t depth) {
     PathLeaving& rec = w_.records[p.leaving];
     const CacheAnswer answer = rec.ray.answer;
     if (!hit.hit() || answer == CacheAnswer::Trace) {
@@ -236,10 +261,10 @@ private:
         contribute(p.slot, p.leaving, p.throughput * settings_.background);
         return;
       }
-      shade_vertex(p, u, vertex(hit, d), d, depth, p.leaving);
+      shade_vertex(p, u, vertex(hit, sp), d, depth, p.leaving);
       return;
     }
-    const Vertex v = vertex(hit, d);
+    const Vertex v = vertex(hit, sp);
     // The leaving ray is specular (no light-sampling strategy reaches its hit): its emission
     // counts fully.
     vec3 emitted(0.0f);
@@ -256,16 +281,15 @@ private:
     shade_vertex(p, u, v, d, depth, kNoInstance, false);
   }
 
-  /// What a hit's shading needs, computed once per hit.
+  /// What a hit's shading needs: its shading point (computed for the whole wave) and material.
   struct Vertex {
-    ShadingPoint sp;
+    const ShadingPoint& sp; ///< computed for the whole wave (shading_points)
     const gpu::GpuMaterial* m;
     std::uint32_t instance, primitive;
   };
 
-  [[nodiscard, gnu::flatten]] Vertex vertex(const Hit& hit, const vec3& d) const {
-    return Vertex{shading_point(tables_, hit, d, true), &material(hit), hit.instance,
-                  hit.primitive};
+  [[nodiscard]] Vertex vertex(const Hit& hit, const ShadingPoint& sp) const {
+    return Vertex{sp, &material(hit), hit.instance, hit.primitive};
   }
 
   /// Emission (weighted against light sampling where the ray was BSDF-sampled at a diffuse

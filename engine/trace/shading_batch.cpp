@@ -1,0 +1,271 @@
+// Shading points of many hits at once (shading_batch.h): shading_point's operations for a baked
+// instance, in their order, eight hits at a time with AVX2; the hits the vector code does not
+// take, one at a time.
+
+#include "specula/trace/shading_batch.h"
+
+#include "specula/core/assert.h"
+#include "specula/trace/sampler_avx2.h"
+
+#include <bit>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <type_traits>
+
+namespace specula::detail {
+namespace {
+
+static_assert(std::is_standard_layout_v<Hit> && sizeof(Hit) == 8 * sizeof(float) &&
+                  std::is_standard_layout_v<gpu::GpuInstance> &&
+                  std::is_standard_layout_v<gpu::GpuMesh> &&
+                  sizeof(gpu::GpuInstance) % sizeof(float) == 0 &&
+                  sizeof(gpu::GpuMesh) % sizeof(float) == 0 && sizeof(uvec3) == 12 &&
+                  sizeof(vec3) == 12,
+              "the vector code gathers these structures' fields as 32-bit words");
+
+constexpr int word(std::size_t bytes) { return int(bytes / sizeof(float)); }
+
+struct V3 {
+  __m256 x, y, z;
+};
+
+SPECULA_AVX2 inline __m256 add(__m256 a, __m256 b) { return _mm256_add_ps(a, b); }
+SPECULA_AVX2 inline __m256 sub(__m256 a, __m256 b) { return _mm256_sub_ps(a, b); }
+SPECULA_AVX2 inline __m256 mul(__m256 a, __m256 b) { return _mm256_mul_ps(a, b); }
+SPECULA_AVX2 inline __m256 neg(__m256 a) { return _mm256_xor_ps(a, _mm256_set1_ps(-0.0f)); }
+SPECULA_AVX2 inline V3 scale(__m256 s, const V3& v) {
+  return {mul(s, v.x), mul(s, v.y), mul(s, v.z)};
+}
+SPECULA_AVX2 inline V3 add(const V3& a, const V3& b) {
+  return {add(a.x, b.x), add(a.y, b.y), add(a.z, b.z)};
+}
+SPECULA_AVX2 inline V3 sub(const V3& a, const V3& b) {
+  return {sub(a.x, b.x), sub(a.y, b.y), sub(a.z, b.z)};
+}
+/// glm::dot: the products, then (x + y) + z.
+SPECULA_AVX2 inline __m256 dot(const V3& a, const V3& b) {
+  return add(add(mul(a.x, b.x), mul(a.y, b.y)), mul(a.z, b.z));
+}
+/// glm::cross.
+SPECULA_AVX2 inline V3 cross(const V3& a, const V3& b) {
+  return {sub(mul(a.y, b.z), mul(b.y, a.z)), sub(mul(a.z, b.x), mul(b.z, a.x)),
+          sub(mul(a.x, b.y), mul(b.x, a.y))};
+}
+/// glm::abs (x >= 0 ? x : -x, so −0 stays −0).
+SPECULA_AVX2 inline __m256 abs(__m256 x) {
+  return _mm256_blendv_ps(neg(x), x, _mm256_cmp_ps(x, _mm256_setzero_ps(), _CMP_GE_OQ));
+}
+SPECULA_AVX2 inline V3 abs(const V3& v) { return {abs(v.x), abs(v.y), abs(v.z)}; }
+/// glm::max and std::max: (x < y) ? y : x.
+SPECULA_AVX2 inline __m256 max(__m256 x, __m256 y) { return _mm256_max_ps(y, x); }
+SPECULA_AVX2 inline V3 max(const V3& a, const V3& b) {
+  return {max(a.x, b.x), max(a.y, b.y), max(a.z, b.z)};
+}
+/// w·a + u·b + v·c, as glm evaluates it: (w·a + u·b) + v·c.
+SPECULA_AVX2 inline V3 interpolate(__m256 w, __m256 u, __m256 v, const V3& a, const V3& b,
+                                   const V3& c) {
+  return add(add(scale(w, a), scale(u, b)), scale(v, c));
+}
+
+SPECULA_AVX2 inline __m256i gather_i(const void* base, __m256i index, __m256i mask) {
+  return _mm256_mask_i32gather_epi32(_mm256_setzero_si256(), static_cast<const int*>(base), index,
+                                     mask, 4);
+}
+SPECULA_AVX2 inline __m256 gather_f(const float* base, __m256i index, __m256i mask) {
+  return _mm256_mask_i32gather_ps(_mm256_setzero_ps(), base, index, _mm256_castsi256_ps(mask), 4);
+}
+/// The three coordinates of vector `index` (in vec3 units) of a vec3 array.
+SPECULA_AVX2 inline V3 gather3(const vec3* base, __m256i index, __m256i mask) {
+  const float* f = &base->x;
+  const __m256i i3 = _mm256_mullo_epi32(index, _mm256_set1_epi32(3));
+  return {gather_f(f, i3, mask), gather_f(f + 1, i3, mask), gather_f(f + 2, i3, mask)};
+}
+
+/// Hits i0 … i0 + 7; returns the mask of the lanes it wrote (the rest are the caller's).
+SPECULA_AVX2 unsigned eight_points(const SceneTables& tables, const Hit* hits, const float* dirs,
+                                   std::size_t stride, ShadingPoint* out) {
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256i all = _mm256_set1_epi32(-1);
+  const __m256i hit_words = _mm256_slli_epi32(lane, 3); // 8 words a Hit
+  const auto* h = reinterpret_cast<const std::uint32_t*>(hits);
+  const __m256i instance = gather_i(h + word(offsetof(Hit, instance)), hit_words, all);
+  const __m256i active =
+      _mm256_andnot_si256(_mm256_cmpeq_epi32(instance, _mm256_set1_epi32(int(kNoInstance))), all);
+  if (_mm256_testz_si256(active, active) != 0) return 0;
+  const __m256i primitive = gather_i(h + word(offsetof(Hit, primitive)), hit_words, active);
+  const auto* hf = reinterpret_cast<const float*>(hits);
+  const __m256 u = gather_f(hf + word(offsetof(Hit, uv)), hit_words, active);
+  const __m256 v = gather_f(hf + word(offsetof(Hit, uv)) + 1, hit_words, active);
+  const V3 object_normal{gather_f(hf + word(offsetof(Hit, object_normal)), hit_words, active),
+                         gather_f(hf + word(offsetof(Hit, object_normal)) + 1, hit_words, active),
+                         gather_f(hf + word(offsetof(Hit, object_normal)) + 2, hit_words, active)};
+  const __m256i dir_words = _mm256_mullo_epi32(lane, _mm256_set1_epi32(int(stride)));
+  const V3 direction{gather_f(dirs, dir_words, active), gather_f(dirs + 1, dir_words, active),
+                     gather_f(dirs + 2, dir_words, active)};
+
+  // The instance's flags and mesh, the mesh's ranges.
+  const __m256i inst_words =
+      _mm256_mullo_epi32(instance, _mm256_set1_epi32(word(sizeof(gpu::GpuInstance))));
+  const auto* inst = reinterpret_cast<const std::uint32_t*>(tables.instances.data());
+  const __m256i flags =
+      gather_i(inst + word(offsetof(gpu::GpuInstance, flags)), inst_words, active);
+  const __m256i identity =
+      _mm256_cmpeq_epi32(_mm256_and_si256(flags, _mm256_set1_epi32(int(gpu::kInstanceIdentity))),
+                         _mm256_set1_epi32(int(gpu::kInstanceIdentity)));
+  const __m256i mesh = gather_i(inst + word(offsetof(gpu::GpuInstance, mesh)), inst_words, active);
+  const __m256i mesh_words =
+      _mm256_mullo_epi32(mesh, _mm256_set1_epi32(word(sizeof(gpu::GpuMesh))));
+  const auto* meshes = reinterpret_cast<const std::uint32_t*>(tables.meshes.data());
+  const __m256i first_vertex =
+      gather_i(meshes + word(offsetof(gpu::GpuMesh, first_vertex)), mesh_words, active);
+  const __m256i first_triangle =
+      gather_i(meshes + word(offsetof(gpu::GpuMesh, first_triangle)), mesh_words, active);
+  const __m256i first_normal =
+      gather_i(meshes + word(offsetof(gpu::GpuMesh, first_normal)), mesh_words, active);
+  const __m256i tri3 =
+      _mm256_mullo_epi32(_mm256_add_epi32(first_triangle, primitive), _mm256_set1_epi32(3));
+  const auto* tris = reinterpret_cast<const std::uint32_t*>(tables.triangles.data());
+  const __m256i t0 = gather_i(tris, tri3, active);
+  const __m256i t1 = gather_i(tris + 1, tri3, active);
+  const __m256i t2 = gather_i(tris + 2, tri3, active);
+  const V3 p0 = gather3(tables.positions.data(), _mm256_add_epi32(first_vertex, t0), active);
+  const V3 p1 = gather3(tables.positions.data(), _mm256_add_epi32(first_vertex, t1), active);
+  const V3 p2 = gather3(tables.positions.data(), _mm256_add_epi32(first_vertex, t2), active);
+
+  // shading_point: the hit from its barycentrics (a baked instance's object space is the world).
+  const __m256 one = _mm256_set1_ps(1.0f);
+  const __m256 zero = _mm256_setzero_ps();
+  const __m256 w = sub(sub(one, u), v);
+  const V3 position = interpolate(w, u, v, p0, p1, p2);
+  // spawn_point: the hit's error bound (error_at of barycentric_error) ...
+  const V3 largest = max(abs(p0), max(abs(p1), abs(p2)));
+  const __m256 magnitude = max(largest.x, max(largest.y, largest.z));
+  const __m256 g7 = _mm256_set1_ps(gamma_bound(7));
+  const __m256 g8m = mul(_mm256_set1_ps(gamma_bound(8)), magnitude);
+  const V3 sum = add(add(abs(scale(w, p0)), abs(scale(u, p1))), abs(scale(v, p2)));
+  const V3 bary{add(mul(g7, sum.x), g8m), add(mul(g7, sum.y), g8m), add(mul(g7, sum.z), g8m)};
+  const __m256 g31 = _mm256_set1_ps(gamma_bound(3) + 1.0f);
+  const __m256 g3 = _mm256_set1_ps(gamma_bound(3));
+  const V3 abs_position = abs(position);
+  const V3 error{add(mul(g31, bary.x), mul(g3, abs_position.x)),
+                 add(mul(g31, bary.y), mul(g3, abs_position.y)),
+                 add(mul(g31, bary.z), mul(g3, abs_position.z))};
+  // ... and inset_barycentrics' fast test: barycentrics inside the triangle as they are, and
+  // every one far enough from its edge.
+  const __m256 margin = mul(_mm256_set1_ps(kEdgeInset), _mm256_sqrt_ps(dot(error, error)));
+  const V3 e0 = sub(p2, p1), e1 = sub(p0, p2), e2 = sub(p1, p0);
+  const V3 c = cross(e2, sub(p2, p0));
+  const __m256 c2 = dot(c, c);
+  const __m256 m2 = mul(margin, margin);
+  __m256 ok = _mm256_and_ps(_mm256_cmp_ps(u, zero, _CMP_GE_OQ), _mm256_cmp_ps(u, one, _CMP_LE_OQ));
+  ok = _mm256_and_ps(
+      ok, _mm256_and_ps(_mm256_cmp_ps(v, zero, _CMP_GE_OQ), _mm256_cmp_ps(v, one, _CMP_LE_OQ)));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(add(u, v), one, _CMP_LE_OQ));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(w, zero, _CMP_GE_OQ)); // max(0, w) is w
+  ok = _mm256_and_ps(ok, _mm256_and_ps(_mm256_cmp_ps(c2, _mm256_set1_ps(1e-30f), _CMP_GT_OQ),
+                                       _mm256_cmp_ps(c2, _mm256_set1_ps(1e30f), _CMP_LT_OQ)));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(mul(mul(w, w), c2), mul(m2, dot(e0, e0)), _CMP_GE_OQ));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(mul(mul(u, u), c2), mul(m2, dot(e1, e1)), _CMP_GE_OQ));
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(mul(mul(v, v), c2), mul(m2, dot(e2, e2)), _CMP_GE_OQ));
+  ok = _mm256_and_ps(ok, _mm256_castsi256_ps(_mm256_and_si256(active, identity)));
+  const unsigned taken = unsigned(_mm256_movemask_ps(ok));
+  if (taken == 0) return 0;
+
+  // The normals: the geometric one facing the ray, the interpolated one on its side.
+  const V3 normal =
+      scale(_mm256_div_ps(one, _mm256_sqrt_ps(dot(object_normal, object_normal))), object_normal);
+  const __m256 front = _mm256_cmp_ps(dot(normal, direction), zero, _CMP_LT_OQ);
+  const V3 geometric{_mm256_blendv_ps(neg(normal.x), normal.x, front),
+                     _mm256_blendv_ps(neg(normal.y), normal.y, front),
+                     _mm256_blendv_ps(neg(normal.z), normal.z, front)};
+  V3 shading = geometric;
+  const __m256i smooth = _mm256_and_si256(
+      _mm256_and_si256(
+          _mm256_castps_si256(ok),
+          _mm256_cmpeq_epi32(_mm256_and_si256(flags, _mm256_set1_epi32(int(gpu::kInstanceSmooth))),
+                             _mm256_set1_epi32(int(gpu::kInstanceSmooth)))),
+      _mm256_andnot_si256(_mm256_cmpeq_epi32(first_normal, _mm256_set1_epi32(int(gpu::kNoIndex))),
+                          all));
+  if (_mm256_testz_si256(smooth, smooth) == 0) {
+    const V3 n0 = gather3(tables.normals.data(), _mm256_add_epi32(first_normal, t0), smooth);
+    const V3 n1 = gather3(tables.normals.data(), _mm256_add_epi32(first_normal, t1), smooth);
+    const V3 n2 = gather3(tables.normals.data(), _mm256_add_epi32(first_normal, t2), smooth);
+    const V3 ns = interpolate(w, u, v, n0, n1, n2);
+    const __m256 len = _mm256_sqrt_ps(dot(ns, ns));
+    const __m256 usable = _mm256_and_ps(
+        _mm256_and_ps(_mm256_castsi256_ps(smooth), _mm256_cmp_ps(len, zero, _CMP_GT_OQ)),
+        _mm256_cmp_ps(len, _mm256_set1_ps(std::numeric_limits<float>::infinity()), _CMP_LT_OQ));
+    const V3 unit{_mm256_div_ps(ns.x, len), _mm256_div_ps(ns.y, len), _mm256_div_ps(ns.z, len)};
+    const __m256 flip = _mm256_cmp_ps(dot(unit, geometric), zero, _CMP_LT_OQ);
+    const V3 facing{_mm256_blendv_ps(unit.x, neg(unit.x), flip),
+                    _mm256_blendv_ps(unit.y, neg(unit.y), flip),
+                    _mm256_blendv_ps(unit.z, neg(unit.z), flip)};
+    shading = {_mm256_blendv_ps(shading.x, facing.x, usable),
+               _mm256_blendv_ps(shading.y, facing.y, usable),
+               _mm256_blendv_ps(shading.z, facing.z, usable)};
+  }
+
+  alignas(32) float f[12][8];
+  const __m256 columns[12] = {position.x,  position.y, position.z,  error.x,
+                              error.y,     error.z,    geometric.x, geometric.y,
+                              geometric.z, shading.x,  shading.y,   shading.z};
+  for (int k = 0; k < 12; ++k) _mm256_store_ps(f[k], columns[k]);
+  const unsigned front_bits = unsigned(_mm256_movemask_ps(front));
+  for (unsigned l = 0; l < 8; ++l) {
+    if ((taken >> l & 1u) == 0) continue;
+    ShadingPoint& sp = out[l];
+    sp.position = vec3(f[0][l], f[1][l], f[2][l]);
+    sp.spawn_point = sp.position; // no inset needed
+    sp.spawn_error = vec3(f[3][l], f[4][l], f[5][l]);
+    sp.geometric_normal = vec3(f[6][l], f[7][l], f[8][l]);
+    sp.shading_normal = vec3(f[9][l], f[10][l], f[11][l]);
+    sp.front_face = (front_bits >> l & 1u) != 0;
+  }
+  return taken;
+}
+
+} // namespace
+
+bool shading_points_vectorised() {
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+}
+
+std::size_t shading_points(const SceneTables& tables, std::span<const Hit> hits,
+                           const float* directions, std::size_t stride, std::span<ShadingPoint> out,
+                           bool simd) {
+  SPECULA_ASSERT(out.size() >= hits.size());
+  // The gathers index words with 32-bit offsets.
+  constexpr std::size_t kMostWords = std::size_t(std::numeric_limits<std::int32_t>::max());
+  const bool vector = simd && shading_points_vectorised() && stride <= kMostWords / 8 &&
+                      tables.positions.size() <= kMostWords / 3 &&
+                      tables.normals.size() <= kMostWords / 3 &&
+                      tables.triangles.size() <= kMostWords / 3 &&
+                      tables.instances.size() <= kMostWords / sizeof(gpu::GpuInstance) &&
+                      tables.meshes.size() <= kMostWords / sizeof(gpu::GpuMesh);
+  std::size_t i = 0, vectorised = 0;
+  if (vector) {
+    for (; i + 8 <= hits.size(); i += 8) {
+      const unsigned taken =
+          eight_points(tables, hits.data() + i, directions + i * stride, stride, out.data() + i);
+      vectorised += std::size_t(std::popcount(taken));
+      for (std::size_t l = 0; l < 8; ++l) {
+        const Hit& hit = hits[i + l];
+        if ((taken >> l & 1u) == 0 && hit.hit())
+          out[i + l] =
+              shading_point(tables, hit,
+                            vec3(directions[(i + l) * stride], directions[(i + l) * stride + 1],
+                                 directions[(i + l) * stride + 2]));
+      }
+    }
+  }
+  for (; i < hits.size(); ++i)
+    if (hits[i].hit())
+      out[i] = shading_point(
+          tables, hits[i],
+          vec3(directions[i * stride], directions[i * stride + 1], directions[i * stride + 2]));
+  return vectorised;
+}
+
+} // namespace specula::detail
