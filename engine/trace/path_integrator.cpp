@@ -129,7 +129,7 @@ private:
                    3);
     for (std::uint32_t i = 0; i < n; ++i)
       shade_pixel(w_.primary_hits[i], w_.primary_directions[i], w_.points[i], i * count, count);
-    trace_shadows();
+    trace_shadows(true);
     for (std::uint32_t depth = 1; !w_.paths.empty(); ++depth) {
       w_.wave_paths.swap(w_.paths);
       w_.wave_rays.swap(w_.rays);
@@ -164,7 +164,7 @@ private:
         else
           shade_leaving(w_.wave_paths[k], w_.samples[k], hit, d, w_.points[k], depth);
       }
-      trace_shadows();
+      trace_shadows(false);
     }
     if (hook_ != nullptr) deliver_leaving();
     for (std::uint32_t i = 0; i < n; ++i)
@@ -541,13 +541,18 @@ private:
   }
 
   /// The wave's shadow rays in one batch; each unblocked one adds its value to its sample, in
-  /// the order they were emitted.
-  void trace_shadows() {
+  /// the order they were emitted. `coherent`: wave 0's, from the tile's primary hits towards the
+  /// same lights, which a backend may trace in packets (Tracer::occluded_coherent: the same
+  /// answers as occluded()).
+  void trace_shadows(bool coherent) {
     if (w_.shadow_rays.empty()) return;
     w_.blocked.resize(w_.shadow_rays.size());
     if (settings_.shadows) {
       counts_[RayKind::Shadow] += w_.shadow_rays.size();
-      frame_.tracer.occluded(w_.shadow_rays, w_.blocked);
+      if (coherent)
+        frame_.tracer.occluded_coherent(w_.shadow_rays, w_.blocked);
+      else
+        frame_.tracer.occluded(w_.shadow_rays, w_.blocked);
     } else {
       std::fill(w_.blocked.begin(), w_.blocked.end(), std::uint8_t{0});
     }
