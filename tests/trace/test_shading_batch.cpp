@@ -117,36 +117,44 @@ TEST(ShadingBatch, EveryHitGetsShadingPointsBitsWithAndWithoutSimd) {
   }
   ASSERT_TRUE(baked && transformed);
   ASSERT_GT(hits.size(), 600u);
-  const auto* dirs = reinterpret_cast<const float*>(directions.data());
-  for (const bool simd : {false, true}) {
-    ShadingPoint marker;
-    marker.position = vec3(-7.0f);
-    std::vector<ShadingPoint> out(hits.size(), marker);
-    const std::size_t vectorised = detail::shading_points(tables, hits, dirs, 3, out, simd);
-    if (!simd) {
-      EXPECT_EQ(vectorised, 0u);
-    }
-    // Most hits are interior ones on baked instances: the vector code must have taken many, or
-    // this compared the scalar code with itself.
-    if (simd && detail::shading_points_vectorised()) {
-      EXPECT_GT(vectorised, hits.size() / 8);
-    }
-    for (std::size_t i = 0; i < hits.size(); ++i) {
-      if (!hits[i].hit()) {
-        EXPECT_EQ(out[i].position, marker.position) << "a miss's entry was written";
-        continue;
+  // The directions as a vec3 array (stride 3) and as the rays' (stride 8, as a wave's rays).
+  std::vector<Ray> rays(directions.size());
+  for (std::size_t i = 0; i < rays.size(); ++i) rays[i].direction = directions[i];
+  for (const bool simd : {false, true})
+    for (const std::size_t stride : {std::size_t(3), sizeof(Ray) / sizeof(float)}) {
+      const float* dirs =
+          stride == 3 ? reinterpret_cast<const float*>(directions.data()) : &rays[0].direction.x;
+      ShadingPoint marker;
+      marker.position = vec3(-7.0f);
+      std::vector<ShadingPoint> out(hits.size(), marker);
+      const std::size_t vectorised = detail::shading_points(tables, hits, dirs, stride, out, simd);
+      if (!simd) {
+        EXPECT_EQ(vectorised, 0u);
       }
-      const ShadingPoint want = shading_point(tables, hits[i], directions[i]);
-      const ShadingPoint& got = out[i];
-      expect_same_bits(got.position, want.position, "position", i);
-      expect_same_bits(got.spawn_point, want.spawn_point, "spawn_point", i);
-      expect_same_bits(got.spawn_error, want.spawn_error, "spawn_error", i);
-      expect_same_bits(got.geometric_normal, want.geometric_normal, "geometric_normal", i);
-      expect_same_bits(got.shading_normal, want.shading_normal, "shading_normal", i);
-      EXPECT_EQ(got.front_face, want.front_face) << "hit " << i;
-      if (::testing::Test::HasFailure()) return;
+      // Most hits are interior ones on baked instances: the vector code must have taken many, or
+      // this compared the scalar code with itself.
+      if (simd && detail::shading_points_vectorised()) {
+        EXPECT_GT(vectorised, hits.size() / 8);
+      }
+      for (std::size_t i = 0; i < hits.size(); ++i) {
+        if (!hits[i].hit()) {
+          EXPECT_EQ(out[i].position, marker.position) << "a miss's entry was written";
+          continue;
+        }
+        const ShadingPoint want = shading_point(tables, hits[i], directions[i]);
+        const ShadingPoint& got = out[i];
+        expect_same_bits(got.position, want.position, "position", i);
+        expect_same_bits(got.spawn_point, want.spawn_point, "spawn_point", i);
+        expect_same_bits(got.spawn_error, want.spawn_error, "spawn_error", i);
+        expect_same_bits(got.geometric_normal, want.geometric_normal, "geometric_normal", i);
+        expect_same_bits(got.shading_normal, want.shading_normal, "shading_normal", i);
+        EXPECT_EQ(got.front_face, want.front_face) << "hit " << i;
+        if (::testing::Test::HasFailure()) {
+          ADD_FAILURE() << "with simd " << simd << ", stride " << stride;
+          return;
+        }
+      }
     }
-  }
 }
 
 TEST(ShadingBatch, HitsTheVectorCodeCannotTakeAreLeftToTheScalarCode) {
