@@ -158,6 +158,7 @@ struct TileScratch {
   std::vector<std::uint32_t> wave, next_wave;
   std::vector<Ray> rays;
   std::vector<Hit> hits;
+  std::vector<ShadingPoint> points; ///< per hit of the wave being shaded (shading_batch.h)
   std::vector<Ray> shadow_rays;
   std::vector<std::uint32_t> shadow_node;
   std::vector<vec3> shadow_value;

@@ -6,6 +6,7 @@
 #include "specula/trace/integrators.h"
 #include "specula/trace/lights.h"
 #include "specula/trace/shading.h"
+#include "specula/trace/shading_batch.h"
 
 #include <algorithm>
 #include <limits>
@@ -32,8 +33,16 @@ public:
     });
     counts_[RayKind::Primary] += n;
 
-    // Wave 0: the primary hits, as the backend traced them.
-    for (std::uint32_t k = 0; k < n; ++k) shade(k, primary.hit(k));
+    // Wave 0: the primary hits, as the backend traced them; their directions are the roots'.
+    if (n == 0) return;
+    s_.hits.resize(n);
+    for (std::uint32_t k = 0; k < n; ++k) s_.hits[k] = primary.hit(k);
+    static_assert(sizeof(WhittedNode) % sizeof(float) == 0);
+    shading_points(s_.hits,
+                   reinterpret_cast<const float*>(s_.nodes.data()) +
+                       (offsetof(WhittedNode, ray) + offsetof(Ray, direction)) / sizeof(float),
+                   sizeof(WhittedNode) / sizeof(float));
+    for (std::uint32_t k = 0; k < n; ++k) shade(k, s_.hits[k], s_.points[k]);
     trace_shadows();
     trace_waves();
     fold(n);
@@ -80,7 +89,8 @@ public:
       s_.shadow_rays.clear();
     }
     s_.wave.clear();
-    for (std::uint32_t k = 0; k < n; ++k) shade(k, s_.hits[k]);
+    ray_shading_points();
+    for (std::uint32_t k = 0; k < n; ++k) shade(k, s_.hits[k], s_.points[k]);
     trace_shadows();
     trace_waves();
     fold(n);
@@ -92,6 +102,23 @@ public:
   }
 
 private:
+  /// The shading points of the hits s_.hits of the rays s_.rays, into s_.points (misses skipped).
+  void ray_shading_points() {
+    static_assert(sizeof(Ray) % sizeof(float) == 0 &&
+                  offsetof(Ray, direction) % sizeof(float) == 0);
+    if (s_.rays.empty()) return;
+    shading_points(s_.hits,
+                   reinterpret_cast<const float*>(s_.rays.data()) +
+                       offsetof(Ray, direction) / sizeof(float),
+                   sizeof(Ray) / sizeof(float));
+  }
+
+  /// The shading points of s_.hits, hit k's direction at directions[k · stride], into s_.points.
+  void shading_points(std::span<const Hit> hits, const float* directions, std::size_t stride) {
+    s_.points.resize(hits.size());
+    if (!hits.empty()) detail::shading_points(tables_, hits, directions, stride, s_.points);
+  }
+
   void begin(std::size_t n) {
     s_.nodes.resize(n);
     s_.next_wave.clear();
@@ -145,7 +172,8 @@ private:
         ++counts_[node.kind];
       }
       frame_.tracer.intersect(s_.rays, s_.hits);
-      for (std::size_t k = 0; k < s_.wave.size(); ++k) shade(s_.wave[k], s_.hits[k]);
+      ray_shading_points();
+      for (std::size_t k = 0; k < s_.wave.size(); ++k) shade(s_.wave[k], s_.hits[k], s_.points[k]);
       trace_shadows();
     }
   }
@@ -222,7 +250,8 @@ private:
 
   /// Local shading at a hit: emission, and a shadow ray towards every light that can light the
   /// diffuse part; then, below the depth limit, the reflection and refraction rays it spawns.
-  void shade(std::uint32_t index, const Hit& hit) {
+  /// `sp`: the hit's shading point (computed for the whole wave).
+  void shade(std::uint32_t index, const Hit& hit, const ShadingPoint& sp) {
     constexpr float kInvPi = std::numbers::inv_pi_v<float>;
     // Copies: spawning rays appends to s_.nodes, which may move it.
     const WhittedNode node = s_.nodes[index];
@@ -235,7 +264,6 @@ private:
     s_.nodes[index].seen = entity_bit(s_.nodes[index].hit_entity);
     const gpu::GpuMaterial& m = tables_.materials[tables_.instances[hit.instance].material];
     const vec3 d = node.ray.direction;
-    const ShadingPoint sp = shading_point(tables_, hit, d, true);
     s_.nodes[index].radiance = m.emission;
 
     const float diffuse = diffuse_weight(m);
