@@ -125,8 +125,9 @@ private:
       w_.primary_hits[i] = primary_.hit(i);
       w_.primary_directions[i] = primary_.direction(i);
     }
-    shading_points(w_.primary_hits, reinterpret_cast<const float*>(w_.primary_directions.data()),
-                   3);
+    shading_points(
+        w_.primary_hits,
+        Directions::aos(reinterpret_cast<const float*>(w_.primary_directions.data()), 3));
     for (std::uint32_t i = 0; i < n; ++i)
       shade_pixel(w_.primary_hits[i], w_.primary_directions[i], w_.points[i], i * count, count);
     trace_shadows(true);
@@ -151,10 +152,9 @@ private:
       draw_samples(w_.wave_paths, depth);
       static_assert(sizeof(Ray) % sizeof(float) == 0 &&
                     offsetof(Ray, direction) % sizeof(float) == 0);
-      shading_points(w_.hits,
-                     reinterpret_cast<const float*>(w_.wave_rays.data()) +
-                         offsetof(Ray, direction) / sizeof(float),
-                     sizeof(Ray) / sizeof(float));
+      shading_points(w_.hits, Directions::aos(reinterpret_cast<const float*>(w_.wave_rays.data()) +
+                                                  offsetof(Ray, direction) / sizeof(float),
+                                              sizeof(Ray) / sizeof(float)));
       for (std::size_t k = 0; k < w_.wave_paths.size(); ++k) {
         const std::uint32_t e = hook_ != nullptr ? w_.exit_of[k] : kNoInstance;
         const Hit& hit = w_.hits[k];
@@ -216,11 +216,10 @@ private:
     draw_sample_dims(keys, std::span(requests.data(), count), kStride);
   }
 
-  /// The shading points of a wave's hits (misses skipped), into w_.points: direction k is at
-  /// directions[k · stride].
-  void shading_points(std::span<const Hit> hits, const float* directions, std::size_t stride) {
+  /// The shading points of a wave's hits (misses skipped), into w_.points.
+  void shading_points(std::span<const Hit> hits, const Directions& directions) {
     w_.points.resize(hits.size());
-    if (!hits.empty()) detail::shading_points(tables_, hits, directions, stride, w_.points);
+    if (!hits.empty()) detail::shading_points(tables_, hits, directions, w_.points);
   }
 
   /// The primary hit of one pixel (its shading point `sp`) for its `count` paths

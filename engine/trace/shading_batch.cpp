@@ -83,8 +83,8 @@ SPECULA_AVX2 inline V3 gather3(const vec3* base, __m256i index, __m256i mask) {
 }
 
 /// Hits i0 … i0 + 7; returns the mask of the lanes it wrote (the rest are the caller's).
-SPECULA_AVX2 unsigned eight_points(const SceneTables& tables, const Hit* hits, const float* dirs,
-                                   std::size_t stride, ShadingPoint* out) {
+SPECULA_AVX2 unsigned eight_points(const SceneTables& tables, const Hit* hits,
+                                   const Directions& dirs, ShadingPoint* out) {
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   const __m256i all = _mm256_set1_epi32(-1);
   const __m256i hit_words = _mm256_slli_epi32(lane, 3); // 8 words a Hit
@@ -100,9 +100,9 @@ SPECULA_AVX2 unsigned eight_points(const SceneTables& tables, const Hit* hits, c
   const V3 object_normal{gather_f(hf + word(offsetof(Hit, object_normal)), hit_words, active),
                          gather_f(hf + word(offsetof(Hit, object_normal)) + 1, hit_words, active),
                          gather_f(hf + word(offsetof(Hit, object_normal)) + 2, hit_words, active)};
-  const __m256i dir_words = _mm256_mullo_epi32(lane, _mm256_set1_epi32(int(stride)));
-  const V3 direction{gather_f(dirs, dir_words, active), gather_f(dirs + 1, dir_words, active),
-                     gather_f(dirs + 2, dir_words, active)};
+  const __m256i dir_words = _mm256_mullo_epi32(lane, _mm256_set1_epi32(int(dirs.stride)));
+  const V3 direction{gather_f(dirs.x, dir_words, active), gather_f(dirs.y, dir_words, active),
+                     gather_f(dirs.z, dir_words, active)};
 
   // The instance's flags and mesh, the mesh's ranges.
   const __m256i inst_words =
@@ -233,12 +233,11 @@ bool shading_points_vectorised() {
 }
 
 std::size_t shading_points(const SceneTables& tables, std::span<const Hit> hits,
-                           const float* directions, std::size_t stride, std::span<ShadingPoint> out,
-                           bool simd) {
+                           const Directions& directions, std::span<ShadingPoint> out, bool simd) {
   SPECULA_ASSERT(out.size() >= hits.size());
   // The gathers index words with 32-bit offsets.
   constexpr std::size_t kMostWords = std::size_t(std::numeric_limits<std::int32_t>::max());
-  const bool vector = simd && shading_points_vectorised() && stride <= kMostWords / 8 &&
+  const bool vector = simd && shading_points_vectorised() && directions.stride <= kMostWords / 8 &&
                       tables.positions.size() <= kMostWords / 3 &&
                       tables.normals.size() <= kMostWords / 3 &&
                       tables.triangles.size() <= kMostWords / 3 &&
@@ -247,24 +246,18 @@ std::size_t shading_points(const SceneTables& tables, std::span<const Hit> hits,
   std::size_t i = 0, vectorised = 0;
   if (vector) {
     for (; i + 8 <= hits.size(); i += 8) {
-      const unsigned taken =
-          eight_points(tables, hits.data() + i, directions + i * stride, stride, out.data() + i);
+      const std::size_t offset = i * directions.stride;
+      const Directions eight{directions.x + offset, directions.y + offset, directions.z + offset,
+                             directions.stride};
+      const unsigned taken = eight_points(tables, hits.data() + i, eight, out.data() + i);
       vectorised += std::size_t(std::popcount(taken));
-      for (std::size_t l = 0; l < 8; ++l) {
-        const Hit& hit = hits[i + l];
-        if ((taken >> l & 1u) == 0 && hit.hit())
-          out[i + l] =
-              shading_point(tables, hit,
-                            vec3(directions[(i + l) * stride], directions[(i + l) * stride + 1],
-                                 directions[(i + l) * stride + 2]));
-      }
+      for (std::size_t l = 0; l < 8; ++l)
+        if ((taken >> l & 1u) == 0 && hits[i + l].hit())
+          out[i + l] = shading_point(tables, hits[i + l], directions[i + l]);
     }
   }
   for (; i < hits.size(); ++i)
-    if (hits[i].hit())
-      out[i] = shading_point(
-          tables, hits[i],
-          vec3(directions[i * stride], directions[i * stride + 1], directions[i * stride + 2]));
+    if (hits[i].hit()) out[i] = shading_point(tables, hits[i], directions[i]);
   return vectorised;
 }
 

@@ -15,13 +15,27 @@
 
 namespace specula::detail {
 
-/// out[i] = shading_point(tables, hits[i], direction i, true) for every hit i that hit something
-/// (a miss's entry is left as it was). Direction i is (directions[i · stride], … + 1, … + 2), so
-/// that it can be a field of an array of structures (a Ray's direction: stride 8).
-/// `simd` false: one hit at a time (the tests compare the two). Returns how many hits the vector
-/// code took.
+/// Directions of a wave's rays: direction i is (x[i · stride], y[i · stride], z[i · stride]), so
+/// that they can be a field of an array of structures (aos) or three arrays (PrimaryHits).
+struct Directions {
+  const float* x = nullptr;
+  const float* y = nullptr;
+  const float* z = nullptr;
+  std::size_t stride = 1;
+  /// Direction fields `stride` words apart, the first at `first` (x, y, z consecutive).
+  [[nodiscard]] static Directions aos(const float* first, std::size_t stride) {
+    return {first, first + 1, first + 2, stride};
+  }
+  [[nodiscard]] vec3 operator[](std::size_t i) const {
+    return vec3(x[i * stride], y[i * stride], z[i * stride]);
+  }
+};
+
+/// out[i] = shading_point(tables, hits[i], directions[i], true) for every hit i that hit
+/// something (a miss's entry is left as it was). `simd` false: one hit at a time (the tests
+/// compare the two). Returns how many hits the vector code took.
 std::size_t shading_points(const SceneTables& tables, std::span<const Hit> hits,
-                           const float* directions, std::size_t stride, std::span<ShadingPoint> out,
+                           const Directions& directions, std::span<ShadingPoint> out,
                            bool simd = true);
 
 /// Whether shading_points(…, simd = true) runs the AVX2 code on this CPU.

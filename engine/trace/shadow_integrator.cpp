@@ -8,6 +8,7 @@
 #include "specula/trace/integrators.h"
 #include "specula/trace/sampler.h"
 #include "specula/trace/shading.h"
+#include "specula/trace/shading_batch.h"
 
 #include <algorithm>
 #include <limits>
@@ -75,6 +76,15 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
       if (s.blocked[r] == 0) frame.pixels[s.shadow_node[r]] += s.shadow_value[r];
   };
 
+  // The shading points of the tile's hits at once (shading_batch.h).
+  s.hits.resize(pixels);
+  for (std::size_t k = 0; k < pixels; ++k) s.hits[k] = primary.hit(k);
+  s.points.resize(pixels);
+  if (pixels > 0)
+    shading_points(tables, s.hits,
+                   Directions{primary.dir_x.data(), primary.dir_y.data(), primary.dir_z.data(), 1},
+                   s.points);
+
   // Emission (or background) into the pixels, the punctual lights' shadow rays into their slots,
   // and each lit pixel's surface for its area-light samples.
   s.surfaces.clear();
@@ -82,14 +92,14 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
   tile.for_each_pixel([&](std::uint32_t x, std::uint32_t y) {
     const std::size_t k = i++;
     const std::uint32_t pixel = y * frame.width + x;
-    const Hit hit = primary.hit(k);
+    const Hit& hit = s.hits[k];
     if (!hit.hit()) {
       frame.pixels[pixel] = settings.background;
       if (guides != nullptr) write_guide(*guides, pixel, nullptr);
       return;
     }
     const gpu::GpuMaterial& m = tables.materials[tables.instances[hit.instance].material];
-    const ShadingPoint sp = shading_point(tables, hit, primary.direction(k), true);
+    const ShadingPoint& sp = s.points[k];
     frame.pixels[pixel] = m.emission;
     const float diffuse = diffuse_weight(m);
     if (guides != nullptr) write_guide(*guides, pixel, &m, sp.shading_normal, hit.t);

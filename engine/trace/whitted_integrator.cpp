@@ -38,10 +38,11 @@ public:
     s_.hits.resize(n);
     for (std::uint32_t k = 0; k < n; ++k) s_.hits[k] = primary.hit(k);
     static_assert(sizeof(WhittedNode) % sizeof(float) == 0);
-    shading_points(s_.hits,
-                   reinterpret_cast<const float*>(s_.nodes.data()) +
-                       (offsetof(WhittedNode, ray) + offsetof(Ray, direction)) / sizeof(float),
-                   sizeof(WhittedNode) / sizeof(float));
+    shading_points(
+        s_.hits,
+        Directions::aos(reinterpret_cast<const float*>(s_.nodes.data()) +
+                            (offsetof(WhittedNode, ray) + offsetof(Ray, direction)) / sizeof(float),
+                        sizeof(WhittedNode) / sizeof(float)));
     for (std::uint32_t k = 0; k < n; ++k) shade(k, s_.hits[k], s_.points[k]);
     trace_shadows();
     trace_waves();
@@ -107,16 +108,15 @@ private:
     static_assert(sizeof(Ray) % sizeof(float) == 0 &&
                   offsetof(Ray, direction) % sizeof(float) == 0);
     if (s_.rays.empty()) return;
-    shading_points(s_.hits,
-                   reinterpret_cast<const float*>(s_.rays.data()) +
-                       offsetof(Ray, direction) / sizeof(float),
-                   sizeof(Ray) / sizeof(float));
+    shading_points(s_.hits, Directions::aos(reinterpret_cast<const float*>(s_.rays.data()) +
+                                                offsetof(Ray, direction) / sizeof(float),
+                                            sizeof(Ray) / sizeof(float)));
   }
 
-  /// The shading points of s_.hits, hit k's direction at directions[k · stride], into s_.points.
-  void shading_points(std::span<const Hit> hits, const float* directions, std::size_t stride) {
+  /// The shading points of `hits`, into s_.points (misses skipped).
+  void shading_points(std::span<const Hit> hits, const Directions& directions) {
     s_.points.resize(hits.size());
-    if (!hits.empty()) detail::shading_points(tables_, hits, directions, stride, s_.points);
+    if (!hits.empty()) detail::shading_points(tables_, hits, directions, s_.points);
   }
 
   void begin(std::size_t n) {

@@ -117,17 +117,27 @@ TEST(ShadingBatch, EveryHitGetsShadingPointsBitsWithAndWithoutSimd) {
   }
   ASSERT_TRUE(baked && transformed);
   ASSERT_GT(hits.size(), 600u);
-  // The directions as a vec3 array (stride 3) and as the rays' (stride 8, as a wave's rays).
+  // The directions as a vec3 array, as a wave's rays (eight words apart) and as three arrays
+  // (PrimaryHits).
   std::vector<Ray> rays(directions.size());
-  for (std::size_t i = 0; i < rays.size(); ++i) rays[i].direction = directions[i];
+  std::vector<float> dx, dy, dz;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    rays[i].direction = directions[i];
+    dx.push_back(directions[i].x);
+    dy.push_back(directions[i].y);
+    dz.push_back(directions[i].z);
+  }
+  const detail::Directions layouts[] = {
+      detail::Directions::aos(reinterpret_cast<const float*>(directions.data()), 3),
+      detail::Directions::aos(&rays[0].direction.x, sizeof(Ray) / sizeof(float)),
+      detail::Directions{dx.data(), dy.data(), dz.data(), 1}};
   for (const bool simd : {false, true})
-    for (const std::size_t stride : {std::size_t(3), sizeof(Ray) / sizeof(float)}) {
-      const float* dirs =
-          stride == 3 ? reinterpret_cast<const float*>(directions.data()) : &rays[0].direction.x;
+    for (const detail::Directions& dirs : layouts) {
+      const std::size_t stride = dirs.stride;
       ShadingPoint marker;
       marker.position = vec3(-7.0f);
       std::vector<ShadingPoint> out(hits.size(), marker);
-      const std::size_t vectorised = detail::shading_points(tables, hits, dirs, stride, out, simd);
+      const std::size_t vectorised = detail::shading_points(tables, hits, dirs, out, simd);
       if (!simd) {
         EXPECT_EQ(vectorised, 0u);
       }
@@ -189,8 +199,9 @@ TEST(ShadingBatch, HitsTheVectorCodeCannotTakeAreLeftToTheScalarCode) {
   ASSERT_EQ(hits.size(), 32u);
   const std::vector<vec3> directions(hits.size(), glm::normalize(vec3(0.2f, -1.0f, 0.3f)));
   std::vector<ShadingPoint> out(hits.size());
-  EXPECT_EQ(detail::shading_points(tables, hits, reinterpret_cast<const float*>(directions.data()),
-                                   3, out),
+  EXPECT_EQ(detail::shading_points(
+                tables, hits,
+                detail::Directions::aos(reinterpret_cast<const float*>(directions.data()), 3), out),
             8u);
   for (std::size_t i = 0; i < hits.size(); ++i)
     expect_same_bits(out[i].spawn_point, shading_point(tables, hits[i], directions[i]).spawn_point,
