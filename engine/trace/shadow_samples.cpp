@@ -109,56 +109,98 @@ SPECULA_AVX2 inline __m256i load8(const std::vector<std::uint32_t>& v, std::size
   return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(v.data() + n0));
 }
 
-/// A float field of EmitterTriangle (`offset` bytes into it) of triangles at `element` floats.
-SPECULA_AVX2 inline __m256 field8(const float* base, __m256i element, std::size_t offset) {
-  return _mm256_i32gather_ps(base + offset / sizeof(float), element, 4);
-}
+constexpr int kStride = int(sizeof(EmitterTriangle) / sizeof(float));
+
+/// The emitter table read from memory, any size: a triangle is its offset in floats (index ×
+/// kStride), a field a gather, the pick EmitterTable::pick's branch-free search, a gather a step.
+struct TableInMemory {
+  const float* base;
+  std::size_t count;
+
+  SPECULA_AVX2 __m256 field(__m256i element, std::size_t offset) const {
+    return _mm256_i32gather_ps(base + offset / sizeof(float), element, 4);
+  }
+  /// The picked triangles, and the mask of lanes whose u0 is at or above every cdf.
+  SPECULA_AVX2 __m256i pick(__m256 u0, __m256i& past) const {
+    const __m256i stride = _mm256_set1_epi32(kStride);
+    __m256i first = _mm256_setzero_si256(); // in floats: triangle index × kStride
+    std::size_t n = count;
+    while (n > 1) {
+      const std::size_t half = n / 2;
+      const __m256i ahead = _mm256_add_epi32(first, _mm256_set1_epi32(int(half) * kStride));
+      const __m256 below =
+          _mm256_cmp_ps(u0, field(ahead, offsetof(EmitterTriangle, cdf)), _CMP_LT_OQ);
+      first = _mm256_blendv_epi8(ahead, first, _mm256_castps_si256(below));
+      n -= half;
+    }
+    const __m256 below =
+        _mm256_cmp_ps(u0, field(first, offsetof(EmitterTriangle, cdf)), _CMP_LT_OQ);
+    first = _mm256_blendv_epi8(_mm256_add_epi32(first, stride), first, _mm256_castps_si256(below));
+    past = _mm256_cmpeq_epi32(first, _mm256_set1_epi32(int(count) * kStride));
+    return first;
+  }
+};
+
+/// A table of at most eight triangles held in registers: a triangle is its index, a field a
+/// permute of the eight triangles' values, the pick a count of the cdfs at or below u0 — the
+/// index the search finds, since the cdfs never decrease.
+struct TableInRegisters {
+  static constexpr std::size_t kMost = 8;
+  __m256 fields[kStride];
+  __m256 cdf[kMost]; ///< each triangle's cdf in every lane
+  std::size_t count;
+
+  SPECULA_AVX2 explicit TableInRegisters(const std::vector<EmitterTriangle>& triangles)
+      : count(triangles.size()) {
+    alignas(32) float column[kMost] = {};
+    const auto* words = reinterpret_cast<const float*>(triangles.data());
+    for (int f = 0; f < kStride; ++f) {
+      for (std::size_t t = 0; t < kMost; ++t)
+        column[t] = t < count ? words[t * std::size_t(kStride) + std::size_t(f)] : 0.0f;
+      fields[f] = _mm256_load_ps(column);
+    }
+    for (std::size_t t = 0; t < count; ++t) cdf[t] = _mm256_set1_ps(triangles[t].cdf);
+  }
+  SPECULA_AVX2 __m256 field(__m256i index, std::size_t offset) const {
+    return _mm256_permutevar8x32_ps(fields[offset / sizeof(float)], index);
+  }
+  SPECULA_AVX2 __m256i pick(__m256 u0, __m256i& past) const {
+    __m256i k = _mm256_setzero_si256();
+    for (std::size_t t = 0; t < count; ++t) // − (all ones) where !(u0 < cdf)
+      k = _mm256_sub_epi32(k, _mm256_castps_si256(_mm256_cmp_ps(u0, cdf[t], _CMP_NLT_UQ)));
+    past = _mm256_cmpeq_epi32(k, _mm256_set1_epi32(int(count)));
+    return k;
+  }
+};
 
 /// p0 + b1 · e1 + b2 · e2, one coordinate (the offsets of its p0, e1 and e2).
-SPECULA_AVX2 inline __m256 point8(const float* base, __m256i k, __m256 b1, __m256 b2,
+template <typename Table>
+SPECULA_AVX2 inline __m256 point8(const Table& table, __m256i k, __m256 b1, __m256 b2,
                                   std::size_t p0, std::size_t e1, std::size_t e2) {
-  return _mm256_add_ps(_mm256_add_ps(field8(base, k, p0), _mm256_mul_ps(b1, field8(base, k, e1))),
-                       _mm256_mul_ps(b2, field8(base, k, e2)));
+  return _mm256_add_ps(_mm256_add_ps(table.field(k, p0), _mm256_mul_ps(b1, table.field(k, e1))),
+                       _mm256_mul_ps(b2, table.field(k, e2)));
 }
 
 /// Surfaces n0 … n0 + 7's samples.
-SPECULA_AVX2 void eight_rays(const EmitterTable& table, const ShadowSurfaces& s, std::size_t n0,
-                             std::uint32_t index, float inv_samples, ShadowLightRays& out) {
+template <typename Table>
+SPECULA_AVX2 void eight_rays(const EmitterTable& emitters, const Table& table,
+                             const ShadowSurfaces& s, std::size_t n0, std::uint32_t index,
+                             float inv_samples, ShadowLightRays& out) {
   // PixelSampler::Stream2::get: the shuffled index, then dimensions 0 and 1.
   const __m256i shuffled = scramble_reversed8(
       _mm256_set1_epi32(int(sobol_detail::reverse_bits(index))), load8(s.set_seed, n0));
   const __m256 u0 = unit8(scramble_reversed8(sobol_reversed8(shuffled, 0), load8(s.seed0, n0)));
   const __m256 u1 = unit8(scramble_reversed8(sobol_reversed8(shuffled, 1), load8(s.seed1, n0)));
 
-  // EmitterTable::pick: the same branch-free search, a gather per step.
-  const std::vector<EmitterTriangle>& triangles = table.triangles();
-  const float* base = reinterpret_cast<const float*>(triangles.data());
-  constexpr int kStride = int(sizeof(EmitterTriangle) / sizeof(float));
-  const __m256i stride = _mm256_set1_epi32(kStride);
-  __m256i first = _mm256_setzero_si256(); // in floats: triangle index × kStride
-  std::size_t count = triangles.size();
-  while (count > 1) {
-    const std::size_t half = count / 2;
-    const __m256i ahead = _mm256_add_epi32(first, _mm256_set1_epi32(int(half) * kStride));
-    const __m256 below =
-        _mm256_cmp_ps(u0, field8(base, ahead, offsetof(EmitterTriangle, cdf)), _CMP_LT_OQ);
-    first = _mm256_blendv_epi8(ahead, first, _mm256_castps_si256(below));
-    count -= half;
-  }
-  {
-    const __m256 below =
-        _mm256_cmp_ps(u0, field8(base, first, offsetof(EmitterTriangle, cdf)), _CMP_LT_OQ);
-    first = _mm256_blendv_epi8(_mm256_add_epi32(first, stride), first, _mm256_castps_si256(below));
-  }
-  const __m256i past = _mm256_cmpeq_epi32(
-      first, _mm256_set1_epi32(int(triangles.size()) * kStride)); // at or above every cdf
+  // EmitterTable::pick's triangle; lanes at or above every cdf take the scalar code's fallback.
+  __m256i past;
+  const __m256i k = table.pick(u0, past);
   if (_mm256_movemask_epi8(past) != 0) {
-    for (std::size_t n = n0; n < n0 + 8; ++n) one_ray(table, s, n, index, inv_samples, out);
+    for (std::size_t n = n0; n < n0 + 8; ++n) one_ray(emitters, s, n, index, inv_samples, out);
     return;
   }
-  const __m256i k = first;
-  const __m256 cdf = field8(base, k, offsetof(EmitterTriangle, cdf));
-  const __m256 pick = field8(base, k, offsetof(EmitterTriangle, pick));
+  const __m256 cdf = table.field(k, offsetof(EmitterTriangle, cdf));
+  const __m256 pick = table.field(k, offsetof(EmitterTriangle, pick));
   // area_light_point: u0 reused within the picked interval, clamped as std::clamp does.
   const __m256 zero = _mm256_setzero_ps();
   const __m256 top = _mm256_set1_ps(0x1.fffffep-1f);
@@ -174,11 +216,11 @@ SPECULA_AVX2 void eight_rays(const EmitterTable& table, const ShadowSurfaces& s,
   constexpr std::size_t kE1 = offsetof(EmitterTriangle, e1);
   constexpr std::size_t kE2 = offsetof(EmitterTriangle, e2);
   constexpr std::size_t kF = sizeof(float);
-  const __m256 dx = _mm256_sub_ps(point8(base, k, b1, b2, kP0, kE1, kE2), load8(s.ox, n0));
+  const __m256 dx = _mm256_sub_ps(point8(table, k, b1, b2, kP0, kE1, kE2), load8(s.ox, n0));
   const __m256 dy =
-      _mm256_sub_ps(point8(base, k, b1, b2, kP0 + kF, kE1 + kF, kE2 + kF), load8(s.oy, n0));
-  const __m256 dz = _mm256_sub_ps(point8(base, k, b1, b2, kP0 + 2 * kF, kE1 + 2 * kF, kE2 + 2 * kF),
-                                  load8(s.oz, n0));
+      _mm256_sub_ps(point8(table, k, b1, b2, kP0 + kF, kE1 + kF, kE2 + kF), load8(s.oy, n0));
+  const __m256 dz = _mm256_sub_ps(
+      point8(table, k, b1, b2, kP0 + 2 * kF, kE1 + 2 * kF, kE2 + 2 * kF), load8(s.oz, n0));
   const __m256 dist = _mm256_sqrt_ps(dot8(dx, dy, dz, dx, dy, dz));
   const __m256 inf = _mm256_set1_ps(std::numeric_limits<float>::infinity());
   __m256 ok =
@@ -188,10 +230,10 @@ SPECULA_AVX2 void eight_rays(const EmitterTable& table, const ShadowSurfaces& s,
   const __m256 tz = _mm256_div_ps(dz, dist);
   constexpr std::size_t kN = offsetof(EmitterTriangle, normal);
   const __m256 cos_l =
-      _mm256_andnot_ps(_mm256_set1_ps(-0.0f), dot8(field8(base, k, kN), field8(base, k, kN + kF),
-                                                   field8(base, k, kN + 2 * kF), tx, ty, tz));
+      _mm256_andnot_ps(_mm256_set1_ps(-0.0f), dot8(table.field(k, kN), table.field(k, kN + kF),
+                                                   table.field(k, kN + 2 * kF), tx, ty, tz));
   ok = _mm256_and_ps(ok, _mm256_cmp_ps(cos_l, zero, _CMP_GT_OQ));
-  const __m256 area = field8(base, k, offsetof(EmitterTriangle, area));
+  const __m256 area = table.field(k, offsetof(EmitterTriangle, area));
   const __m256 pdf =
       _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(_mm256_div_ps(pick, area), dist), dist), cos_l);
   ok = _mm256_and_ps(
@@ -210,13 +252,31 @@ SPECULA_AVX2 void eight_rays(const EmitterTable& table, const ShadowSurfaces& s,
   _mm256_storeu_ps(out.dz.data() + n0, tz);
   _mm256_storeu_ps(out.tfar.data() + n0, _mm256_mul_ps(dist, _mm256_set1_ps(1.0f - 1e-5f)));
   _mm256_storeu_ps(out.vr.data() + n0,
-                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ar, n0), field8(base, k, kEm)), w));
+                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ar, n0), table.field(k, kEm)), w));
   _mm256_storeu_ps(out.vg.data() + n0,
-                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ag, n0), field8(base, k, kEm + kF)), w));
+                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ag, n0), table.field(k, kEm + kF)), w));
   _mm256_storeu_ps(out.vb.data() + n0,
-                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ab, n0), field8(base, k, kEm + 2 * kF)), w));
+                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ab, n0), table.field(k, kEm + 2 * kF)), w));
   const int mask = _mm256_movemask_ps(ok);
   for (int lane = 0; lane < 8; ++lane) out.valid[n0 + std::size_t(lane)] = (mask >> lane) & 1;
+}
+
+/// The groups of eight surfaces; returns the first surface left to the scalar code.
+SPECULA_AVX2 std::size_t eight_at_a_time(const EmitterTable& emitters, const ShadowSurfaces& s,
+                                         std::uint32_t index, float inv_samples,
+                                         ShadowLightRays& out) {
+  const std::vector<EmitterTriangle>& triangles = emitters.triangles();
+  std::size_t first = 0;
+  if (triangles.size() <= TableInRegisters::kMost) {
+    const TableInRegisters table(triangles);
+    for (; first + 8 <= s.size(); first += 8)
+      eight_rays(emitters, table, s, first, index, inv_samples, out);
+  } else {
+    const TableInMemory table{reinterpret_cast<const float*>(triangles.data()), triangles.size()};
+    for (; first + 8 <= s.size(); first += 8)
+      eight_rays(emitters, table, s, first, index, inv_samples, out);
+  }
+  return first;
 }
 
 } // namespace
@@ -240,7 +300,7 @@ void shadow_light_rays(const EmitterTable& table, const ShadowSurfaces& surfaces
                                              sizeof(EmitterTriangle) * sizeof(float) -
                                          1;
   if (simd && shadow_light_rays_vectorised() && table.triangles().size() <= kMostTriangles)
-    for (; first + 8 <= n; first += 8) eight_rays(table, surfaces, first, index, inv_samples, out);
+    first = eight_at_a_time(table, surfaces, index, inv_samples, out);
   for (; first < n; ++first) one_ray(table, surfaces, first, index, inv_samples, out);
 }
 

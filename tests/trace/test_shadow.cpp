@@ -15,8 +15,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <random>
 #include <numbers>
+#include <random>
 #include <vector>
 
 namespace specula {
@@ -329,40 +329,15 @@ TEST(Shadow, StratifiedSamplesBeatIndependentOnes) {
   EXPECT_LT(slope, -1.0);
 }
 
-TEST(Shadow, VectorisedLightSamplesEqualTheScalarOnesBitForBit) {
-  if (!detail::shadow_light_rays_vectorised()) GTEST_SKIP() << "this CPU has no AVX2";
-  // Emitters of unequal power and orientation, a few to hundreds of triangles each, and surfaces
-  // anywhere around them: in front of and behind the lights and themselves, on a light's plane
-  // (cos 0 at the light), on its corner (distance 0), and far enough for the distance to
-  // overflow.
-  ecs::Registry reg;
-  const auto emitter = [&](const MeshSource& mesh, const vec3& at, const quat& rotation,
-                           const vec3& emission) {
-    Material m;
-    m.base_color = vec3(0.0f);
-    m.emission = emission;
-    test::add_mesh(reg, mesh, test::at(at, vec3(1.0f), rotation), m);
-  };
-  emitter(test::primitive("plane", 1.0f, vec3(0.7f)), vec3(0, 2, 0), quat(0, 1, 0, 0),
-          vec3(4, 3, 2));
-  emitter(test::primitive("plane", 1.0f, vec3(0.3f)), vec3(1.5f, 1, -1),
-          glm::angleAxis(0.7f, glm::normalize(vec3(1, 0, 1))), vec3(1));
-  emitter(test::primitive("box", 1.0f, vec3(0.4f, 0.2f, 0.6f)), vec3(-2, 0.5f, 0.3f),
-          glm::angleAxis(1.9f, vec3(0, 0, 1)), vec3(0.5f, 2, 1));
-  emitter(test::primitive("sphere", 0.3f, vec3(1.0f), 8, 8), vec3(0.2f, -1.5f, 2), quat(1, 0, 0, 0),
-          vec3(7, 7, 7));
-  emitter(test::primitive("plane", 1.0f, vec3(2.0f)), vec3(3, 3, 3),
-          glm::angleAxis(2.5f, glm::normalize(vec3(1, 1, 0))), vec3(0.1f));
-  const test::TracedWorld w(reg);
-  const EmitterTable& table = w.layer.emitters();
-  ASSERT_GE(table.triangles().size(), 1024u); // the pick's search runs 10 steps and more
-
+/// Surfaces anywhere around the emitters of `table` — in front of and behind the lights and
+/// themselves, on a light's plane (cos 0 at the light), on its corner (distance 0), and far
+/// enough for the distance to overflow — whose vectorised light samples must be the scalar ones
+/// bit for bit.
+void expect_vectorised_light_samples_equal_scalar_ones(const EmitterTable& table) {
   std::mt19937 rng(41);
   std::uniform_real_distribution<float> coordinate(-4.0f, 4.0f), unit(0.0f, 1.0f);
   std::normal_distribution<float> gauss;
-  const auto direction = [&] {
-    return glm::normalize(vec3(gauss(rng), gauss(rng), gauss(rng)));
-  };
+  const auto direction = [&] { return glm::normalize(vec3(gauss(rng), gauss(rng), gauss(rng))); };
   detail::ShadowSurfaces surfaces;
   constexpr std::size_t kSurfaces = 8 * 125 + 5; // a tail past the last group of eight
   for (std::size_t n = 0; n < kSurfaces; ++n) {
@@ -396,6 +371,60 @@ TEST(Shadow, VectorisedLightSamplesEqualTheScalarOnesBitForBit) {
   // Both kinds occur: the comparison covers lit samples and each early exit.
   EXPECT_GT(valid, 8 * kSurfaces / 5);
   EXPECT_LT(valid, 8 * kSurfaces * 4 / 5);
+}
+
+/// Emitters of unequal power and orientation: the first `planes` of five quads (two triangles
+/// each, or with `solids` 512), then (with `solids`) a box and a sphere.
+void emitters(ecs::Registry& reg, int planes, bool solids) {
+  const auto emitter = [&](const MeshSource& mesh, const vec3& at, const quat& rotation,
+                           const vec3& emission) {
+    Material m;
+    m.base_color = vec3(0.0f);
+    m.emission = emission;
+    test::add_mesh(reg, mesh, test::at(at, vec3(1.0f), rotation), m);
+  };
+  const struct {
+    float size;
+    vec3 at;
+    quat rotation;
+    vec3 emission;
+  } quads[] = {
+      {0.7f, vec3(0, 2, 0), quat(0, 1, 0, 0), vec3(4, 3, 2)},
+      {0.3f, vec3(1.5f, 1, -1), glm::angleAxis(0.7f, glm::normalize(vec3(1, 0, 1))), vec3(1)},
+      {2.0f, vec3(3, 3, 3), glm::angleAxis(2.5f, glm::normalize(vec3(1, 1, 0))), vec3(0.1f)},
+      {0.5f, vec3(-1, 2.5f, 1), glm::angleAxis(1.2f, glm::normalize(vec3(0, 1, 1))), vec3(9, 1, 1)},
+      {1.0f, vec3(0.5f, -2, -1), glm::angleAxis(0.3f, vec3(1, 0, 0)), vec3(0.5f, 0.5f, 3)}};
+  for (int q = 0; q < planes; ++q)
+    emitter(test::primitive("plane", 1.0f, vec3(quads[q].size), 32, solids ? 16 : 1), quads[q].at,
+            quads[q].rotation, quads[q].emission);
+  if (!solids) return;
+  emitter(test::primitive("box", 1.0f, vec3(0.4f, 0.2f, 0.6f)), vec3(-2, 0.5f, 0.3f),
+          glm::angleAxis(1.9f, vec3(0, 0, 1)), vec3(0.5f, 2, 1));
+  emitter(test::primitive("sphere", 0.3f, vec3(1.0f), 8, 8), vec3(0.2f, -1.5f, 2), quat(1, 0, 0, 0),
+          vec3(7, 7, 7));
+}
+
+TEST(Shadow, VectorisedLightSamplesEqualTheScalarOnesBitForBit) {
+  if (!detail::shadow_light_rays_vectorised()) GTEST_SKIP() << "this CPU has no AVX2";
+  ecs::Registry reg;
+  emitters(reg, 5, true);
+  const test::TracedWorld w(reg);
+  ASSERT_GE(w.layer.emitters().triangles().size(), 1024u); // the pick's search runs 10 steps
+  expect_vectorised_light_samples_equal_scalar_ones(w.layer.emitters());
+}
+
+TEST(Shadow, VectorisedLightSamplesFromSmallTablesEqualTheScalarOnes) {
+  // Tables of up to eight triangles are held in registers (a permute per field, the pick a
+  // count of cdfs): 2, 6 and 8 triangles.
+  if (!detail::shadow_light_rays_vectorised()) GTEST_SKIP() << "this CPU has no AVX2";
+  for (const int planes : {1, 3, 4}) {
+    ecs::Registry reg;
+    emitters(reg, planes, false);
+    const test::TracedWorld w(reg);
+    ASSERT_EQ(w.layer.emitters().triangles().size(), std::size_t(2 * planes));
+    SCOPED_TRACE(testing::Message() << planes << " quads");
+    expect_vectorised_light_samples_equal_scalar_ones(w.layer.emitters());
+  }
 }
 
 } // namespace
