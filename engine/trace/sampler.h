@@ -167,9 +167,7 @@ public:
   /// The sampler whose stream_seed() is `stream_seed`: kept by a path, it spares the two hashes
   /// of the constructor at every vertex.
   [[nodiscard]] static constexpr PixelSampler from_stream_seed(std::uint32_t stream_seed) {
-    PixelSampler s(0, 0);
-    s.seed_ = stream_seed;
-    return s;
+    return PixelSampler(stream_seed, Hashed{});
   }
   /// The stream's own seed (the render's seed and the stream hashed together).
   [[nodiscard]] constexpr std::uint32_t stream_seed() const { return seed_; }
@@ -224,6 +222,9 @@ public:
   }
 
 private:
+  struct Hashed {}; ///< the seed is a stream seed already
+  constexpr PixelSampler(std::uint32_t stream_seed, Hashed) : seed_(stream_seed) {}
+
   std::uint32_t seed_;
 };
 
