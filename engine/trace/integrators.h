@@ -129,8 +129,7 @@ struct PathWave {
   std::vector<Path> paths, wave_paths, hit_paths;
   std::vector<VertexSamples> samples; ///< per path of the wave being shaded
   std::vector<ShadingPoint> points;   ///< per hit of the wave being shaded (wave 0: per pixel)
-  std::vector<Hit> primary_hits;      ///< wave 0: the tile's primary hits and directions
-  std::vector<vec3> primary_directions;
+  std::vector<Hit> primary_hits;      ///< wave 0: the tile's primary hits
   std::vector<Ray> rays, wave_rays;
   std::vector<Hit> hits;
   std::vector<Ray> shadow_rays;

@@ -120,16 +120,11 @@ private:
     }
     draw_samples(w_.hit_paths, 0);
     w_.primary_hits.resize(n);
-    w_.primary_directions.resize(n);
-    for (std::uint32_t i = 0; i < n; ++i) {
-      w_.primary_hits[i] = primary_.hit(i);
-      w_.primary_directions[i] = primary_.direction(i);
-    }
-    shading_points(
-        w_.primary_hits,
-        Directions::aos(reinterpret_cast<const float*>(w_.primary_directions.data()), 3));
+    for (std::uint32_t i = 0; i < n; ++i) w_.primary_hits[i] = primary_.hit(i);
+    shading_points(w_.primary_hits, Directions{primary_.dir_x.data(), primary_.dir_y.data(),
+                                               primary_.dir_z.data(), 1});
     for (std::uint32_t i = 0; i < n; ++i)
-      shade_pixel(w_.primary_hits[i], w_.primary_directions[i], w_.points[i], i * count, count);
+      shade_pixel(w_.primary_hits[i], primary_.direction(i), w_.points[i], i * count, count);
     trace_shadows(true);
     for (std::uint32_t depth = 1; !w_.paths.empty(); ++depth) {
       w_.wave_paths.swap(w_.paths);
@@ -448,7 +443,8 @@ private:
     }
     if (entity == kNoInstance) return;
     const std::uint32_t bit = entity_bit(entity);
-    for (; chain != kNoInstance; chain = w_.records[chain].parent) w_.records[chain].ray.seen |= bit;
+    for (; chain != kNoInstance; chain = w_.records[chain].parent)
+      w_.records[chain].ray.seen |= bit;
   }
 
   /// Opens a leaving record for each of the wave's rays that leave a cached object (before they
