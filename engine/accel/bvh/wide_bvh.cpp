@@ -399,6 +399,21 @@ using namespace simd_avx2;
 } // namespace
 } // namespace wide_avx2
 
+namespace {
+
+/// The packet's lanes prepared for one walk (prepare_coherent_lanes); whether they take it: the
+/// vector preparation agreed, the test is the watertight one and more than one lane is live
+/// (otherwise each lane walks alone).
+template <int N, TriangleTest Test>
+bool prepare_packet_walk(const RayPacket<N>& rays, const bool* active, PreparedRay* prepared,
+                         unsigned& mask, std::uint32_t neg[3], WatertightLanesOf<N>& lanes) {
+  const bool vector_prepared = prepare_coherent_lanes<N>(rays, active, nullptr, prepared, nullptr,
+                                                         nullptr, mask, neg, lanes);
+  return vector_prepared && Test == TriangleTest::watertight && std::popcount(mask) > 1;
+}
+
+} // namespace
+
 template <int N, TriangleTest Test>
 void WideBvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bool* active,
                                TestTag<Test>) const {
@@ -408,9 +423,7 @@ void WideBvh::intersect_packet(RayPacket<N>& rays, PacketHits<N>& hits, const bo
   unsigned mask = 0;
   std::uint32_t neg[3] = {0, 0, 0};
   WatertightLanesOf<N> lanes;
-  const bool vector_prepared = prepare_coherent_lanes<N>(rays, active, nullptr, prepared, nullptr,
-                                                         nullptr, mask, neg, lanes);
-  if (vector_prepared && Test == TriangleTest::watertight && std::popcount(mask) > 1) {
+  if (prepare_packet_walk<N, Test>(rays, active, prepared, mask, neg, lanes)) {
     if constexpr (N == 8)
       wide_avx2::traverse_packet(nodes_.data(), groups_.data(), prepared, lane_hits, mask, neg,
                                  lanes);
@@ -456,9 +469,7 @@ unsigned WideBvh::occluded_packet(const RayPacket<N>& rays, const bool* active,
   unsigned mask = 0;
   std::uint32_t neg[3] = {0, 0, 0};
   WatertightLanesOf<N> lanes;
-  const bool vector_prepared = prepare_coherent_lanes<N>(rays, active, nullptr, prepared, nullptr,
-                                                         nullptr, mask, neg, lanes);
-  if (vector_prepared && Test == TriangleTest::watertight && std::popcount(mask) > 1) {
+  if (prepare_packet_walk<N, Test>(rays, active, prepared, mask, neg, lanes)) {
     // A subtree that one lane alone enters is left to that lane's single-ray walk.
     const auto single = [&](int lane, std::uint32_t child, std::uint32_t count) {
       return traverse<TriangleTest::watertight, true>(prepared[lane], nullptr, child, count);
