@@ -82,6 +82,41 @@ SPECULA_AVX2 inline V3 gather3(const vec3* base, __m256i index, __m256i mask) {
   return {gather_f(f, i3, mask), gather_f(f + 1, i3, mask), gather_f(f + 2, i3, mask)};
 }
 
+/// ShadingPoint as 16 words, in member order: position, spawn point, spawn error, geometric and
+/// shading normals (15 floats), then front_face in the low byte of the last word (1 or 0, the
+/// padding bytes 0).
+static_assert(sizeof(ShadingPoint) == 16 * sizeof(float) &&
+              offsetof(ShadingPoint, spawn_point) == 3 * sizeof(float) &&
+              offsetof(ShadingPoint, spawn_error) == 6 * sizeof(float) &&
+              offsetof(ShadingPoint, geometric_normal) == 9 * sizeof(float) &&
+              offsetof(ShadingPoint, shading_normal) == 12 * sizeof(float) &&
+              offsetof(ShadingPoint, front_face) == 15 * sizeof(float) &&
+              std::is_trivially_copyable_v<ShadingPoint>);
+
+/// Rows become columns: r[i][j] ← r[j][i].
+SPECULA_AVX2 inline void transpose8(__m256 (&r)[8]) {
+  const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
+  const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
+  const __m256 t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
+  const __m256 t6 = _mm256_unpacklo_ps(r[6], r[7]), t7 = _mm256_unpackhi_ps(r[6], r[7]);
+  const __m256 u0 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u1 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m256 u2 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u3 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m256 u4 = _mm256_shuffle_ps(t4, t6, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u5 = _mm256_shuffle_ps(t4, t6, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m256 u6 = _mm256_shuffle_ps(t5, t7, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u7 = _mm256_shuffle_ps(t5, t7, _MM_SHUFFLE(3, 2, 3, 2));
+  r[0] = _mm256_permute2f128_ps(u0, u4, 0x20);
+  r[1] = _mm256_permute2f128_ps(u1, u5, 0x20);
+  r[2] = _mm256_permute2f128_ps(u2, u6, 0x20);
+  r[3] = _mm256_permute2f128_ps(u3, u7, 0x20);
+  r[4] = _mm256_permute2f128_ps(u0, u4, 0x31);
+  r[5] = _mm256_permute2f128_ps(u1, u5, 0x31);
+  r[6] = _mm256_permute2f128_ps(u2, u6, 0x31);
+  r[7] = _mm256_permute2f128_ps(u3, u7, 0x31);
+}
+
 /// Hits i0 … i0 + 7; returns the mask of the lanes it wrote (the rest are the caller's).
 SPECULA_AVX2 unsigned eight_points(const SceneTables& tables, const Hit* hits,
                                    const Directions& dirs, ShadingPoint* out) {
@@ -206,21 +241,23 @@ SPECULA_AVX2 unsigned eight_points(const SceneTables& tables, const Hit* hits,
                _mm256_blendv_ps(shading.z, facing.z, usable)};
   }
 
-  alignas(32) float f[12][8];
-  const __m256 columns[12] = {position.x,  position.y, position.z,  error.x,
-                              error.y,     error.z,    geometric.x, geometric.y,
-                              geometric.z, shading.x,  shading.y,   shading.z};
-  for (int k = 0; k < 12; ++k) _mm256_store_ps(f[k], columns[k]);
-  const unsigned front_bits = unsigned(_mm256_movemask_ps(front));
+  // Each lane's ShadingPoint is 16 words (the layout asserted above; the spawn point is the
+  // position, no inset needed): two 8 × 8 transposes of the columns give them lane by lane, two
+  // stores each for the lanes taken (a column at a time through memory had the compiler copy
+  // them all on the stack first).
+  const __m256 front_word =
+      _mm256_castsi256_ps(_mm256_and_si256(_mm256_castps_si256(front), _mm256_set1_epi32(1)));
+  __m256 low[8] = {position.x, position.y, position.z, position.x,
+                   position.y, position.z, error.x,    error.y};
+  __m256 high[8] = {error.z,   geometric.x, geometric.y, geometric.z,
+                    shading.x, shading.y,   shading.z,   front_word};
+  transpose8(low);
+  transpose8(high);
   for (unsigned l = 0; l < 8; ++l) {
     if ((taken >> l & 1u) == 0) continue;
-    ShadingPoint& sp = out[l];
-    sp.position = vec3(f[0][l], f[1][l], f[2][l]);
-    sp.spawn_point = sp.position; // no inset needed
-    sp.spawn_error = vec3(f[3][l], f[4][l], f[5][l]);
-    sp.geometric_normal = vec3(f[6][l], f[7][l], f[8][l]);
-    sp.shading_normal = vec3(f[9][l], f[10][l], f[11][l]);
-    sp.front_face = (front_bits >> l & 1u) != 0;
+    float* words = reinterpret_cast<float*>(out + l);
+    _mm256_storeu_ps(words, low[l]);
+    _mm256_storeu_ps(words + 8, high[l]);
   }
   return taken;
 }
