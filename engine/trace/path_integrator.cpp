@@ -334,8 +334,10 @@ private:
       if constexpr (kPunctual) {
         // Whitted's own shadow rays (shading.h), so that with nothing else the images agree.
         for (const gpu::GpuLight& light : tables_.lights)
-          if (const auto shadow = punctual_shadow_ray(light, sp, origin, f))
-            add_shadow(shadow->ray, p, p.throughput * shadow->value);
+          punctual_shadow_ray(light, sp, origin, f,
+                              [&](const vec3& direction, float tfar, const vec3& value) {
+                                add_shadow(origin, direction, tfar, p, p.throughput * value);
+                              });
       }
       // Area lights are sampled towards the next vertex, which the last one does not have (the
       // BSDF strategy would need a ray beyond the depth limit).
@@ -350,7 +352,7 @@ private:
                                      ? power_heuristic(ls.pdf, p_diffuse * cos_theta * kInvPi)
                                      : 1.0f;
             // Stop short of the light point, relatively: its own triangle must not block it.
-            add_shadow(Ray{origin, 0.0f, ls.to_light, ls.distance * (1.0f - 1e-4f)}, p,
+            add_shadow(origin, ls.to_light, ls.distance * (1.0f - 1e-4f), p,
                        p.throughput * f * ls.emission * (cos_theta * weight / ls.pdf));
           }
         }
@@ -408,8 +410,10 @@ private:
     w_.rays.push_back(ray);
   }
 
-  void add_shadow(const Ray& ray, const Path& p, const vec3& value) {
-    w_.shadow_rays.push_back(ray);
+  /// A shadow ray (stored part by part: see punctual_shadow_ray) and what it brings unblocked.
+  void add_shadow(const vec3& origin, const vec3& direction, float tfar, const Path& p,
+                  const vec3& value) {
+    store_ray(w_.shadow_rays.emplace_back(), origin, direction, tfar);
     w_.shadow_slot.push_back(p.slot);
     w_.shadow_chain.push_back(p.leaving);
     w_.shadow_value.push_back(value);

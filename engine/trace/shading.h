@@ -146,29 +146,34 @@ struct SpecularSplit {
   return std::max(0.0f, 1.0f - m.reflectivity - m.transmission);
 }
 
-/// A shadow ray towards a punctual light and the radiance it brings when nothing blocks it.
-struct PunctualShadowRay {
-  Ray ray;
-  vec3 value; ///< albedo × irradiance × cos θ
-};
-
 /// The shadow ray from shading point `sp` (leaving from `origin`, its offset spawn point) towards
-/// `light`, for a diffuse part of reflectance `albedo` (base colour × diffuse weight / π); none
-/// when the light cannot light it (behind the surface, at or past grazing, or black). Whitted's
-/// and the shadow caster's local shading both use it, so that they give the same bits.
-[[nodiscard]] inline std::optional<PunctualShadowRay>
-punctual_shadow_ray(const gpu::GpuLight& light, const ShadingPoint& sp, const vec3& origin,
-                    const vec3& albedo) {
+/// `light`, for a diffuse part of reflectance `albedo`: `emit(direction, tfar, value)` with the
+/// ray's direction and far distance and the radiance it brings when nothing blocks it (albedo ×
+/// irradiance × cos θ); nothing when the light cannot light it (behind the surface, at or past
+/// grazing, or black). Whitted's and the shadow caster's local shading both use it, so that they
+/// give the same bits. The parts go to `emit` as values for it to store where the ray belongs:
+/// a ray put together here and copied there was read back before its parts had reached memory,
+/// a stall on every shadow ray.
+template <class Emit>
+inline void punctual_shadow_ray(const gpu::GpuLight& light, const ShadingPoint& sp,
+                                const vec3& origin, const vec3& albedo, Emit&& emit) {
   const LightSample ls = sample_light(light, sp.position);
-  if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) return std::nullopt; // behind
+  if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) return; // behind
   const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
-  if (cos_theta <= 0.0f || max_component(ls.irradiance) <= 0.0f) return std::nullopt;
+  if (cos_theta <= 0.0f || max_component(ls.irradiance) <= 0.0f) return;
   // Stop just short of the light: a light placed on a surface must not shadow itself.
   const float tfar = std::isinf(ls.distance)
                          ? ls.distance
                          : float(glm::length(glm::dvec3(light.position - origin)) * (1.0 - 1e-5));
-  return PunctualShadowRay{Ray{origin, 0.0f, ls.to_light, tfar},
-                           albedo * ls.irradiance * cos_theta};
+  emit(ls.to_light, tfar, albedo * ls.irradiance * cos_theta);
+}
+
+/// Stores a ray part by part (see punctual_shadow_ray).
+inline void store_ray(Ray& ray, const vec3& origin, const vec3& direction, float tfar) {
+  ray.origin = origin;
+  ray.tnear = 0.0f;
+  ray.direction = direction;
+  ray.tfar = tfar;
 }
 
 } // namespace specula

@@ -54,9 +54,10 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
   s.blocked.resize(pixels * slots);
   std::vector<std::uint32_t>& filled = s.rays_of_pixel; // here: the rays of each slot
   filled.assign(slots, 0u);
-  const auto emit = [&](std::size_t slot, const Ray& ray, std::uint32_t pixel, const vec3& value) {
+  const auto emit = [&](std::size_t slot, const vec3& origin, const vec3& direction, float tfar,
+                        std::uint32_t pixel, const vec3& value) {
     const std::size_t r = slot * pixels + filled[slot]++;
-    s.shadow_rays[r] = ray;
+    store_ray(s.shadow_rays[r], origin, direction, tfar);
     s.shadow_node[r] = pixel;
     s.shadow_value[r] = value;
   };
@@ -106,11 +107,11 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
     if (!(diffuse > 0.0f)) return;
     const vec3 albedo = m.base_color * (diffuse * kInvPi);
     const vec3 origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
-    for (std::size_t l = 0; l < lights; ++l) {
-      const std::optional<PunctualShadowRay> shadow =
-          punctual_shadow_ray(tables.lights[l], sp, origin, albedo);
-      if (shadow) emit(l, shadow->ray, pixel, shadow->value);
-    }
+    for (std::size_t l = 0; l < lights; ++l)
+      punctual_shadow_ray(tables.lights[l], sp, origin, albedo,
+                          [&](const vec3& direction, float tfar, const vec3& value) {
+                            emit(l, origin, direction, tfar, pixel, value);
+                          });
     if constexpr (kAreaLights)
       s.surfaces.push(origin, sp.geometric_normal, sp.shading_normal, albedo, pixel,
                       PixelSampler(pixel, settings.seed).stream2(kAreaLightSet));
@@ -128,10 +129,8 @@ void shade_tile(const FrameInputs& frame, const PacketTile& tile, TileScratch& s
                         s.light_rays);
       for (std::size_t n = 0; n < lit.size(); ++n)
         if (out.valid[n] != 0)
-          emit(lights,
-               Ray{vec3(lit.ox[n], lit.oy[n], lit.oz[n]), 0.0f,
-                   vec3(out.dx[n], out.dy[n], out.dz[n]), out.tfar[n]},
-               lit.pixel[n], vec3(out.vr[n], out.vg[n], out.vb[n]));
+          emit(lights, vec3(lit.ox[n], lit.oy[n], lit.oz[n]), vec3(out.dx[n], out.dy[n], out.dz[n]),
+               out.tfar[n], lit.pixel[n], vec3(out.vr[n], out.vg[n], out.vb[n]));
       trace_slot(lights);
     }
   }

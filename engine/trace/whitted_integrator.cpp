@@ -253,8 +253,11 @@ private:
   /// `sp`: the hit's shading point (computed for the whole wave).
   void shade(std::uint32_t index, const Hit& hit, const ShadingPoint& sp) {
     constexpr float kInvPi = std::numbers::inv_pi_v<float>;
-    // Copies: spawning rays appends to s_.nodes, which may move it.
-    const WhittedNode node = s_.nodes[index];
+    // Copies of what spawning needs (it appends to s_.nodes, which may move it): the parent's
+    // fields, not the whole node, which was most of this function's reads.
+    const WhittedNode& at = s_.nodes[index];
+    const Parent node{at.throughput, at.pixel, at.tile_pixel, at.depth};
+    const vec3 d = at.ray.direction;
     if (!hit.hit()) {
       s_.nodes[index].radiance = settings_.background;
       return;
@@ -263,21 +266,19 @@ private:
     s_.nodes[index].hit_entity = tables_.instances[hit.instance].entity_index;
     s_.nodes[index].seen = entity_bit(s_.nodes[index].hit_entity);
     const gpu::GpuMaterial& m = tables_.materials[tables_.instances[hit.instance].material];
-    const vec3 d = node.ray.direction;
     s_.nodes[index].radiance = m.emission;
 
     const float diffuse = diffuse_weight(m);
     if (diffuse > 0.0f && !tables_.lights.empty()) {
       const vec3 albedo = m.base_color * (diffuse * kInvPi);
       const vec3 origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
-      for (const gpu::GpuLight& light : tables_.lights) {
-        const std::optional<PunctualShadowRay> shadow =
-            punctual_shadow_ray(light, sp, origin, albedo);
-        if (!shadow) continue;
-        s_.shadow_rays.push_back(shadow->ray);
-        s_.shadow_node.push_back(index);
-        s_.shadow_value.push_back(shadow->value);
-      }
+      for (const gpu::GpuLight& light : tables_.lights)
+        punctual_shadow_ray(light, sp, origin, albedo,
+                            [&](const vec3& direction, float tfar, const vec3& value) {
+                              store_ray(s_.shadow_rays.emplace_back(), origin, direction, tfar);
+                              s_.shadow_node.push_back(index);
+                              s_.shadow_value.push_back(value);
+                            });
     }
     if (node.depth >= settings_.max_depth) return;
 
@@ -292,7 +293,13 @@ private:
             split.refract_direction, split.refract_weight, RayKind::Refraction, !sp.front_face);
   }
 
-  void spawn(const WhittedNode& parent, std::uint32_t parent_index, std::uint32_t instance,
+  /// What a node's children take from it.
+  struct Parent {
+    vec3 throughput;
+    std::uint32_t pixel, tile_pixel, depth;
+  };
+
+  void spawn(const Parent& parent, std::uint32_t parent_index, std::uint32_t instance,
              const vec3& origin, const vec3& direction, float weight, RayKind kind, bool exits) {
     const vec3 throughput = parent.throughput * weight;
     if (max_component(throughput) < settings_.min_weight) return;
@@ -302,13 +309,10 @@ private:
       return;
     }
     ++budget;
-    // `parent` may live in s_.nodes: read it before the array can grow.
-    const std::uint32_t pixel = parent.pixel, tile_pixel = parent.tile_pixel;
-    const std::uint32_t depth = parent.depth + 1;
     s_.next_wave.push_back(std::uint32_t(s_.nodes.size()));
     WhittedNode& child = s_.nodes.emplace_back();
-    set_root(child, origin, 0.0f, direction, std::numeric_limits<float>::infinity(), pixel,
-             tile_pixel, depth, kind);
+    set_root(child, origin, 0.0f, direction, std::numeric_limits<float>::infinity(), parent.pixel,
+             parent.tile_pixel, parent.depth + 1, kind);
     child.weight = vec3(weight);
     child.throughput = throughput;
     child.parent = parent_index;
