@@ -73,7 +73,9 @@ public:
   /// Starts a Dear ImGui frame (ImGui::NewFrame with the backends'); only with settings.ui.
   virtual void begin_ui() = 0;
   /// Draws `frame` scaled to the client area (aspect kept, letterboxed), `ui` over it (null: no
-  /// UI), and presents. Handles resizes and out-of-date swapchains itself.
+  /// UI), and presents. Handles resizes and out-of-date swapchains itself. Returns once the
+  /// drawing is submitted: the present call itself runs on a thread of its own while the caller
+  /// goes on, and the next present() or read_back() waits for it (and throws what it failed with).
   virtual void present(const Framebuffer& frame, ImDrawData* ui) = 0;
   /// Asks for a new client area size (the window system may refuse or adjust it); the next
   /// present() after the resize lands draws at the new size.
