@@ -362,7 +362,6 @@ private:
                        VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, 0);
   }
 
-  /// Releases whatever open() got to, in reverse order.
   /// Waits for the last frame's present (present()) and takes its result: an out-of-date or
   /// suboptimal swapchain is recreated at the next present, any other failure throws.
   void finish_presenting() {
@@ -374,6 +373,7 @@ private:
       gpu::check(r, "vkQueuePresentKHR");
   }
 
+  /// Releases whatever open() got to, in reverse order.
   void destroy() noexcept {
     if (presenting_.valid()) (void)presenting_.get(); // the result no longer matters
     if (context_ != nullptr && !context_->lost()) (void)vkDeviceWaitIdle(context_->device());
