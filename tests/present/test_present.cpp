@@ -255,8 +255,11 @@ TEST(Window, PresentsFramesAndReadsThemBack) {
   EXPECT_EQ(window->width(), 320u);
   EXPECT_EQ(window->height(), 200u);
   InputState input;
-  for (std::uint32_t i = 0; i < 4; ++i) {
-    const Framebuffer frame = random_frame(160 + i, 90, 100 + i);
+  // present() returns while the frame is still being presented (on a thread of its own): the
+  // next present and a read-back wait for it. The first frames are read back one by one, the
+  // later ones after a few presented back to back.
+  for (std::uint32_t i = 0; i < 12; ++i) {
+    const Framebuffer frame = random_frame(160 + 7 * i, 90 + 3 * i, 100 + i);
     ASSERT_TRUE(window->poll(input));
     const bool ui = i % 2 == 1;
     // A new ImGui window is laid out on its first frame and drawn from the next.
@@ -268,10 +271,11 @@ TEST(Window, PresentsFramesAndReadsThemBack) {
       ImGui::Render();
     }
     window->present(frame, ui ? ImGui::GetDrawData() : nullptr);
+    if (i >= 4 && i % 4 != 2 && i % 4 != 3) continue;
     const Rgba8Image shown = window->read_back();
     const Rgba8Image want = encode_srgb8(frame, window->width(), window->height());
     if (ui)
-      EXPECT_FALSE(same_image(shown, want)) << "the panel is missing";
+      EXPECT_FALSE(same_image(shown, want)) << "frame " << i << ": the panel is missing";
     else
       EXPECT_TRUE(same_image(shown, want)) << "frame " << i;
   }
@@ -299,42 +303,6 @@ TEST(Window, FollowsAResize) {
   ASSERT_EQ(window->height(), 240u);
   for (int i = 0; i < 2; ++i) window->present(frame, nullptr);
   EXPECT_TRUE(same_image(window->read_back(), encode_srgb8(frame, 200, 240)));
-}
-
-TEST(Window, BackToBackPresentsShowEachFrameInTurn) {
-  // present() returns while the frame is still being presented (on a thread of its own): the
-  // next present and a read-back wait for it, so frames presented back to back, at different
-  // sizes and with the UI on and off, each show in turn and the last one is what remains.
-  SPECULA_NEED_DISPLAY();
-  WindowSettings settings;
-  settings.width = 320;
-  settings.height = 200;
-  settings.ui = true;
-  std::string why;
-  auto window = open_window(settings, why);
-  if (!window) GTEST_SKIP() << why;
-  InputState input;
-  for (std::uint32_t i = 0; i < 12; ++i) {
-    const Framebuffer frame = random_frame(100 + 17 * i, 60 + 5 * i, 300 + i);
-    ASSERT_TRUE(window->poll(input));
-    const bool ui = i % 3 == 1;
-    for (int pass = 0; ui && pass < 2; ++pass) {
-      window->begin_ui();
-      ImGui::Begin("panel");
-      ImGui::TextUnformatted("busy");
-      ImGui::End();
-      ImGui::Render();
-    }
-    window->present(frame, ui ? ImGui::GetDrawData() : nullptr);
-    if (i % 4 == 3 || i == 11) {
-      const Rgba8Image shown = window->read_back();
-      const Rgba8Image want = encode_srgb8(frame, window->width(), window->height());
-      if (ui)
-        EXPECT_FALSE(same_image(shown, want)) << "frame " << i << ": the panel is missing";
-      else
-        EXPECT_TRUE(same_image(shown, want)) << "frame " << i;
-    }
-  }
 }
 
 TEST(Window, WithoutADisplayOpeningThrowsWithTheReason) {
