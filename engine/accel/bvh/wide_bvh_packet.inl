@@ -31,6 +31,7 @@ SPECULA_SIMD_TARGET void traverse_packet(const WideBvhNode* nodes, const WideTri
   for (;;) {
     if (cur.count == 0) {
       const WideBvhNode& n = nodes[cur.child];
+      const Vf lanes = vlanes(cur.mask);
       Entry hit[4];
       int k = 0;
       for (int c = 0; c < 4; ++c) {
@@ -43,13 +44,12 @@ SPECULA_SIMD_TARGET void traverse_packet(const WideBvhNode* nodes, const WideTri
           t0 = vmax(tn, t0); // NaN keeps the current bound, as intersect_box's comparisons do
           t1 = vmin(tf, t1);
         }
-        const unsigned m = cur.mask & vmask(vle(t0, t1));
+        const Vf in = vand(vle(t0, t1), lanes);
+        const unsigned m = vmask(in);
         if (m == 0) continue;
-        alignas(32) float entry[kLanes];
-        vstore(entry, t0);
-        float least = entry[std::countr_zero(m)];
-        for (unsigned r = m & (m - 1); r != 0; r &= r - 1)
-          least = std::min(least, entry[std::countr_zero(r)]);
+        // The least entry over the lanes that enter (never NaN: vmax kept the finite bound), by
+        // vector steps: a loop over the lanes branched on which ones entered.
+        const float least = vhmin(vselect(vset1(std::numeric_limits<float>::infinity()), t0, in));
         // Sorted nearest first (an insertion into at most three).
         Entry e{n.child[c], n.count[c], m, least};
         int j = k++;

@@ -50,6 +50,21 @@ inline Vf vand(Vf a, Vf b) { return _mm_and_ps(a, b); }
 inline Vf vxor(Vf a, Vf b) { return _mm_xor_ps(a, b); }
 inline Vf vzero() { return _mm_setzero_ps(); }
 inline void vstore(float* p, Vf a) { _mm_store_ps(p, a); }
+/// Every lane set where its bit in `bits` is (lane i: bit i).
+inline Vf vlanes(unsigned bits) {
+  const __m128i bit = _mm_setr_epi32(1, 2, 4, 8);
+  return _mm_castsi128_ps(_mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(int(bits)), bit), bit));
+}
+/// b where `mask` is set, else a.
+inline Vf vselect(Vf a, Vf b, Vf mask) {
+  return _mm_or_ps(_mm_and_ps(mask, b), _mm_andnot_ps(mask, a));
+}
+/// The least lane (no NaN among them).
+inline float vhmin(Vf a) {
+  a = _mm_min_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(1, 0, 3, 2)));
+  a = _mm_min_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(2, 3, 0, 1)));
+  return _mm_cvtss_f32(a);
+}
 #include "packet_watertight.inl"
 #undef SPECULA_SIMD_TARGET
 } // namespace simd_sse
@@ -81,6 +96,18 @@ SPECULA_SIMD_TARGET inline Vf vand(Vf a, Vf b) { return _mm256_and_ps(a, b); }
 SPECULA_SIMD_TARGET inline Vf vxor(Vf a, Vf b) { return _mm256_xor_ps(a, b); }
 SPECULA_SIMD_TARGET inline Vf vzero() { return _mm256_setzero_ps(); }
 SPECULA_SIMD_TARGET inline void vstore(float* p, Vf a) { _mm256_store_ps(p, a); }
+SPECULA_SIMD_TARGET inline Vf vlanes(unsigned bits) {
+  const __m256i bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+  return _mm256_castsi256_ps(
+      _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(int(bits)), bit), bit));
+}
+SPECULA_SIMD_TARGET inline Vf vselect(Vf a, Vf b, Vf mask) { return _mm256_blendv_ps(a, b, mask); }
+SPECULA_SIMD_TARGET inline float vhmin(Vf a) {
+  a = _mm256_min_ps(a, _mm256_permute2f128_ps(a, a, 1));
+  a = _mm256_min_ps(a, _mm256_shuffle_ps(a, a, _MM_SHUFFLE(1, 0, 3, 2)));
+  a = _mm256_min_ps(a, _mm256_shuffle_ps(a, a, _MM_SHUFFLE(2, 3, 0, 1)));
+  return _mm256_cvtss_f32(a);
+}
 #include "packet_watertight.inl"
 #undef SPECULA_SIMD_TARGET
 } // namespace simd_avx2
