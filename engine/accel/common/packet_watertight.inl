@@ -179,6 +179,7 @@ intersect_watertight_lanes(const WatertightLanes& w, PreparedRay* rays, Triangle
   const Vf outside = vand(vor(vor(vlt(U, zero), vlt(V, zero)), vlt(W, zero)),
                           vor(vor(vgt(U, zero), vgt(V, zero)), vgt(W, zero)));
   unsigned candidates = mask & ~edge & ~vmask(outside);
+  Vf hit_t = tfar; // the lanes' tfar after this triangle, without the edge lanes'
   if (candidates != 0) {
     const Vf det = vadd(vadd(U, V), W);
     const Vf az = vmul(w.sz, a_kz);
@@ -204,10 +205,12 @@ intersect_watertight_lanes(const WatertightLanes& w, PreparedRay* rays, Triangle
         rays[i].tfar = t_lane[i];
         hits[i] = TriangleHit{t_lane[i], u_lane[i], v_lane[i], prim};
       }
+      hit_t = vselect(tfar, t, vlanes(candidates));
     }
   }
   for (unsigned m = edge; m; m &= m - 1) on_edge(std::countr_zero(m));
-  if ((candidates | edge) != 0) tfar = gather(rays, &PreparedRay::tfar);
+  // The edge lanes' scalar test may have moved their tfar: read them all back then.
+  tfar = edge != 0 ? gather(rays, &PreparedRay::tfar) : hit_t;
   return candidates;
 }
 
