@@ -320,19 +320,45 @@ bool WideBvh::traverse(PreparedRay& r, TriangleHit* hit, std::uint32_t start_chi
             stack[top++] = {n.child[i], n.count[i], entry[i]};
           }
           cur = {n.child[first], n.count[first], entry[first]};
+        } else if (std::has_single_bit(mask)) {
+          // One child (most nodes near the leaves): nothing to order.
+          const int i = std::countr_zero(mask);
+          cur = {n.child[i], n.count[i], entry[i]};
+        } else if (std::popcount(mask) == 2) {
+          // Two: the nearer first, the lower slot on a tie (as the insertion below orders them).
+          const int i = std::countr_zero(mask), j = std::countr_zero(mask & (mask - 1));
+          const bool swap = entry[i] > entry[j];
+          const int near = swap ? j : i, far = swap ? i : j;
+          stack[top++] = {n.child[far], n.count[far], entry[far]};
+          cur = {n.child[near], n.count[near], entry[near]};
         } else {
-          // Nearest first: the hit children sorted by entry distance, the farthest pushed first.
-          Entry hits[4];
+          // Three or four: the slots sorted by entry distance with adjacent exchanges (a bubble
+          // network: stable, so ties keep the lower slot first, as an insertion would), by
+          // selections rather than branches; the farthest pushed first.
+          int order[4];
           int k = 0;
-          for (; mask != 0; mask &= mask - 1) {
-            const int i = std::countr_zero(mask);
-            Entry e{n.child[i], n.count[i], entry[i]};
-            int j = k++;
-            for (; j > 0 && hits[j - 1].t > e.t; --j) hits[j] = hits[j - 1];
-            hits[j] = e;
+          for (; mask != 0; mask &= mask - 1) order[k++] = std::countr_zero(mask);
+          const auto exchange = [&](int a, int b) {
+            const int x = order[a], y = order[b];
+            const bool swap = entry[x] > entry[y];
+            order[a] = swap ? y : x;
+            order[b] = swap ? x : y;
+          };
+          if (k == 3) {
+            exchange(0, 1);
+            exchange(1, 2);
+            exchange(0, 1);
+          } else {
+            exchange(0, 1);
+            exchange(1, 2);
+            exchange(2, 3);
+            exchange(0, 1);
+            exchange(1, 2);
+            exchange(0, 1);
           }
-          for (int j = k - 1; j > 0; --j) stack[top++] = hits[j];
-          cur = hits[0];
+          for (int j = k - 1; j > 0; --j)
+            stack[top++] = {n.child[order[j]], n.count[order[j]], entry[order[j]]};
+          cur = {n.child[order[0]], n.count[order[0]], entry[order[0]]};
         }
         continue;
       }
