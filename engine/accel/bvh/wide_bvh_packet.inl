@@ -48,7 +48,7 @@ SPECULA_SIMD_TARGET void traverse_packet(const WideBvhNode* nodes, const WideTri
         const unsigned m = vmask(in);
         if (m == 0) continue;
         // The least entry over the lanes that enter (never NaN: vmax kept the finite bound), by
-        // vector steps: a loop over the lanes branched on which ones entered.
+        // vector steps rather than a loop over the lanes, which branched on which ones entered.
         const float least = vhmin(vselect(vset1(std::numeric_limits<float>::infinity()), t0, in));
         // Sorted nearest first (an insertion into at most three).
         Entry e{n.child[c], n.count[c], m, least};
