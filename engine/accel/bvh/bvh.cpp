@@ -330,16 +330,6 @@ struct ChildHits {
   float entry[2];
 };
 
-/// All ones in the lanes whose bit is set in `mask`.
-inline __m128i lane_bits_sse(std::uint32_t mask) {
-  const __m128i bit = _mm_setr_epi32(1, 2, 4, 8);
-  return _mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(int(mask)), bit), bit);
-}
-__attribute__((target("avx2"))) inline __m256i lane_bits_avx2(std::uint32_t mask) {
-  const __m256i bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-  return _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(int(mask)), bit), bit);
-}
-
 // The two children of a node against a packet: intersect_box lane by lane (the same operations,
 // max/min keep the current bound on NaN as the scalar test does).
 ChildHits box2_sse(const PacketData<4>& p, const BvhNode* c, std::uint32_t mask) {
@@ -361,13 +351,10 @@ ChildHits box2_sse(const PacketData<4>& p, const BvhNode* c, std::uint32_t mask)
     }
     const __m128 hit = _mm_cmple_ps(t0, t1);
     const std::uint32_t m = std::uint32_t(_mm_movemask_ps(hit)) & mask;
-    // The nearest entry over the lanes that hit (+inf elsewhere), by two shuffles.
-    const __m128 live = _mm_and_ps(hit, _mm_castsi128_ps(lane_bits_sse(mask)));
-    __m128 e = _mm_or_ps(_mm_and_ps(live, t0), _mm_andnot_ps(live, _mm_set1_ps(kInf)));
-    e = _mm_min_ps(e, _mm_shuffle_ps(e, e, _MM_SHUFFLE(2, 3, 0, 1)));
-    e = _mm_min_ps(e, _mm_shuffle_ps(e, e, _MM_SHUFFLE(1, 0, 3, 2)));
+    // The nearest entry over the lanes that hit (+inf elsewhere).
+    const __m128 live = _mm_and_ps(hit, simd_sse::vlanes(mask));
     out.mask[k] = m;
-    out.entry[k] = m != 0 ? _mm_cvtss_f32(e) : kInf;
+    out.entry[k] = m != 0 ? simd_sse::vhmin(simd_sse::vselect(_mm_set1_ps(kInf), t0, live)) : kInf;
   }
   return out;
 }
@@ -393,26 +380,19 @@ __attribute__((target("avx2,fma"))) ChildHits box2_avx2(const PacketData<8>& p, 
     }
     const __m256 hit = _mm256_cmp_ps(t0, t1, _CMP_LE_OQ);
     const std::uint32_t m = std::uint32_t(_mm256_movemask_ps(hit)) & mask;
-    // The nearest entry over the lanes that hit (+inf elsewhere): halves, then two shuffles.
-    const __m256 live = _mm256_and_ps(hit, _mm256_castsi256_ps(lane_bits_avx2(mask)));
-    const __m256 e8 = _mm256_blendv_ps(_mm256_set1_ps(kInf), t0, live);
-    __m128 e = _mm_min_ps(_mm256_castps256_ps128(e8), _mm256_extractf128_ps(e8, 1));
-    e = _mm_min_ps(e, _mm_shuffle_ps(e, e, _MM_SHUFFLE(2, 3, 0, 1)));
-    e = _mm_min_ps(e, _mm_shuffle_ps(e, e, _MM_SHUFFLE(1, 0, 3, 2)));
+    // The nearest entry over the lanes that hit (+inf elsewhere).
+    const __m256 live = _mm256_and_ps(hit, simd_avx2::vlanes(mask));
     out.mask[k] = m;
-    out.entry[k] = m != 0 ? _mm_cvtss_f32(e) : kInf;
+    out.entry[k] =
+        m != 0 ? simd_avx2::vhmin(simd_avx2::vselect(_mm256_set1_ps(kInf), t0, live)) : kInf;
   }
   return out;
 }
 
 /// The farthest tfar over the lanes in `mask` (-inf for none).
 __attribute__((target("avx2"))) float reach_avx2(const PacketData<8>& p, std::uint32_t mask) {
-  const __m256 r8 = _mm256_blendv_ps(_mm256_set1_ps(-kInf), _mm256_load_ps(p.tfar),
-                                     _mm256_castsi256_ps(lane_bits_avx2(mask)));
-  __m128 r = _mm_max_ps(_mm256_castps256_ps128(r8), _mm256_extractf128_ps(r8, 1));
-  r = _mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(2, 3, 0, 1)));
-  r = _mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(1, 0, 3, 2)));
-  return _mm_cvtss_f32(r);
+  return simd_avx2::vhmax(
+      simd_avx2::vselect(_mm256_set1_ps(-kInf), _mm256_load_ps(p.tfar), simd_avx2::vlanes(mask)));
 }
 
 /// The vector operations of one packet width: the two children's boxes, and a leaf's triangles
@@ -424,12 +404,8 @@ struct BoxTestSse {
   }
   /// The farthest tfar over the lanes in `mask` (-inf for none).
   static float reach(const PacketData<4>& p, std::uint32_t mask) {
-    const __m128 live = _mm_castsi128_ps(lane_bits_sse(mask));
-    __m128 r = _mm_or_ps(_mm_and_ps(live, _mm_load_ps(p.tfar)),
-                         _mm_andnot_ps(live, _mm_set1_ps(-kInf)));
-    r = _mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(2, 3, 0, 1)));
-    r = _mm_max_ps(r, _mm_shuffle_ps(r, r, _MM_SHUFFLE(1, 0, 3, 2)));
-    return _mm_cvtss_f32(r);
+    return simd_sse::vhmax(
+        simd_sse::vselect(_mm_set1_ps(-kInf), _mm_load_ps(p.tfar), simd_sse::vlanes(mask)));
   }
   static bool make_lanes(const PreparedRay* rays, unsigned mask, Lanes& w) {
     return simd_sse::make_watertight_lanes(rays, mask, w);

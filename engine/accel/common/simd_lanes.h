@@ -65,6 +65,12 @@ inline float vhmin(Vf a) {
   a = _mm_min_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(2, 3, 0, 1)));
   return _mm_cvtss_f32(a);
 }
+/// The greatest lane (no NaN among them).
+inline float vhmax(Vf a) {
+  a = _mm_max_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(1, 0, 3, 2)));
+  a = _mm_max_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(2, 3, 0, 1)));
+  return _mm_cvtss_f32(a);
+}
 #include "packet_watertight.inl"
 #undef SPECULA_SIMD_TARGET
 } // namespace simd_sse
@@ -106,6 +112,12 @@ SPECULA_SIMD_TARGET inline float vhmin(Vf a) {
   a = _mm256_min_ps(a, _mm256_permute2f128_ps(a, a, 1));
   a = _mm256_min_ps(a, _mm256_shuffle_ps(a, a, _MM_SHUFFLE(1, 0, 3, 2)));
   a = _mm256_min_ps(a, _mm256_shuffle_ps(a, a, _MM_SHUFFLE(2, 3, 0, 1)));
+  return _mm256_cvtss_f32(a);
+}
+SPECULA_SIMD_TARGET inline float vhmax(Vf a) {
+  a = _mm256_max_ps(a, _mm256_permute2f128_ps(a, a, 1));
+  a = _mm256_max_ps(a, _mm256_shuffle_ps(a, a, _MM_SHUFFLE(1, 0, 3, 2)));
+  a = _mm256_max_ps(a, _mm256_shuffle_ps(a, a, _MM_SHUFFLE(2, 3, 0, 1)));
   return _mm256_cvtss_f32(a);
 }
 #include "packet_watertight.inl"
