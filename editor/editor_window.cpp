@@ -68,11 +68,13 @@ int run_window(EditorSession& session, const WindowRun& run) {
   settings.height = session.view().height;
   settings.ui = true;
   const std::unique_ptr<present::Window> window = present::Window::open(settings);
+  // A Vulkan backend renders on the window's device, its frames drawn where they are.
+  session.share_device(window->context());
   if (!run.script.empty()) run_script(session, run.script);
   PanelState panels;
   WindowControls controls;
   present::InputState in;
-  std::uint64_t shown = 0;
+  std::uint64_t shown = 0, in_place = 0; // frames presented; of them, from the device in place
   using Clock = std::chrono::steady_clock;
   const auto ms = [](Clock::time_point a, Clock::time_point b) {
     return std::chrono::duration<double, std::milli>(b - a).count();
@@ -98,7 +100,12 @@ int run_window(EditorSession& session, const WindowRun& run) {
     window->begin_ui();
     draw_panels(session, panels);
     ImGui::Render();
-    window->present(session.frame(), ImGui::GetDrawData());
+    if (const gpu::DeviceFrame* on_device = session.device_frame()) {
+      window->present(*on_device, ImGui::GetDrawData());
+      ++in_place;
+    } else {
+      window->present(session.frame(), ImGui::GetDrawData());
+    }
     tick_ms.push_back(ms(start, ticked));
     present_ms.push_back(ms(ticked, Clock::now()));
     ++shown;
@@ -109,9 +116,11 @@ int run_window(EditorSession& session, const WindowRun& run) {
     // The presented rate, for docs/PERFORMANCE.md (a run with --frames is a measurement or a test).
     const double f = median(frame_ms);
     std::printf("specula-editor: %llu frames shown at %ux%u, median %.2f ms per frame (%.1f "
-                "frames/s): tick %.2f ms, panels and present %.2f ms; render scale median %.3f\n",
+                "frames/s): tick %.2f ms, panels and present %.2f ms; render scale median %.3f; "
+                "presented in place from the device: %llu\n",
                 static_cast<unsigned long long>(shown), window->width(), window->height(), f,
-                1e3 / f, median(tick_ms), median(present_ms), median(scales));
+                1e3 / f, median(tick_ms), median(present_ms), median(scales),
+                static_cast<unsigned long long>(in_place));
   }
   return 0;
 }

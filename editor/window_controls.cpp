@@ -11,8 +11,9 @@
 namespace specula::editor {
 
 std::optional<dvec2> window_to_frame(std::uint32_t window_width, std::uint32_t window_height,
-                                     const Framebuffer& frame, double x, double y) {
-  const double fw = frame.width(), fh = frame.height();
+                                     std::uint32_t frame_width, std::uint32_t frame_height,
+                                     double x, double y) {
+  const double fw = frame_width, fh = frame_height;
   const double scale = std::min(double(window_width) / fw, double(window_height) / fh);
   if (!(scale > 0.0)) return std::nullopt;
   const double ox = 0.5 * (double(window_width) - scale * fw);
@@ -41,7 +42,8 @@ void WindowControls::apply(EditorSession& session, const present::InputState& in
     return;
   }
   const auto to_frame = [&](double x, double y) {
-    return window_to_frame(window_width, window_height, session.frame(), x, y);
+    const auto [fw, fh] = session.frame_size();
+    return window_to_frame(window_width, window_height, fw, fh, x, y);
   };
   if (in.button_pressed[0]) {
     last_x_ = in.mouse_x;

@@ -18,7 +18,8 @@ namespace specula::editor {
 /// Window pixel → frame pixel, undoing present()'s aspect-keeping letterbox; none outside the
 /// frame.
 std::optional<dvec2> window_to_frame(std::uint32_t window_width, std::uint32_t window_height,
-                                     const Framebuffer& frame, double x, double y);
+                                     std::uint32_t frame_width, std::uint32_t frame_height,
+                                     double x, double y);
 
 class WindowControls {
 public:

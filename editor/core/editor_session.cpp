@@ -98,7 +98,30 @@ void EditorSession::prepare() {
   job.settings.threads = view_.threads;
   job.image = Framebuffer(view_.width, view_.height);
   job.cache = view_.cache;
+  job.gpu.device = device_;
   prepare_rendering(scene_.registry, std::move(job));
+  keep_frames_on_device();
+}
+
+void EditorSession::keep_frames_on_device() {
+  specula::keep_frames_on_device(*scene_.registry.resource<ActiveTracer>().tracer,
+                                 device_ != nullptr && !cache_view_);
+}
+
+void EditorSession::share_device(std::shared_ptr<gpu::Context> device) {
+  device_ = std::move(device);
+  scene_.registry.resource<RenderJob>().gpu.device = device_;
+  const RenderJob& job = scene_.registry.resource<RenderJob>();
+  if (tracer_device(*scene_.registry.resource<ActiveTracer>().tracer))
+    set_backend(job.backend); // a tracer on the new device
+  else
+    keep_frames_on_device();
+}
+
+const gpu::DeviceFrame* EditorSession::device_frame() const {
+  if (overlay_ready_) return nullptr;
+  auto& r = const_cast<ecs::Registry&>(scene_.registry); // read only
+  return specula::device_frame(*r.resource<ActiveTracer>().tracer);
 }
 
 EditorId EditorSession::assign_id(ecs::Entity e) {
@@ -156,12 +179,25 @@ void EditorSession::tick(double dt) {
 
 const Framebuffer& EditorSession::frame() const {
   if (overlay_ready_) return overlay_;
-  // Registry lookups are non-const (pools are made on demand); nothing is written.
-  return const_cast<ecs::Registry&>(scene_.registry).resource<RenderJob>().image;
+  // Registry lookups are non-const (pools are made on demand); the image is written only by a
+  // pending device frame's readback, which leaves it as the frame rendered.
+  auto& r = const_cast<ecs::Registry&>(scene_.registry);
+  RenderJob& job = r.resource<RenderJob>();
+  if (const Tracer& tracer = *r.resource<ActiveTracer>().tracer; specula::device_frame(tracer))
+    read_back_frame(tracer, job.image);
+  return job.image;
+}
+
+std::pair<std::uint32_t, std::uint32_t> EditorSession::frame_size() const {
+  if (overlay_ready_) return {overlay_.width(), overlay_.height()};
+  const Framebuffer& image =
+      const_cast<ecs::Registry&>(scene_.registry).resource<RenderJob>().image;
+  return {image.width(), image.height()};
 }
 
 void EditorSession::set_cache_view(bool on) {
   cache_view_ = on;
+  keep_frames_on_device();
   if (!on) {
     overlay_ready_ = false;
     cache_view_counts_ = CacheViewCounts{};
@@ -185,7 +221,10 @@ void EditorSession::set_backend(const std::string& backend) {
     tracer->update(*layer);
   job.backend = std::string(tracer->name());
   view_.backend = backend;
+  Tracer& previous = *scene_.registry.resource<ActiveTracer>().tracer;
+  if (specula::device_frame(previous)) read_back_frame(previous, job.image); // goes with it
   scene_.registry.resource<ActiveTracer>().tracer = std::move(tracer);
+  keep_frames_on_device();
 }
 
 void EditorSession::set_mode(TraceMode mode) {
@@ -211,17 +250,17 @@ void EditorSession::set_cache(const cache::CacheSettings& cache) {
 // ------------------------------------------------------------------------------------
 
 std::optional<ecs::Entity> EditorSession::click(std::uint32_t x, std::uint32_t y) {
-  const Framebuffer& image = frame();
-  if (x >= image.width() || y >= image.height())
+  const auto [width, height] = frame_size();
+  if (x >= width || y >= height)
     throw Error("click", "pixel (" + std::to_string(x) + ", " + std::to_string(y) +
-                             ") lies outside the " + std::to_string(image.width()) + "x" +
-                             std::to_string(image.height()) + " frame");
+                             ") lies outside the " + std::to_string(width) + "x" +
+                             std::to_string(height) + " frame");
   const SceneLayer& layer = scene_.registry.resource<SceneLayer>();
   if (layer.syncs() == 0) throw Error("click", "no frame has been rendered yet");
   const std::optional<Camera> cam = active_camera(scene_.registry);
   if (!cam) throw Error("click", "the scene has no camera");
   // The same camera ray the frame traced, through the active tracer: no separate picking path.
-  const Ray ray = CameraRays(*cam, image.width(), image.height(), layer.render_origin()).ray(x, y);
+  const Ray ray = CameraRays(*cam, width, height, layer.render_origin()).ray(x, y);
   Hit hit;
   scene_.registry.resource<ActiveTracer>().tracer->intersect({&ray, 1}, {&hit, 1});
   selected_ = kNoId;
@@ -433,9 +472,9 @@ dvec2 EditorSession::screen_axis(ecs::Entity e, int axis) const {
   const dvec3 p = world_position(r, e);
   dvec3 unit(0.0);
   unit[axis] = 1.0;
-  const Framebuffer& image = frame();
-  const auto a = project(*cam, image.width(), image.height(), p);
-  const auto b = project(*cam, image.width(), image.height(), p + unit);
+  const auto [width, height] = frame_size();
+  const auto a = project(*cam, width, height, p);
+  const auto b = project(*cam, width, height, p + unit);
   if (!a || !b) throw Error("drag", "the handle lies behind the camera");
   return *b - *a;
 }

@@ -20,10 +20,12 @@
 #include <deque>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 namespace specula::editor {
@@ -86,8 +88,20 @@ public:
   /// 1 is the view's size.
   void set_render_scale(float scale);
   /// The latest frame as shown: the render job's image, or with the cache view on, that image
-  /// with the cached objects tinted (cache_view.h).
+  /// with the cached objects tinted (cache_view.h). A frame kept on a shared device
+  /// (share_device) is read back first.
   [[nodiscard]] const Framebuffer& frame() const;
+  /// Its size (no readback).
+  [[nodiscard]] std::pair<std::uint32_t, std::uint32_t> frame_size() const;
+  /// Renders on `device` (a window's: present::Window::context) where the backend is a Vulkan
+  /// one, keeping cast and Whitted frames there so that the window draws device_frame() in
+  /// place; frame() reads one back only when the pixels are asked for (a screenshot). The cache
+  /// view's tint is drawn on the host: with it on, frames are read back as before. Null: stop
+  /// sharing. The tracer is made again when the backend is a Vulkan one.
+  void share_device(std::shared_ptr<gpu::Context> device);
+  /// The latest frame where it is on the shared device, or null (a CPU backend, path and shadow
+  /// modes, the cache view, no device shared, or already read back).
+  [[nodiscard]] const gpu::DeviceFrame* device_frame() const;
   [[nodiscard]] const std::deque<FrameSample>& history() const { return history_; }
   /// The cache view (cache_view.h): from the next tick on, frame() tints each cached object's
   /// pixels by the texels their reflections read; off, it shows the rendered frame again at once.
@@ -212,6 +226,9 @@ private:
   std::deque<FrameSample> history_;
   bool cache_view_ = false;
   bool overlay_ready_ = false; ///< overlay_ holds the latest frame with the cache view
+  std::shared_ptr<gpu::Context> device_; ///< share_device's
+  /// Keeps the active tracer's frames on device_ when there is one and the cache view is off.
+  void keep_frames_on_device();
   Framebuffer overlay_{1, 1};
   CacheViewCounts cache_view_counts_;
 };

@@ -153,6 +153,9 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
 void DeviceRenderer::ensure_frame_buffers(std::uint32_t pixels) {
   ensure_size(context_, params_, sizeof(GpuFrameParams), MemoryKind::host);
   ensure_size(context_, counters_buffer_, sizeof(GpuFrameCounters), MemoryKind::host);
+  // A window may still be presenting the last frame from image_ (in place, on a shared
+  // device): its commands finish before the buffer is replaced.
+  if (image_.valid() && image_.size() < VkDeviceSize(pixels) * 16) context_.wait_idle();
   ensure_size(context_, image_, VkDeviceSize(pixels) * 16);
   ensure_size(context_, primary_buffer_, VkDeviceSize(pixels) * 4);
   ensure_size(context_, unused_, 16);
@@ -338,10 +341,34 @@ void DeviceRenderer::run_single(std::uint32_t pixels) {
   }
 }
 
+void DeviceRenderer::read_back(Framebuffer& out) const {
+  if (out.width() != frame_width_ || out.height() != frame_height_)
+    throw Error("vulkan", "reading back a " + std::to_string(frame_width_) + "x" +
+                              std::to_string(frame_height_) + " device frame into a " +
+                              std::to_string(out.width()) + "x" + std::to_string(out.height()) +
+                              " image");
+  const std::size_t pixels = std::size_t(frame_width_) * frame_height_;
+  std::vector<vec4> image(pixels);
+  image_.download(image.data(), image.size() * sizeof(vec4));
+  std::span<vec3> px = out.pixels();
+  for (std::size_t i = 0; i < pixels; ++i) px[i] = vec3(image[i]);
+  image_pending_ = false;
+  ++readbacks_;
+}
+
+std::span<const std::uint32_t> DeviceRenderer::primary_instances() const {
+  if (primary_pending_) {
+    primary_.resize(std::size_t(frame_width_) * frame_height_);
+    primary_buffer_.download(primary_.data(), primary_.size() * 4);
+    primary_pending_ = false;
+  }
+  return primary_;
+}
+
 std::vector<GpuHit> DeviceRenderer::primary_hits() const {
   if (execution_ != Execution::wavefront)
     throw Error("vulkan", "primary hits are kept by wavefront device frames only");
-  std::vector<GpuHit> hits(primary_.size());
+  std::vector<GpuHit> hits(std::size_t(frame_width_) * frame_height_);
   if (!hits.empty()) hits_.download(hits.data(), hits.size() * sizeof(GpuHit));
   return hits;
 }
@@ -432,12 +459,14 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
 
     GpuFrameCounters c{};
     counters_buffer_.download(&c, sizeof c);
-    std::vector<vec4> image(pixels);
-    image_.download(image.data(), image.size() * sizeof(vec4));
-    primary_.resize(pixels);
-    primary_buffer_.download(primary_.data(), primary_.size() * 4);
-    std::span<vec3> px = out.pixels();
-    for (std::uint32_t i = 0; i < pixels; ++i) px[i] = vec3(image[i]);
+    frame_width_ = width;
+    frame_height_ = height;
+    frame_ = DeviceFrame{&context_, &image_, width, height};
+    primary_pending_ = true;
+    // Cast and Whitted frames may stay on the device (presented in place); path and shadow
+    // frames are averaged on the host.
+    image_pending_ = keep_on_device_ && !stochastic;
+    if (!image_pending_) read_back(out);
 
     stats.rays = RayCounts{};
     for (int k = 0; k < kRayKindCount; ++k) stats.rays.count[k] = c.rays[k];

@@ -39,6 +39,16 @@ struct FrameStats;
 namespace specula::gpu {
 
 enum class Execution : std::uint8_t;
+
+/// A frame left on the device (DeviceRenderer::set_keep_frames_on_device): width × height
+/// linear radiance values, one vec4 each (alpha unused), row major from the top row, in
+/// `radiance` on `context`'s device. Valid until the next frame is rendered.
+struct DeviceFrame {
+  const Context* context = nullptr;
+  const Buffer* radiance = nullptr;
+  std::uint32_t width = 0, height = 0;
+};
+
 struct GpuTraceCounters;
 class DeviceCache;
 class DevicePath;
@@ -76,8 +86,21 @@ public:
   [[nodiscard]] std::uint32_t cache_records() const { return cache_records_; }
 
   /// The instance slot each pixel's primary ray hit in the last frame (kNoIndex: a miss), row
-  /// major: for comparing primary visibility with the CPU backends.
-  [[nodiscard]] std::span<const std::uint32_t> primary_instances() const { return primary_; }
+  /// major: for comparing primary visibility with the CPU backends (read back on first use).
+  [[nodiscard]] std::span<const std::uint32_t> primary_instances() const;
+
+  /// Cast and Whitted frames stay on the device instead of being read into render()'s `out`
+  /// (which is then left as it was): device_frame() hands the image to a presenter on the same
+  /// device (present::Window, Offscreen), read_back() copies it to the host when asked.
+  void set_keep_frames_on_device(bool keep) { keep_on_device_ = keep; }
+  /// The last frame while it is on the device only (kept there and not read back yet).
+  [[nodiscard]] const DeviceFrame* device_frame() const {
+    return image_pending_ ? &frame_ : nullptr;
+  }
+  /// Copies the last frame into `out` (its size); no longer on the device only after.
+  void read_back(Framebuffer& out) const;
+  /// Frames copied to the host so far (render() without keeping, or read_back()).
+  [[nodiscard]] std::uint64_t readbacks() const { return readbacks_; }
   /// Each pixel's primary hit in the last frame, row major, read back from the device
   /// (wavefront execution only: throws specula::Error otherwise): traced and rasterised primary
   /// visibility compared hit by hit.
@@ -132,7 +155,13 @@ private:
   std::uint32_t node_capacity_ = 0, shadow_capacity_ = 0, chunk_pixels_ = 0;
   std::uint32_t light_count_ = 0;
   std::uint32_t max_depth_ = 0;
-  std::vector<std::uint32_t> primary_;
+  mutable std::vector<std::uint32_t> primary_;
+  std::uint32_t frame_width_ = 0, frame_height_ = 0; ///< the last frame's size
+  DeviceFrame frame_;                                ///< the last frame where it is
+  bool keep_on_device_ = false;
+  mutable bool image_pending_ = false;   ///< the last frame is in image_ only
+  mutable bool primary_pending_ = false; ///< primary_ not yet read from primary_buffer_
+  mutable std::uint64_t readbacks_ = 0;
   double gpu_ms_ = 0.0;
   std::uint64_t dispatches_ = 0;
 };

@@ -459,12 +459,21 @@ void Context::run_now(const std::function<void(VkCommandBuffer)>& record) {
   VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
   si.commandBufferCount = 1;
   si.pCommandBuffers = &cmd;
+  const std::unique_lock<std::mutex> lock = lock_queue();
   const VkResult r = vkQueueSubmit(queue_, 1, &si, VK_NULL_HANDLE);
   if (r == VK_ERROR_DEVICE_LOST) lost_ = true;
   check(r, "vkQueueSubmit");
   const VkResult w = vkQueueWaitIdle(queue_);
   if (w == VK_ERROR_DEVICE_LOST) lost_ = true;
   check(w, "vkQueueWaitIdle");
+}
+
+void Context::wait_idle() {
+  if (lost_) return;
+  const std::unique_lock<std::mutex> lock = lock_queue();
+  const VkResult r = vkQueueWaitIdle(queue_);
+  if (r == VK_ERROR_DEVICE_LOST) lost_ = true;
+  check(r, "vkQueueWaitIdle");
 }
 
 // ---- Buffer ---------------------------------------------------------------------------------------
@@ -819,6 +828,13 @@ void Commands::begin_if_needed() {
   bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
   check(vkBeginCommandBuffer(cmd_, &bi), "vkBeginCommandBuffer");
   if (queries_ != VK_NULL_HANDLE) vkCmdResetQueryPool(cmd_, queries_, 0, max_timestamps_);
+  // Submissions are not ordered among themselves: a window's frame submitted earlier may still
+  // read a buffer these commands write (a device frame's image, presented in place).
+  VkMemoryBarrier mb{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  mb.srcAccessMask = VK_ACCESS_MEMORY_WRITE_BIT;
+  mb.dstAccessMask = VK_ACCESS_MEMORY_READ_BIT | VK_ACCESS_MEMORY_WRITE_BIT;
+  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT,
+                       0, 1, &mb, 0, nullptr, 0, nullptr);
   timestamps_ = 0;
   recording_ = true;
 }
@@ -872,6 +888,19 @@ void transition(VkCommandBuffer cmd, const Image& image, VkImageLayout from, VkI
                 src_stage, src_access, dst_stage, dst_access);
 }
 } // namespace
+
+void record_dispatch(VkCommandBuffer cmd, VkDescriptorSet set, const Pipeline& pipeline,
+                     std::span<const Buffer* const> buffers, const void* push_constants,
+                     std::uint32_t groups_x, std::uint32_t groups_y, std::uint32_t groups_z) {
+  if (buffers.size() != pipeline.bindings_)
+    throw GpuError("record_dispatch: " + std::to_string(buffers.size()) + " buffers for " +
+                       std::to_string(pipeline.bindings_) + " bindings",
+                   VK_ERROR_UNKNOWN);
+  bind(pipeline.context_->device(), cmd, set, pipeline.pipeline_, pipeline.layout_, buffers,
+       push_constants, pipeline.push_bytes_);
+  if (groups_x > 0 && groups_y > 0 && groups_z > 0)
+    vkCmdDispatch(cmd, groups_x, groups_y, groups_z);
+}
 
 void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageAspectFlags aspect,
                    VkImageLayout from, VkImageLayout to, VkPipelineStageFlags src_stage,
@@ -1032,7 +1061,11 @@ void Commands::submit() {
   si.pCommandBuffers = &cmd_;
   VkDevice d = context_.device();
   check(vkResetFences(d, 1, &fence_), "vkResetFences");
-  VkResult r = vkQueueSubmit(context_.queue(), 1, &si, fence_);
+  VkResult r;
+  {
+    const std::unique_lock<std::mutex> lock = context_.lock_queue();
+    r = vkQueueSubmit(context_.queue(), 1, &si, fence_);
+  }
   if (r == VK_SUCCESS) r = vkWaitForFences(d, 1, &fence_, VK_TRUE, UINT64_MAX);
   if (r == VK_ERROR_DEVICE_LOST) context_.lost_ = true;
   check(r, "vkQueueSubmit");

@@ -17,6 +17,7 @@
 #include <functional>
 #include <initializer_list>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -132,10 +133,16 @@ public:
   [[nodiscard]] bool valid() const { return pipeline_ != VK_NULL_HANDLE; }
   [[nodiscard]] std::uint32_t storage_buffers() const { return bindings_; }
   [[nodiscard]] std::uint32_t push_constant_bytes() const { return push_bytes_; }
+  /// Set 0's layout, for a descriptor set allocated by whoever records the pipeline into a
+  /// command buffer of its own (record_dispatch).
+  [[nodiscard]] VkDescriptorSetLayout set_layout() const { return set_layout_; }
 
 private:
   friend class Context;
   friend class Commands;
+  friend void record_dispatch(VkCommandBuffer, VkDescriptorSet, const Pipeline&,
+                              std::span<const Buffer* const>, const void*, std::uint32_t,
+                              std::uint32_t, std::uint32_t);
   Context* context_ = nullptr;
   VkShaderModule module_ = VK_NULL_HANDLE;
   VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
@@ -196,6 +203,14 @@ private:
   void release() noexcept;
 };
 
+/// Records a dispatch of a compute `pipeline` into `cmd`, a command buffer recorded and submitted
+/// elsewhere (a window's frame): `set` (allocated by the caller for pipeline.set_layout()) is
+/// written with `buffers` first, so no pending submission may be using it.
+void record_dispatch(VkCommandBuffer cmd, VkDescriptorSet set, const Pipeline& pipeline,
+                     std::span<const Buffer* const> buffers, const void* push_constants,
+                     std::uint32_t groups_x, std::uint32_t groups_y = 1,
+                     std::uint32_t groups_z = 1);
+
 /// One non-indexed draw of a graphics pipeline: vertices [0, vertex_count) of instance
 /// `instance` (gl_InstanceIndex).
 struct Draw {
@@ -205,8 +220,10 @@ struct Draw {
 
 /// One command buffer recorded and submitted at once: dispatches with their buffers bound,
 /// barriers between them, timestamps around them. submit() waits for completion and throws
-/// GpuError (device_lost() for a lost device). Descriptor sets are allocated per dispatch from a
-/// pool the recorder owns, freed when it is destroyed.
+/// GpuError (device_lost() for a lost device). Every recording starts with a barrier on all
+/// earlier submissions to the queue: a window's frame still reading a buffer (a device frame
+/// presented in place) finishes before these commands write it. Descriptor sets are allocated per
+/// dispatch from a pool the recorder owns, freed when it is destroyed.
 class Commands {
 public:
   explicit Commands(Context& context, std::uint32_t max_timestamps = 64);
@@ -326,6 +343,17 @@ public:
   /// One-shot commands on the queue, waited for (uploads, readbacks).
   void run_now(const std::function<void(VkCommandBuffer)>& record);
 
+  /// The queue is shared by whoever holds the context (a window presenting from a thread of its
+  /// own, a tracer rendering on the window's device): every vkQueueSubmit, vkQueuePresentKHR,
+  /// vkQueueWaitIdle and vkDeviceWaitIdle holds this lock, as Vulkan asks of a queue used from
+  /// several threads.
+  [[nodiscard]] std::unique_lock<std::mutex> lock_queue() {
+    return std::unique_lock<std::mutex>(queue_mutex_);
+  }
+  /// Waits until the queue has run everything submitted (vkQueueWaitIdle, locked): before
+  /// replacing a buffer that another user's pending commands may still read.
+  void wait_idle();
+
 private:
   friend class Commands;
   Context() = default;
@@ -340,6 +368,7 @@ private:
   DeviceInfo info_;
   bool validation_ = false;
   bool lost_ = false;
+  std::mutex queue_mutex_;
   /// Set 0 of p's storage buffers visible to `stages`; push constants to `push_stages`.
   static void make_layouts(VkDevice device, Pipeline& p, VkShaderStageFlags stages,
                            VkShaderStageFlags push_stages);

@@ -76,7 +76,8 @@ struct VulkanTracer::Kernels {
 VulkanTracer::VulkanTracer(std::uint32_t packet_width, VulkanOptions options)
     : packet_width_(packet_width), options_(std::move(options)),
       name_(options_.structure == GpuStructure::grid ? "vulkan-grid" : "vulkan") {
-  context_ = Context::create(options_.context);
+  context_ = options_.device ? options_.device
+                             : std::shared_ptr<Context>(Context::create(options_.context));
   scene_ = std::make_unique<GpuScene>(*context_, options_.structure, options_.grid_density);
   kernels_ = std::make_unique<Kernels>(*context_);
   PipelineDesc desc;
@@ -94,6 +95,16 @@ VulkanTracer::VulkanTracer(std::uint32_t packet_width, VulkanOptions options)
 }
 
 VulkanTracer::~VulkanTracer() = default;
+
+// Device frames run on the caller's thread alone, as render_frame_on_device does (the mutex
+// guards the CPU integrators' batches).
+void VulkanTracer::set_keep_frames_on_device(bool keep) {
+  renderer_->set_keep_frames_on_device(keep);
+}
+
+const DeviceFrame* VulkanTracer::device_frame() const { return renderer_->device_frame(); }
+
+void VulkanTracer::read_back_frame(Framebuffer& out) const { renderer_->read_back(out); }
 
 const TracerUpdateStats& VulkanTracer::update(const SceneLayer& layer) { return scene_->update(layer); }
 const TracerUpdateStats& VulkanTracer::last_update() const { return scene_->last_update(); }

@@ -12,6 +12,7 @@
 /// Loops are bounded for lavapipe (PLATFORM-NOTES): a ray that uses up its per-dispatch traversal
 /// budget is resumed in a further dispatch, and rays left pending (a driver cut) are counted.
 
+#include "specula/gpu/device_renderer.h"
 #include "specula/gpu/gpu_scene.h"
 #include "specula/gpu/raster_primary.h"
 #include "specula/gpu/vk_context.h"
@@ -51,7 +52,11 @@ struct VulkanOptions {
   /// Count ray/triangle tests in trace_rays.comp (GpuTraceCounters::tests; costs an atomic per
   /// ray). Traversal steps are always counted.
   bool count_tests = false;
+  /// How to open the device when `device` is null.
   Context::Options context;
+  /// A device to share instead (a window's: present::Window::context()), so that device frames
+  /// can be presented where they are (set_keep_frames_on_device).
+  std::shared_ptr<Context> device;
 };
 
 /// Counters of the latest batch or frame (tests assert cut == 0).
@@ -67,12 +72,10 @@ struct GpuTraceCounters {
   double gpu_ms = 0.0;          ///< timestamp time of the dispatches
 };
 
-class DeviceRenderer;
-
 class VulkanTracer final : public Tracer {
 public:
-  /// Opens a device (Context::create) and the kernels. Throws specula::UnavailableError when
-  /// there is no usable Vulkan device.
+  /// Opens a device (Context::create; or takes options.device) and the kernels. Throws
+  /// specula::UnavailableError when there is no usable Vulkan device.
   explicit VulkanTracer(std::uint32_t packet_width = 8, VulkanOptions options = {});
   ~VulkanTracer() override;
   VulkanTracer(const VulkanTracer&) = delete;
@@ -97,13 +100,25 @@ public:
   [[nodiscard]] const GpuTraceCounters& counters() const { return counters_; }
   /// The device-frame renderer (its latest frame's ray-cache figures, for tests).
   [[nodiscard]] const DeviceRenderer& renderer() const { return *renderer_; }
+  /// The device, for sharing.
+  [[nodiscard]] const std::shared_ptr<Context>& shared_context() const { return context_; }
+
+  /// Cast and Whitted device frames stay on the device, render_frame_on_device's `out` left as
+  /// it was: a presenter on the same device draws device_frame() where it is, and
+  /// read_back_frame() copies it to the host only when someone needs the pixels (a screenshot).
+  /// Off by default (every frame read back into `out`).
+  void set_keep_frames_on_device(bool keep);
+  /// The last device frame while it is on the device only.
+  [[nodiscard]] const DeviceFrame* device_frame() const;
+  /// Copies the last device frame into `out` (of its size).
+  void read_back_frame(Framebuffer& out) const;
 
 private:
   struct Kernels;
   std::uint32_t packet_width_;
   VulkanOptions options_;
   std::string name_;
-  std::unique_ptr<Context> context_;
+  std::shared_ptr<Context> context_;
   std::unique_ptr<GpuScene> scene_;
   std::unique_ptr<Kernels> kernels_;
   std::unique_ptr<DeviceRenderer> renderer_;

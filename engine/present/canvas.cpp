@@ -1,5 +1,6 @@
 #include "specula/present/canvas.h"
 
+#include "specula/gpu/shaders.h"
 #include "specula/image/srgb.h"
 
 #include <backends/imgui_impl_vulkan.h>
@@ -8,6 +9,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cstring>
 #include <stdexcept>
 #include <utility>
@@ -15,27 +17,33 @@
 
 namespace specula::present {
 
-void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint32_t height,
-                       std::span<std::uint8_t> out, bool bgra) {
-  const std::uint64_t fw = frame.width(), fh = frame.height();
+Letterbox letterbox(std::uint64_t fw, std::uint64_t fh, std::uint32_t width, std::uint32_t height) {
+  Letterbox l;
   // Scale to fit, aspect kept: the drawn rectangle is dw × dh, centred; the rest stays black.
-  std::uint64_t dw = 0, dh = 0;
   if (fw > 0 && fh > 0 && width > 0 && height > 0) {
     if (std::uint64_t(width) * fh <= std::uint64_t(height) * fw) { // width-bound
-      dw = width;
-      dh = std::clamp<std::uint64_t>((fh * width + fw / 2) / fw, 1, height);
+      l.dw = width;
+      l.dh = std::clamp<std::uint64_t>((fh * width + fw / 2) / fw, 1, height);
     } else {
-      dh = height;
-      dw = std::clamp<std::uint64_t>((fw * height + fh / 2) / fh, 1, width);
+      l.dh = height;
+      l.dw = std::clamp<std::uint64_t>((fw * height + fh / 2) / fh, 1, width);
     }
   }
-  const std::uint64_t ox = (width - dw) / 2, oy = (height - dh) / 2;
-  const auto pixels = frame.pixels();
-  const std::size_t r = bgra ? 2 : 0, b = bgra ? 0 : 2;
+  l.ox = (width - l.dw) / 2;
+  l.oy = (height - l.dh) / 2;
   // A frame drawn larger than it is (dynamic resolution) is scaled up bilinearly, in linear
   // colour; one drawn at its size or smaller takes the source pixel under each destination
   // pixel's centre (nearest neighbour, in integers: at the same size, the frame itself).
-  const bool bilinear = dw >= fw && dh >= fh && (dw > fw || dh > fh);
+  l.bilinear = l.dw >= fw && l.dh >= fh && (l.dw > fw || l.dh > fh);
+  return l;
+}
+
+void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint32_t height,
+                       std::span<std::uint8_t> out, bool bgra) {
+  const std::uint64_t fw = frame.width(), fh = frame.height();
+  const auto [ox, oy, dw, dh, bilinear] = letterbox(fw, fh, width, height);
+  const auto pixels = frame.pixels();
+  const std::size_t r = bgra ? 2 : 0, b = bgra ? 0 : 2;
   // Each drawn column's source column (or taps), once per frame rather than a division per pixel.
   std::vector<LinearTaps> columns;
   std::vector<std::uint32_t> nearest_columns;
@@ -180,7 +188,11 @@ Canvas::Canvas(gpu::Context& context, bool ui, VkFormat format)
 }
 
 Canvas::~Canvas() {
-  if (!context_.lost()) (void)vkDeviceWaitIdle(context_.device());
+  try {
+    context_.wait_idle();
+  } catch (const gpu::GpuError&) { // a lost device: nothing runs any more
+  }
+  encoder_.reset();
   if (ui_) ImGui_ImplVulkan_Shutdown();
   if (framebuffer_ != VK_NULL_HANDLE) vkDestroyFramebuffer(context_.device(), framebuffer_, nullptr);
   if (ui_pool_ != VK_NULL_HANDLE) vkDestroyDescriptorPool(context_.device(), ui_pool_, nullptr);
@@ -217,6 +229,116 @@ void Canvas::record(VkCommandBuffer cmd, const Framebuffer& frame, ImDrawData* u
   encode_srgb8_into(frame, width_, height_,
                     {static_cast<std::uint8_t*>(staging_.mapped()), std::size_t(width_) * height_ * 4},
                     format_ == VK_FORMAT_B8G8R8A8_UNORM);
+  record_pixels(cmd, staging_, ui);
+}
+
+/// present_encode.comp and what it reads besides the frame: the encoder's thresholds, the
+/// letterbox's taps (host-visible, rewritten per frame), the encoded pixels (device-local).
+struct Canvas::DeviceEncoder {
+  /// present_encode.comp's push constants.
+  struct Push {
+    std::uint32_t width, height, ox, oy, dw, dh, src_width, bgra;
+  };
+  /// One column's or row's source samples (LinearTaps, padded to 16 bytes).
+  struct Tap {
+    std::uint32_t lo, hi;
+    float weight;
+    std::uint32_t unused;
+  };
+  gpu::Pipeline pipeline;
+  VkDescriptorPool pool = VK_NULL_HANDLE;
+  VkDescriptorSet set = VK_NULL_HANDLE;
+  gpu::Buffer thresholds, taps, pixels;
+  VkDevice device = VK_NULL_HANDLE;
+
+  explicit DeviceEncoder(gpu::Context& context) : device(context.device()) {
+    gpu::PipelineDesc desc;
+    desc.spirv = gpu::shader_spirv("present_encode");
+    desc.storage_buffers = 4;
+    desc.push_constant_bytes = sizeof(Push);
+    desc.debug_name = "present_encode";
+    pipeline = context.make_pipeline(desc);
+    const VkDescriptorPoolSize size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 4};
+    VkDescriptorPoolCreateInfo dpi{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+    dpi.maxSets = 1;
+    dpi.poolSizeCount = 1;
+    dpi.pPoolSizes = &size;
+    gpu::check(vkCreateDescriptorPool(device, &dpi, nullptr, &pool), "vkCreateDescriptorPool");
+    const VkDescriptorSetLayout layout = pipeline.set_layout();
+    VkDescriptorSetAllocateInfo ai{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
+    ai.descriptorPool = pool;
+    ai.descriptorSetCount = 1;
+    ai.pSetLayouts = &layout;
+    gpu::check(vkAllocateDescriptorSets(device, &ai, &set), "vkAllocateDescriptorSets");
+    // threshold[k] is the least value that encodes to k; 0 and 2 bound the search.
+    std::array<float, 257> t{};
+    const Srgb8Encoder& encoder = Srgb8Encoder::get();
+    for (std::uint32_t k = 1; k < 256; ++k) t[k] = encoder.threshold(k);
+    t[256] = 2.0f;
+    thresholds = context.make_buffer(sizeof t, gpu::MemoryKind::host);
+    thresholds.upload(t.data(), sizeof t);
+  }
+  ~DeviceEncoder() { vkDestroyDescriptorPool(device, pool, nullptr); }
+  DeviceEncoder(const DeviceEncoder&) = delete;
+  DeviceEncoder& operator=(const DeviceEncoder&) = delete;
+};
+
+void Canvas::record(VkCommandBuffer cmd, const gpu::DeviceFrame& frame, ImDrawData* ui) {
+  if (frame.context != &context_ || frame.radiance == nullptr)
+    throw std::invalid_argument("a device frame is drawn by a canvas on its own device");
+  if (frame.radiance->size() < VkDeviceSize(frame.width) * frame.height * 16)
+    throw std::invalid_argument("a device frame's buffer is smaller than its size");
+  if (!encoder_) encoder_ = std::make_unique<DeviceEncoder>(context_);
+  DeviceEncoder& e = *encoder_;
+  const VkDeviceSize bytes = VkDeviceSize(width_) * height_ * 4;
+  if (!e.pixels.valid() || e.pixels.size() < bytes) e.pixels = context_.make_buffer(bytes);
+
+  const Letterbox box = letterbox(frame.width, frame.height, width_, height_);
+  const std::size_t taps = box.dw + box.dh;
+  if (!e.taps.valid() ||
+      e.taps.size() < std::max<std::size_t>(taps, 1) * sizeof(DeviceEncoder::Tap))
+    e.taps = context_.make_buffer(std::max<std::size_t>(taps, 1) * sizeof(DeviceEncoder::Tap),
+                                  gpu::MemoryKind::host);
+  auto* tap = static_cast<DeviceEncoder::Tap*>(e.taps.mapped());
+  const auto fill = [&](std::uint64_t drawn, std::uint64_t source) {
+    for (std::uint64_t i = 0; i < drawn; ++i, ++tap) {
+      if (box.bilinear) {
+        const LinearTaps t = linear_source(i, drawn, source);
+        *tap = {t.lo, t.hi, t.weight, 0};
+      } else {
+        const auto n = std::uint32_t(nearest_source(i, drawn, source));
+        *tap = {n, n, 0.0f, 0};
+      }
+    }
+  };
+  fill(box.dw, frame.width);
+  fill(box.dh, frame.height);
+
+  // The frame's kernels (an earlier submission) wrote the radiance; the previous frame's copy
+  // read the pixels: both finish before the encoding.
+  VkMemoryBarrier mb{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  mb.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT;
+  mb.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT;
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                       VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &mb, 0, nullptr, 0, nullptr);
+  const DeviceEncoder::Push push{width_,
+                                 height_,
+                                 std::uint32_t(box.ox),
+                                 std::uint32_t(box.oy),
+                                 std::uint32_t(box.dw),
+                                 std::uint32_t(box.dh),
+                                 frame.width,
+                                 format_ == VK_FORMAT_B8G8R8A8_UNORM ? 1u : 0u};
+  const gpu::Buffer* buffers[] = {frame.radiance, &e.taps, &e.thresholds, &e.pixels};
+  gpu::record_dispatch(cmd, e.set, e.pipeline, buffers, &push, (width_ + 7) / 8, (height_ + 7) / 8);
+  mb.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+  mb.dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0,
+                       1, &mb, 0, nullptr, 0, nullptr);
+  record_pixels(cmd, e.pixels, ui);
+}
+
+void Canvas::record_pixels(VkCommandBuffer cmd, const gpu::Buffer& pixels, ImDrawData* ui) {
   // The previous contents are replaced whole; the stages that last read the image (a blit or a
   // readback, both transfers) finish before the copy writes it.
   gpu::image_barrier(cmd, image_.handle(), VK_IMAGE_ASPECT_COLOR_BIT, VK_IMAGE_LAYOUT_UNDEFINED,
@@ -225,7 +347,7 @@ void Canvas::record(VkCommandBuffer cmd, const Framebuffer& frame, ImDrawData* u
   VkBufferImageCopy region{};
   region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
   region.imageExtent = {width_, height_, 1};
-  vkCmdCopyBufferToImage(cmd, staging_.handle(), image_.handle(),
+  vkCmdCopyBufferToImage(cmd, pixels.handle(), image_.handle(),
                          VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
   if (ui_ && ui != nullptr && ui->CmdListsCount > 0) {
     VkRenderPassBeginInfo rbi{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};

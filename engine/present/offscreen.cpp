@@ -48,7 +48,15 @@ public:
     ImGui::NewFrame();
   }
 
-  Rgba8Image render(const Framebuffer& frame, ImDrawData* ui) override {
+  Rgba8Image render(const Framebuffer& frame, ImDrawData* ui) override { return draw(frame, ui); }
+  Rgba8Image render(const gpu::DeviceFrame& frame, ImDrawData* ui) override {
+    return draw(frame, ui);
+  }
+  [[nodiscard]] std::shared_ptr<gpu::Context> context() const override { return context_; }
+
+private:
+  template <class Frame>
+  Rgba8Image draw(const Frame& frame, ImDrawData* ui) {
     if (ui_ != nullptr) ImGui::SetCurrentContext(ui_);
     context_->run_now([&](VkCommandBuffer cmd) {
       canvas_->record(cmd, frame, ui);
@@ -57,8 +65,7 @@ public:
     return canvas_->readback();
   }
 
-private:
-  std::unique_ptr<gpu::Context> context_;
+  std::shared_ptr<gpu::Context> context_;
   ImGuiContext* ui_ = nullptr;
   std::unique_ptr<Canvas> canvas_;
 };

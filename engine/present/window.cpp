@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <future>
 #include <limits>
+#include <mutex>
 
 namespace specula::present {
 namespace {
@@ -74,6 +75,18 @@ public:
   }
 
   void present(const Framebuffer& frame, ImDrawData* ui) override {
+    present_with([&] { canvas_->record(cmd_, frame, ui); });
+  }
+
+  void present(const gpu::DeviceFrame& frame, ImDrawData* ui) override {
+    present_with([&] { canvas_->record(cmd_, frame, ui); });
+  }
+
+  [[nodiscard]] std::shared_ptr<gpu::Context> context() const override { return context_; }
+
+  /// present(): `record` records the canvas's commands into cmd_.
+  template <class Record>
+  void present_with(const Record& record) {
     finish_presenting();
     const VkDevice device = context_->device();
     gpu::check(vkWaitForFences(device, 1, &fence_, VK_TRUE, UINT64_MAX), "vkWaitForFences");
@@ -98,7 +111,7 @@ public:
     VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
     bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
     gpu::check(vkBeginCommandBuffer(cmd_, &bi), "vkBeginCommandBuffer");
-    canvas_->record(cmd_, frame, ui);
+    record();
     copy_to_swapchain(images_[index]);
     gpu::check(vkEndCommandBuffer(cmd_), "vkEndCommandBuffer");
 
@@ -113,14 +126,17 @@ public:
     si.signalSemaphoreCount = 1;
     si.pSignalSemaphores = &rendered_[index];
     gpu::check(vkResetFences(device, 1, &fence_), "vkResetFences");
-    gpu::check(vkQueueSubmit(context_->queue(), 1, &si, fence_), "vkQueueSubmit");
+    {
+      const std::unique_lock<std::mutex> lock = context_->lock_queue();
+      gpu::check(vkQueueSubmit(context_->queue(), 1, &si, fence_), "vkQueueSubmit");
+    }
     presented_ = true;
 
     // The present on a thread of its own, so that the next frame's tick goes on meanwhile: on
     // lavapipe the call waits for the copy and the panels' pass to run, then hands the image to
     // the X server (3-7 ms of a 960x540 frame). The queue and the swapchain are touched again
-    // only after finish_presenting().
-    presenting_ = std::async(std::launch::async, [queue = context_->queue(), swapchain = swapchain_,
+    // only after finish_presenting(), the queue by a tracer sharing the device under its lock.
+    presenting_ = std::async(std::launch::async, [context = context_.get(), swapchain = swapchain_,
                                                   wait = rendered_[index], index] {
       VkPresentInfoKHR pi{VK_STRUCTURE_TYPE_PRESENT_INFO_KHR};
       pi.waitSemaphoreCount = 1;
@@ -128,7 +144,8 @@ public:
       pi.swapchainCount = 1;
       pi.pSwapchains = &swapchain;
       pi.pImageIndices = &index;
-      return vkQueuePresentKHR(queue, &pi);
+      const std::unique_lock<std::mutex> lock = context->lock_queue();
+      return vkQueuePresentKHR(context->queue(), &pi);
     });
   }
 
@@ -259,7 +276,7 @@ private:
   void make_swapchain() {
     const VkDevice device = context_->device();
     const VkPhysicalDevice physical = context_->physical_device();
-    gpu::check(vkDeviceWaitIdle(device), "vkDeviceWaitIdle");
+    context_->wait_idle();
     stale_ = false;
     VkSurfaceCapabilitiesKHR caps;
     gpu::check(vkGetPhysicalDeviceSurfaceCapabilitiesKHR(physical, surface_, &caps),
@@ -376,7 +393,10 @@ private:
   /// Releases whatever open() got to, in reverse order.
   void destroy() noexcept {
     if (presenting_.valid()) (void)presenting_.get(); // the result no longer matters
-    if (context_ != nullptr && !context_->lost()) (void)vkDeviceWaitIdle(context_->device());
+    if (context_ != nullptr) try {
+        context_->wait_idle();
+      } catch (const gpu::GpuError&) { // a lost device: nothing runs any more
+      }
     if (ui_ != nullptr) ImGui::SetCurrentContext(ui_);
     canvas_.reset();
     if (glfw_ui_) ImGui_ImplGlfw_Shutdown();
@@ -398,7 +418,8 @@ private:
 
   bool vsync_ = false;
   GLFWwindow* window_ = nullptr;
-  std::unique_ptr<gpu::Context> context_;
+  /// Shared with tracers rendering on the window's device (context()).
+  std::shared_ptr<gpu::Context> context_;
   VkSurfaceKHR surface_ = VK_NULL_HANDLE;
   ImGuiContext* ui_ = nullptr;
   bool glfw_ui_ = false;

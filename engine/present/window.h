@@ -22,6 +22,11 @@
 
 struct ImDrawData;
 
+namespace specula::gpu {
+class Context;
+struct DeviceFrame;
+} // namespace specula::gpu
+
 namespace specula::present {
 
 /// An 8-bit sRGB RGBA image read back from a target (row-major, top row first).
@@ -77,6 +82,16 @@ public:
   /// drawing is submitted: the present call itself runs on a thread of its own while the caller
   /// goes on, and the next present() or read_back() waits for it (and throws what it failed with).
   virtual void present(const Framebuffer& frame, ImDrawData* ui) = 0;
+  /// The same for a frame rendered on this window's device (a Vulkan tracer made on context(),
+  /// its frames kept there: render/tracer_factory.h's keep_frames_on_device), used where it is:
+  /// a kernel scales and encodes it into the image the UI is drawn over, no copy through the
+  /// host. The bytes are those present(Framebuffer) shows for the frame read back. Throws
+  /// std::invalid_argument for a frame of another device.
+  virtual void present(const gpu::DeviceFrame& frame, ImDrawData* ui) = 0;
+  /// The presenting device, to share: a Vulkan tracer made on it (GpuTracerOptions::device)
+  /// renders frames present() can draw in place. Its queue is locked (Context::lock_queue)
+  /// around every submission and present.
+  [[nodiscard]] virtual std::shared_ptr<gpu::Context> context() const = 0;
   /// Asks for a new client area size (the window system may refuse or adjust it); the next
   /// present() after the resize lands draws at the new size.
   virtual void set_size(std::uint32_t width, std::uint32_t height) = 0;
@@ -107,6 +122,10 @@ public:
   virtual void begin_ui() = 0;
   /// Draws `frame` and `ui` (as Window::present does) and returns the image.
   virtual Rgba8Image render(const Framebuffer& frame, ImDrawData* ui) = 0;
+  /// The same for a frame on this target's device, used where it is (Window::present's).
+  virtual Rgba8Image render(const gpu::DeviceFrame& frame, ImDrawData* ui) = 0;
+  /// The device, to share with a tracer (Window::context).
+  [[nodiscard]] virtual std::shared_ptr<gpu::Context> context() const = 0;
 };
 
 /// The CPU encoding present() applies, for comparing: clamp to [0, 1], sRGB, 8 bits, alpha 255;

@@ -245,6 +245,7 @@ std::unique_ptr<Tracer> make_tracer(std::string_view name, const TracerOptions& 
     vk.device_frames = options.gpu.device_frames;
     vk.grid_density = options.gpu.grid_density;
     vk.count_tests = options.gpu.count_tests;
+    vk.device = options.gpu.device;
     auto tracer = std::make_unique<gpu::VulkanTracer>(packet_width, vk);
     // Test-only: lets the CLI's tests reach the device-loss path of a whole run (every submit
     // then fails as on a lost device); see tests/cli.
@@ -270,6 +271,42 @@ std::unique_ptr<Tracer> make_tracer(std::string_view name, std::uint32_t packet_
   options.packet_width = packet_width;
   options.kind = kind;
   return make_tracer(name, options);
+}
+
+bool keep_frames_on_device(Tracer& tracer, bool keep) {
+#if SPECULA_HAS_VULKAN
+  if (auto* vk = dynamic_cast<gpu::VulkanTracer*>(&tracer)) {
+    vk->set_keep_frames_on_device(keep);
+    return true;
+  }
+#else
+  (void)tracer;
+  (void)keep;
+#endif
+  return false;
+}
+
+const gpu::DeviceFrame* device_frame(const Tracer& tracer) {
+#if SPECULA_HAS_VULKAN
+  if (const auto* vk = dynamic_cast<const gpu::VulkanTracer*>(&tracer)) return vk->device_frame();
+#else
+  (void)tracer;
+#endif
+  return nullptr;
+}
+
+void read_back_frame(const Tracer& tracer, Framebuffer& out) {
+#if SPECULA_HAS_VULKAN
+  if (const auto* vk = dynamic_cast<const gpu::VulkanTracer*>(&tracer);
+      vk != nullptr && vk->device_frame() != nullptr) {
+    vk->read_back_frame(out);
+    return;
+  }
+#else
+  (void)out;
+#endif
+  throw Error(std::string("backend '") + std::string(tracer.name()) +
+              "' has no frame on a device to read back");
 }
 
 std::optional<TracerDevice> tracer_device(const Tracer& tracer) {

@@ -17,6 +17,12 @@
 
 namespace specula {
 
+class Framebuffer;
+namespace gpu {
+class Context;
+struct DeviceFrame;
+} // namespace gpu
+
 struct BackendInfo {
   std::string_view name;
   bool available = false; ///< in this build and usable on this machine
@@ -80,6 +86,9 @@ struct GpuTracerOptions {
   float grid_density = 4.0f;
   /// Count the Vulkan traversal's ray/triangle tests (TracerDevice::tests; slower).
   bool count_tests = false;
+  /// A Vulkan device to render on instead of opening one: a window's (present::Window::context),
+  /// so that its frames can be presented where they are (keep_frames_on_device).
+  std::shared_ptr<gpu::Context> device;
 };
 
 struct TracerOptions {
@@ -121,6 +130,18 @@ struct TracerDevice {
   double gpu_ms = 0.0;
 };
 [[nodiscard]] std::optional<TracerDevice> tracer_device(const Tracer& tracer);
+
+/// Device frames (the Vulkan backends' cast and Whitted frames) stay on the device instead of
+/// being read into the frame's image, which is then left as it was: a presenter on the same
+/// device draws device_frame() where it is (present::Window::present), and read_back_frame copies
+/// it to the host when the pixels are needed. Returns false (nothing changed) for tracers
+/// without a device.
+bool keep_frames_on_device(Tracer& tracer, bool keep);
+/// The tracer's last frame while it is on the device only (null for every other tracer and
+/// frame); valid until the tracer renders again.
+[[nodiscard]] const gpu::DeviceFrame* device_frame(const Tracer& tracer);
+/// Copies that frame into `out` (of its size); throws specula::Error when there is none.
+void read_back_frame(const Tracer& tracer, Framebuffer& out);
 
 /// Whether an exception is a tracer's device failing (gpu::GpuError: a Vulkan call failed, the
 /// device was lost), as opposed to bad input (specula::Error), a missing feature

@@ -80,16 +80,19 @@ ecs::Entity named(EditorSession& s, const std::string& name) {
 }
 
 TEST(EditorWindow, WindowPixelsMapThroughTheLetterboxToFramePixels) {
-  const Framebuffer f(kFrameW, kFrameH);
-  const auto p = window_to_frame(kWindowW, kWindowH, f, kPillar + 2.0 * 10.25, 2.0 * 30.5);
+  const auto p =
+      window_to_frame(kWindowW, kWindowH, kFrameW, kFrameH, kPillar + 2.0 * 10.25, 2.0 * 30.5);
   ASSERT_TRUE(p);
   EXPECT_DOUBLE_EQ(p->x, 10.25);
   EXPECT_DOUBLE_EQ(p->y, 30.5);
-  EXPECT_FALSE(window_to_frame(kWindowW, kWindowH, f, kPillar - 1.0, 10.0)) << "left pillar";
-  EXPECT_FALSE(window_to_frame(kWindowW, kWindowH, f, kWindowW - kPillar + 0.5, 10.0))
+  EXPECT_FALSE(window_to_frame(kWindowW, kWindowH, kFrameW, kFrameH, kPillar - 1.0, 10.0))
+      << "left pillar";
+  EXPECT_FALSE(
+      window_to_frame(kWindowW, kWindowH, kFrameW, kFrameH, kWindowW - kPillar + 0.5, 10.0))
       << "right pillar";
-  EXPECT_FALSE(window_to_frame(kWindowW, kWindowH, f, 100.0, -0.5)) << "above the window";
-  EXPECT_FALSE(window_to_frame(0, 0, f, 0.0, 0.0)) << "a minimised window";
+  EXPECT_FALSE(window_to_frame(kWindowW, kWindowH, kFrameW, kFrameH, 100.0, -0.5))
+      << "above the window";
+  EXPECT_FALSE(window_to_frame(0, 0, kFrameW, kFrameH, 0.0, 0.0)) << "a minimised window";
 }
 
 TEST(EditorWindow, ClickSelectsXDragMovesOneUnitCtrlZUndoesCtrlYRedoes) {

@@ -3,10 +3,14 @@
 // display (Xvfb in CI), and the input bookkeeping behind Window::poll.
 #include "../gpu/device_scenes.h"
 #include "specula/core/error.h"
+#include "specula/gpu/device_renderer.h"
+#include "specula/gpu/vk_context.h"
 #include "specula/image/image_io.h"
 #include "specula/image/srgb.h"
 #include "specula/present/input.h"
 #include "specula/present/window.h"
+#include "specula/render/tracer_factory.h"
+#include "specula/trace/render_frame.h"
 
 #include <GLFW/glfw3.h>
 #include <gtest/gtest.h>
@@ -112,6 +116,155 @@ TEST(Offscreen, WithoutUiReturnsTheEncodedFrame) {
     EXPECT_TRUE(same_image(target->render(frame, nullptr), encode_srgb8(frame, w, h)))
         << w << "x" << h;
   }
+}
+
+/// `frame` on `context`'s device as a device frame's buffer: one vec4 per pixel.
+gpu::Buffer device_copy(gpu::Context& context, const Framebuffer& frame) {
+  std::vector<glm::vec4> pixels;
+  for (const vec3& p : frame.pixels()) pixels.emplace_back(p, 0.0f);
+  gpu::Buffer buffer = context.make_buffer(pixels.size() * sizeof(glm::vec4));
+  buffer.upload(pixels.data(), pixels.size() * sizeof(glm::vec4));
+  return buffer;
+}
+
+/// Every channel within one code of the wanted one (bilinear scaling: the host may fuse a
+/// multiply-add the kernel keeps apart), and no more than 1% of them off at all.
+::testing::AssertionResult within_one_code(const Rgba8Image& got, const Rgba8Image& want) {
+  if (got.width != want.width || got.height != want.height) return same_image(got, want);
+  std::size_t off = 0;
+  for (std::size_t i = 0; i < want.rgba.size(); ++i) {
+    const int d = int(got.rgba[i]) - int(want.rgba[i]);
+    if (d < -1 || d > 1)
+      return ::testing::AssertionFailure()
+             << "byte " << i << ": " << int(got.rgba[i]) << ", want " << int(want.rgba[i]);
+    off += d != 0 ? 1 : 0;
+  }
+  if (off * 100 > want.rgba.size())
+    return ::testing::AssertionFailure() << off << " bytes one code off";
+  return ::testing::AssertionSuccess();
+}
+
+/// A frame whose values sit on both sides of every step of the 8-bit encoding (each threshold
+/// and the float below it), then the values the clamp handles: -0, ±inf, NaN, above 1.
+Framebuffer threshold_frame() {
+  Framebuffer frame(64, 8);
+  const Srgb8Encoder& encoder = Srgb8Encoder::get();
+  std::span<vec3> px = frame.pixels();
+  for (std::uint32_t k = 1; k < 256; ++k) {
+    const float t = encoder.threshold(k);
+    px[2 * (k - 1)] = vec3(t, std::nextafter(t, 0.0f), t);
+    px[2 * (k - 1) + 1] = vec3(std::nextafter(t, 0.0f), t, std::nextafter(t, 2.0f));
+  }
+  const float inf = std::numeric_limits<float>::infinity();
+  px[510] = vec3(-0.0f, inf, -inf);
+  px[511] = vec3(std::numeric_limits<float>::quiet_NaN(), 1.0f, 1.5f);
+  return frame;
+}
+
+TEST(Offscreen, DeviceFramesDrawTheBytesOfTheHostEncoding) {
+  const Framebuffer random = random_frame(37, 23, 5), steps = threshold_frame();
+  struct Case {
+    const Framebuffer* frame;
+    std::uint32_t width, height;
+    bool bilinear;
+  };
+  // The same size, smaller with bars (nearest neighbour), larger (bilinear), letterboxed.
+  for (const Case& c :
+       {Case{&steps, 64, 8, false}, Case{&random, 37, 23, false}, Case{&random, 30, 41, false},
+        Case{&random, 64, 48, true}, Case{&steps, 160, 40, true}}) {
+    auto target = try_offscreen({c.width, c.height, false});
+    if (!target) GTEST_SKIP() << "no Vulkan device on this machine";
+    const gpu::Buffer buffer = device_copy(*target->context(), *c.frame);
+    const gpu::DeviceFrame frame{target->context().get(), &buffer, c.frame->width(),
+                                 c.frame->height()};
+    const Rgba8Image shown = target->render(frame, nullptr);
+    const Rgba8Image want = encode_srgb8(*c.frame, c.width, c.height);
+    if (c.bilinear)
+      EXPECT_TRUE(within_one_code(shown, want)) << c.width << "x" << c.height;
+    else
+      EXPECT_TRUE(same_image(shown, want)) << c.width << "x" << c.height;
+  }
+}
+
+TEST(Offscreen, RefusesADeviceFrameOfAnotherDevice) {
+  auto target = try_offscreen({8, 8, false});
+  if (!target) GTEST_SKIP() << "no Vulkan device on this machine";
+  const auto other = gpu::Context::create();
+  const Framebuffer frame = random_frame(8, 8, 3);
+  const gpu::Buffer buffer = device_copy(*other, frame);
+  EXPECT_THROW((void)target->render(gpu::DeviceFrame{other.get(), &buffer, 8, 8}, nullptr),
+               std::invalid_argument);
+  // A buffer too small for the size it claims.
+  const gpu::Buffer mine = device_copy(*target->context(), frame);
+  EXPECT_THROW(
+      (void)target->render(gpu::DeviceFrame{target->context().get(), &mine, 8, 9}, nullptr),
+      std::invalid_argument);
+}
+
+/// A Vulkan tracer on `device` over the test Cornell box, its frames kept on the device.
+struct SharedTracer {
+  ecs::Registry reg;
+  std::unique_ptr<test::TracedWorld> world;
+  explicit SharedTracer(std::shared_ptr<gpu::Context> device) {
+    test::cornell(reg);
+    TracerOptions options;
+    options.gpu.device = std::move(device);
+    world = std::make_unique<test::TracedWorld>(reg, "vulkan", options);
+  }
+  Tracer& tracer() { return *world->tracer; }
+  FrameStats render(TraceMode mode, Framebuffer& out,
+                    const Camera& camera = test::cornell_camera()) {
+    TraceSettings s;
+    s.mode = mode;
+    s.max_depth = 4;
+    s.threads = 2;
+    return render_frame(*world->tracer, world->layer, camera, s, out, nullptr);
+  }
+};
+
+TEST(Offscreen, ShowsAVulkanTracersFrameWhereItIs) {
+  constexpr std::uint32_t kW = 64, kH = 48;
+  auto target = try_offscreen({kW, kH, false});
+  if (!target) GTEST_SKIP() << "no Vulkan device on this machine";
+  SharedTracer shared(target->context());
+  ASSERT_TRUE(keep_frames_on_device(shared.tracer(), true));
+  ASSERT_EQ(tracer_device(shared.tracer())->name, target->context()->info().name);
+
+  const Framebuffer untouched(kW, kH, vec3(0.5f, -1.0f, 7.0f));
+  Framebuffer out = untouched;
+  shared.render(TraceMode::Whitted, out);
+  EXPECT_EQ(out, untouched) << "the frame went through the host";
+  const gpu::DeviceFrame* on_device = device_frame(shared.tracer());
+  ASSERT_NE(on_device, nullptr);
+  EXPECT_EQ(on_device->context, target->context().get());
+  EXPECT_EQ(on_device->width, kW);
+  const Rgba8Image shown = target->render(*on_device, nullptr);
+
+  // Read back on demand, the frame is the one shown, and the one a frame read back at once is.
+  Framebuffer host(kW, kH);
+  read_back_frame(shared.tracer(), host);
+  EXPECT_EQ(device_frame(shared.tracer()), nullptr) << "read back: no longer on the device only";
+  EXPECT_THROW(read_back_frame(shared.tracer(), host), Error);
+  EXPECT_TRUE(same_image(shown, encode_srgb8(host, kW, kH)));
+  ASSERT_TRUE(keep_frames_on_device(shared.tracer(), false));
+  Framebuffer direct(kW, kH);
+  shared.render(TraceMode::Whitted, direct);
+  EXPECT_EQ(device_frame(shared.tracer()), nullptr);
+  EXPECT_EQ(direct, host);
+  EXPECT_NE(direct, untouched);
+
+  // Path frames are averaged on the host: read back even when kept.
+  ASSERT_TRUE(keep_frames_on_device(shared.tracer(), true));
+  out = untouched;
+  shared.render(TraceMode::Path, out);
+  EXPECT_EQ(device_frame(shared.tracer()), nullptr);
+  EXPECT_NE(out, untouched);
+
+  // CPU tracers have no device to keep frames on.
+  test::TracedWorld cpu(shared.reg, "native");
+  EXPECT_FALSE(keep_frames_on_device(*cpu.tracer, true));
+  EXPECT_EQ(device_frame(*cpu.tracer), nullptr);
+  EXPECT_THROW(read_back_frame(*cpu.tracer, host), Error);
 }
 
 TEST(Offscreen, UiWindowChangesOnlyItsRectangle) {
@@ -276,6 +429,52 @@ TEST(Window, PresentsFramesAndReadsThemBack) {
     const Rgba8Image want = encode_srgb8(frame, window->width(), window->height());
     if (ui)
       EXPECT_FALSE(same_image(shown, want)) << "frame " << i << ": the panel is missing";
+    else
+      EXPECT_TRUE(same_image(shown, want)) << "frame " << i;
+  }
+}
+
+TEST(Window, PresentsAVulkanTracersFramesWhereTheyAre) {
+  SPECULA_NEED_DISPLAY();
+  WindowSettings settings;
+  settings.width = 320;
+  settings.height = 200;
+  settings.ui = true;
+  std::string why;
+  auto window = open_window(settings, why);
+  if (!window) GTEST_SKIP() << why;
+  SharedTracer shared(window->context());
+  ASSERT_TRUE(keep_frames_on_device(shared.tracer(), true));
+  InputState input;
+  Camera camera = test::cornell_camera();
+  // Frames presented back to back while the next renders on the same queue (the present runs on
+  // a thread of its own), at the window's size and smaller (scaled up), with and without panels;
+  // some read back and compared with the host encoding of the frame read back.
+  for (std::uint32_t i = 0; i < 8; ++i) {
+    const bool small = i % 3 == 1;
+    Framebuffer out(small ? 160 : 320, small ? 100 : 200);
+    camera.position.x = 0.05 * i;
+    shared.render(TraceMode::Whitted, out, camera);
+    const gpu::DeviceFrame* on_device = device_frame(shared.tracer());
+    ASSERT_NE(on_device, nullptr) << "frame " << i;
+    ASSERT_TRUE(window->poll(input));
+    const bool ui = i % 4 == 3;
+    for (int pass = 0; ui && pass < 2; ++pass) {
+      window->begin_ui();
+      ImGui::Begin("panel");
+      ImGui::TextUnformatted("hello");
+      ImGui::End();
+      ImGui::Render();
+    }
+    window->present(*on_device, ui ? ImGui::GetDrawData() : nullptr);
+    if (i % 2 == 0) continue;
+    const Rgba8Image shown = window->read_back();
+    read_back_frame(shared.tracer(), out);
+    const Rgba8Image want = encode_srgb8(out, window->width(), window->height());
+    if (ui)
+      EXPECT_FALSE(same_image(shown, want)) << "frame " << i << ": the panel is missing";
+    else if (small)
+      EXPECT_TRUE(within_one_code(shown, want)) << "frame " << i;
     else
       EXPECT_TRUE(same_image(shown, want)) << "frame " << i;
   }
