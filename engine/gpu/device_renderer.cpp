@@ -353,7 +353,6 @@ void DeviceRenderer::read_back(Framebuffer& out) const {
   std::span<vec3> px = out.pixels();
   for (std::size_t i = 0; i < pixels; ++i) px[i] = vec3(image[i]);
   image_pending_ = false;
-  ++readbacks_;
 }
 
 std::span<const std::uint32_t> DeviceRenderer::primary_instances() const {

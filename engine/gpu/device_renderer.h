@@ -99,8 +99,6 @@ public:
   }
   /// Copies the last frame into `out` (its size); no longer on the device only after.
   void read_back(Framebuffer& out) const;
-  /// Frames copied to the host so far (render() without keeping, or read_back()).
-  [[nodiscard]] std::uint64_t readbacks() const { return readbacks_; }
   /// Each pixel's primary hit in the last frame, row major, read back from the device
   /// (wavefront execution only: throws specula::Error otherwise): traced and rasterised primary
   /// visibility compared hit by hit.
@@ -161,7 +159,6 @@ private:
   bool keep_on_device_ = false;
   mutable bool image_pending_ = false;   ///< the last frame is in image_ only
   mutable bool primary_pending_ = false; ///< primary_ not yet read from primary_buffer_
-  mutable std::uint64_t readbacks_ = 0;
   double gpu_ms_ = 0.0;
   std::uint64_t dispatches_ = 0;
 };
