@@ -395,14 +395,32 @@ std::unique_ptr<Window> open_window(const WindowSettings& settings, std::string&
   }
 }
 
-TEST(Window, PresentsFramesAndReadsThemBack) {
-  SPECULA_NEED_DISPLAY();
+/// A 320×200 window with Dear ImGui (null, with the reason in `why`, when none opens).
+std::unique_ptr<Window> open_ui_window(std::string& why) {
   WindowSettings settings;
   settings.width = 320;
   settings.height = 200;
   settings.ui = true;
+  return open_window(settings, why);
+}
+
+/// One panel's draw data for the next present.
+ImDrawData* panel_ui(Window& window) {
+  // A new ImGui window is laid out on its first frame and drawn from the next.
+  for (int pass = 0; pass < 2; ++pass) {
+    window.begin_ui();
+    ImGui::Begin("panel");
+    ImGui::TextUnformatted("hello");
+    ImGui::End();
+    ImGui::Render();
+  }
+  return ImGui::GetDrawData();
+}
+
+TEST(Window, PresentsFramesAndReadsThemBack) {
+  SPECULA_NEED_DISPLAY();
   std::string why;
-  auto window = open_window(settings, why);
+  auto window = open_ui_window(why);
   if (!window) GTEST_SKIP() << why;
   EXPECT_FALSE(window->device_name().empty());
   EXPECT_EQ(window->width(), 320u);
@@ -415,15 +433,7 @@ TEST(Window, PresentsFramesAndReadsThemBack) {
     const Framebuffer frame = random_frame(160 + 7 * i, 90 + 3 * i, 100 + i);
     ASSERT_TRUE(window->poll(input));
     const bool ui = i % 2 == 1;
-    // A new ImGui window is laid out on its first frame and drawn from the next.
-    for (int pass = 0; ui && pass < 2; ++pass) {
-      window->begin_ui();
-      ImGui::Begin("panel");
-      ImGui::TextUnformatted("hello");
-      ImGui::End();
-      ImGui::Render();
-    }
-    window->present(frame, ui ? ImGui::GetDrawData() : nullptr);
+    window->present(frame, ui ? panel_ui(*window) : nullptr);
     if (i >= 4 && i % 4 != 2 && i % 4 != 3) continue;
     const Rgba8Image shown = window->read_back();
     const Rgba8Image want = encode_srgb8(frame, window->width(), window->height());
@@ -436,12 +446,8 @@ TEST(Window, PresentsFramesAndReadsThemBack) {
 
 TEST(Window, PresentsAVulkanTracersFramesWhereTheyAre) {
   SPECULA_NEED_DISPLAY();
-  WindowSettings settings;
-  settings.width = 320;
-  settings.height = 200;
-  settings.ui = true;
   std::string why;
-  auto window = open_window(settings, why);
+  auto window = open_ui_window(why);
   if (!window) GTEST_SKIP() << why;
   SharedTracer shared(window->context());
   ASSERT_TRUE(keep_frames_on_device(shared.tracer(), true));
@@ -459,14 +465,7 @@ TEST(Window, PresentsAVulkanTracersFramesWhereTheyAre) {
     ASSERT_NE(on_device, nullptr) << "frame " << i;
     ASSERT_TRUE(window->poll(input));
     const bool ui = i % 4 == 3;
-    for (int pass = 0; ui && pass < 2; ++pass) {
-      window->begin_ui();
-      ImGui::Begin("panel");
-      ImGui::TextUnformatted("hello");
-      ImGui::End();
-      ImGui::Render();
-    }
-    window->present(*on_device, ui ? ImGui::GetDrawData() : nullptr);
+    window->present(*on_device, ui ? panel_ui(*window) : nullptr);
     if (i % 2 == 0) continue;
     const Rgba8Image shown = window->read_back();
     read_back_frame(shared.tracer(), out);
