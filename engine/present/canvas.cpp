@@ -41,7 +41,10 @@ Letterbox letterbox(std::uint64_t fw, std::uint64_t fh, std::uint32_t width, std
 void encode_srgb8_into(const Framebuffer& frame, std::uint32_t width, std::uint32_t height,
                        std::span<std::uint8_t> out, bool bgra) {
   const std::uint64_t fw = frame.width(), fh = frame.height();
-  const auto [ox, oy, dw, dh, bilinear] = letterbox(fw, fh, width, height);
+  const Letterbox box = letterbox(fw, fh, width, height);
+  // Plain copies: the row lambda below captures them (clang 15 cannot capture bindings).
+  const std::uint64_t ox = box.ox, oy = box.oy, dw = box.dw, dh = box.dh;
+  const bool bilinear = box.bilinear;
   const auto pixels = frame.pixels();
   const std::size_t r = bgra ? 2 : 0, b = bgra ? 0 : 2;
   // Each drawn column's source column (or taps), once per frame rather than a division per pixel.
