@@ -57,7 +57,13 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
   RenderJob job = game.render_job(options.width, options.height);
   job.backend = options.backend;
   if (options.mode) job.settings.mode = *options.mode;
+  // A Vulkan backend renders on the window's device and keeps its frames there: the window
+  // draws them where they are (a CPU backend's are uploaded).
+  job.gpu.device = window->context();
   prepare_rendering(game.registry(), std::move(job));
+  Tracer& tracer = *game.registry().resource<ActiveTracer>().tracer;
+  const bool on_device = keep_frames_on_device(tracer, true);
+  std::uint64_t in_place = 0;
   Schedule schedule;
   std::vector<GameInput> played;
   present::InputState input;
@@ -97,16 +103,24 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
     ImGui::Text("%.1f ms/frame, %s", done.last.ms, done.backend.c_str());
     ImGui::End();
     ImGui::Render();
-    window->present(done.image, ImGui::GetDrawData());
+    if (const gpu::DeviceFrame* shown = on_device ? device_frame(tracer) : nullptr) {
+      window->present(*shown, ImGui::GetDrawData());
+      ++in_place;
+    } else {
+      window->present(done.image, ImGui::GetDrawData());
+    }
   }
   if (options.frames && !frame_ms.empty()) {
     const double ms = median(frame_ms);
     std::printf("%s: %llu frames shown at %ux%u, median %.2f ms per frame (%.1f frames/s), "
-                "render scale median %.3f\n",
+                "render scale median %.3f; presented in place from the device: %llu\n",
                 game_name.c_str(), static_cast<unsigned long long>(frame), options.width,
-                options.height, ms, 1e3 / ms, median(scales));
+                options.height, ms, 1e3 / ms, median(scales),
+                static_cast<unsigned long long>(in_place));
   }
-  if (options.out) write_png(game.registry().resource<RenderJob>().image, *options.out);
+  Framebuffer& image = game.registry().resource<RenderJob>().image;
+  if (device_frame(tracer) != nullptr) read_back_frame(tracer, image); // only now on the host
+  if (options.out) write_png(image, *options.out);
   if (options.record) {
     std::ofstream f(*options.record, std::ios::binary);
     f << format_input_script(played);
