@@ -382,6 +382,8 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
                               (hook != nullptr ? " with this radiance hook" : ""));
   cache::RayCacheStore* store = hook != nullptr ? DeviceCache::store_of(hook) : nullptr;
   const auto start = std::chrono::steady_clock::now();
+  // The last frame kept on the device is overwritten from here on: no longer presentable.
+  image_pending_ = false;
   const std::uint32_t width = out.width(), height = out.height();
   const std::uint32_t pixels = width * height;
   if (store != nullptr) store->begin_frame(width, height, settings.mode);

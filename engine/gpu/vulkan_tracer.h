@@ -100,8 +100,6 @@ public:
   [[nodiscard]] const GpuTraceCounters& counters() const { return counters_; }
   /// The device-frame renderer (its latest frame's ray-cache figures, for tests).
   [[nodiscard]] const DeviceRenderer& renderer() const { return *renderer_; }
-  /// The device, for sharing.
-  [[nodiscard]] const std::shared_ptr<Context>& shared_context() const { return context_; }
 
   /// Cast and Whitted device frames stay on the device, render_frame_on_device's `out` left as
   /// it was: a presenter on the same device draws device_frame() where it is, and
