@@ -78,7 +78,6 @@ public:
     tile.for_each_pixel(
         [&](std::uint32_t x, std::uint32_t y) { w_.pixel.push_back(y * frame_.width + x); });
     counts_[RayKind::Primary] += n;
-    if (frame_.guides != nullptr) write_guides();
 
     const std::uint32_t spp = std::max(1u, settings_.spp);
     w_.sum.assign(n, vec3(0.0f));
@@ -123,6 +122,7 @@ private:
     for (std::uint32_t i = 0; i < n; ++i) w_.primary_hits[i] = primary_.hit(i);
     shading_points(w_.primary_hits, Directions{primary_.dir_x.data(), primary_.dir_y.data(),
                                                primary_.dir_z.data(), 1});
+    if (first == 0 && frame_.guides != nullptr) write_guides();
     for (std::uint32_t i = 0; i < n; ++i)
       shade_pixel(w_.primary_hits[i], primary_.direction(i), w_.points[i], i * count, count);
     trace_shadows(true);
@@ -167,17 +167,17 @@ private:
         w_.sum[i] += finite_or_counted(w_.radiance[i * count + s], counts_);
   }
 
+  /// The denoiser's guides from wave 0's primary hits and their shading points (w_.points).
   void write_guides() {
     GuideBuffers& g = *frame_.guides;
     for (std::uint32_t i = 0; i < primary_.size(); ++i) {
       const std::uint32_t pixel = w_.pixel[i];
-      const Hit hit = primary_.hit(i);
+      const Hit& hit = w_.primary_hits[i];
       if (!hit.hit()) {
         write_guide(g, pixel, nullptr);
         continue;
       }
-      write_guide(g, pixel, &material(hit),
-                  shading_point(tables_, hit, primary_.direction(i), false).shading_normal, hit.t);
+      write_guide(g, pixel, &material(hit), w_.points[i].shading_normal, hit.t);
     }
   }
 
