@@ -29,11 +29,8 @@ void DeviceCache::upload(const cache::RayCacheStore& store, std::uint32_t slots,
     throw Error("vulkan", "ray-cache cubes need " + std::to_string(total * 16) +
                               " bytes of texels, more than a storage buffer holds (" +
                               std::to_string(range) + ")");
-  const VkDeviceSize bytes = std::max<VkDeviceSize>(16, total * sizeof(cache::Texel));
-  if (!texels_.valid() || texels_.size() < bytes) {
-    texels_ = context_.make_buffer(bytes);
+  if (ensure_size(context_, texels_, total * sizeof(cache::Texel)))
     uploaded_.clear(); // a new buffer: every cube goes up
-  }
   std::vector<Uploaded> now;
   texels_uploaded_ = 0;
   std::uint32_t first = 0;
@@ -68,8 +65,7 @@ void DeviceCache::upload(const cache::RayCacheStore& store, std::uint32_t slots,
   }
   uploaded_ = std::move(now);
   const VkDeviceSize table_bytes = table.size() * sizeof(GpuCube);
-  if (!cubes_.valid() || cubes_.size() < table_bytes)
-    cubes_ = context_.make_buffer(table_bytes, MemoryKind::host);
+  ensure_size(context_, cubes_, table_bytes, MemoryKind::host);
   cubes_.upload(table.data(), table_bytes);
 }
 
@@ -77,9 +73,7 @@ void DeviceCache::reserve_records(std::uint32_t capacity) {
   const VkDeviceSize range = context_.info().max_storage_buffer_range;
   record_capacity_ =
       std::uint32_t(std::min<VkDeviceSize>(capacity, range / sizeof(GpuLeavingRecord)));
-  const VkDeviceSize bytes =
-      std::max<VkDeviceSize>(16, VkDeviceSize(record_capacity_) * sizeof(GpuLeavingRecord));
-  if (!records_.valid() || records_.size() < bytes) records_ = context_.make_buffer(bytes);
+  ensure_size(context_, records_, VkDeviceSize(record_capacity_) * sizeof(GpuLeavingRecord));
 }
 
 std::uint64_t DeviceCache::deliver(cache::RayCacheStore& store, const SceneTables& tables,

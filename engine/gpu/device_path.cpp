@@ -45,12 +45,6 @@ constexpr std::uint32_t kMaxPasses = 4096;
 
 std::uint32_t groups(std::uint32_t n) { return (n + 63) / 64; }
 
-void ensure_size(Context& ctx, Buffer& buffer, VkDeviceSize bytes,
-                 MemoryKind kind = MemoryKind::device) {
-  bytes = std::max<VkDeviceSize>(16, bytes);
-  if (!buffer.valid() || buffer.size() < bytes) buffer = ctx.make_buffer(bytes, kind);
-}
-
 /// Slots per state pool at most: two such pools take 12 MiB of states and 1 MiB per stack entry;
 /// the default budget leaves far fewer rays than that out of budget at once.
 constexpr std::uint64_t kMaxPoolSlots = 1u << 16;

@@ -44,15 +44,8 @@ std::uint32_t groups(std::uint32_t n) { return (n + 63) / 64; }
 
 template <class T>
 void upload_vector(Context& ctx, Buffer& buffer, const std::vector<T>& data) {
-  const VkDeviceSize bytes = std::max<VkDeviceSize>(16, data.size() * sizeof(T));
-  if (!buffer.valid() || buffer.size() < bytes) buffer = ctx.make_buffer(bytes);
+  ensure_size(ctx, buffer, data.size() * sizeof(T));
   if (!data.empty()) buffer.upload(data.data(), data.size() * sizeof(T));
-}
-
-void ensure_size(Context& ctx, Buffer& buffer, VkDeviceSize bytes,
-                 MemoryKind kind = MemoryKind::device) {
-  bytes = std::max<VkDeviceSize>(16, bytes);
-  if (!buffer.valid() || buffer.size() < bytes) buffer = ctx.make_buffer(bytes, kind);
 }
 
 } // namespace

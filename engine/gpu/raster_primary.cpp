@@ -39,8 +39,7 @@ void RasterPrimary::prepare(const SceneLayer& layer, const CameraRays& rays, std
     boxes[top[box].slot] = box;
     draw(top[box].slot);
   }
-  if (!slot_boxes_.valid() || slot_boxes_.size() < boxes.size() * 4)
-    slot_boxes_ = context_.make_buffer(boxes.size() * 4);
+  ensure_size(context_, slot_boxes_, boxes.size() * 4);
   slot_boxes_.upload(boxes.data(), boxes.size() * 4);
 
   if (!colour_.valid() || colour_.width() != width || colour_.height() != height) {

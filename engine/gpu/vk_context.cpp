@@ -468,6 +468,13 @@ void Context::run_now(const std::function<void(VkCommandBuffer)>& record) {
   check(w, "vkQueueWaitIdle");
 }
 
+bool ensure_size(Context& context, Buffer& buffer, VkDeviceSize bytes, MemoryKind kind) {
+  bytes = std::max<VkDeviceSize>(16, bytes);
+  if (buffer.valid() && buffer.size() >= bytes) return false;
+  buffer = context.make_buffer(bytes, kind);
+  return true;
+}
+
 void Context::wait_idle() {
   if (lost_) return;
   const std::unique_lock<std::mutex> lock = lock_queue();

@@ -376,6 +376,12 @@ private:
                                           VkMemoryPropertyFlags avoid = 0) const;
 };
 
+/// Makes `buffer` hold at least `bytes` (16 at least) of `kind`: a new buffer, the old contents
+/// dropped, when it is smaller or not made yet; kept as it is otherwise. Returns whether it made
+/// a new one.
+bool ensure_size(Context& context, Buffer& buffer, VkDeviceSize bytes,
+                 MemoryKind kind = MemoryKind::device);
+
 /// Every Vulkan device the loader reports (empty when there is no loader or no device), for
 /// `specula info` and the backend factory's availability probe. Never throws.
 struct DeviceSummary {

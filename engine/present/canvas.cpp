@@ -294,14 +294,11 @@ void Canvas::record(VkCommandBuffer cmd, const gpu::DeviceFrame& frame, ImDrawDa
   if (!encoder_) encoder_ = std::make_unique<DeviceEncoder>(context_);
   DeviceEncoder& e = *encoder_;
   const VkDeviceSize bytes = VkDeviceSize(width_) * height_ * 4;
-  if (!e.pixels.valid() || e.pixels.size() < bytes) e.pixels = context_.make_buffer(bytes);
+  gpu::ensure_size(context_, e.pixels, bytes);
 
   const Letterbox box = letterbox(frame.width, frame.height, width_, height_);
-  const std::size_t taps = box.dw + box.dh;
-  if (!e.taps.valid() ||
-      e.taps.size() < std::max<std::size_t>(taps, 1) * sizeof(DeviceEncoder::Tap))
-    e.taps = context_.make_buffer(std::max<std::size_t>(taps, 1) * sizeof(DeviceEncoder::Tap),
-                                  gpu::MemoryKind::host);
+  gpu::ensure_size(context_, e.taps, (box.dw + box.dh) * sizeof(DeviceEncoder::Tap),
+                   gpu::MemoryKind::host);
   auto* tap = static_cast<DeviceEncoder::Tap*>(e.taps.mapped());
   const auto fill = [&](std::uint64_t drawn, std::uint64_t source) {
     for (std::uint64_t i = 0; i < drawn; ++i, ++tap) {
