@@ -335,12 +335,12 @@ void DeviceRenderer::run_single(std::uint32_t pixels) {
 }
 
 void DeviceRenderer::read_back(Framebuffer& out) const {
-  if (out.width() != frame_width_ || out.height() != frame_height_)
-    throw Error("vulkan", "reading back a " + std::to_string(frame_width_) + "x" +
-                              std::to_string(frame_height_) + " device frame into a " +
+  if (out.width() != frame_.width || out.height() != frame_.height)
+    throw Error("vulkan", "reading back a " + std::to_string(frame_.width) + "x" +
+                              std::to_string(frame_.height) + " device frame into a " +
                               std::to_string(out.width()) + "x" + std::to_string(out.height()) +
                               " image");
-  const std::size_t pixels = std::size_t(frame_width_) * frame_height_;
+  const std::size_t pixels = std::size_t(frame_.width) * frame_.height;
   std::vector<vec4> image(pixels);
   image_.download(image.data(), image.size() * sizeof(vec4));
   std::span<vec3> px = out.pixels();
@@ -350,7 +350,7 @@ void DeviceRenderer::read_back(Framebuffer& out) const {
 
 std::span<const std::uint32_t> DeviceRenderer::primary_instances() const {
   if (primary_pending_) {
-    primary_.resize(std::size_t(frame_width_) * frame_height_);
+    primary_.resize(std::size_t(frame_.width) * frame_.height);
     primary_buffer_.download(primary_.data(), primary_.size() * 4);
     primary_pending_ = false;
   }
@@ -360,7 +360,7 @@ std::span<const std::uint32_t> DeviceRenderer::primary_instances() const {
 std::vector<GpuHit> DeviceRenderer::primary_hits() const {
   if (execution_ != Execution::wavefront)
     throw Error("vulkan", "primary hits are kept by wavefront device frames only");
-  std::vector<GpuHit> hits(std::size_t(frame_width_) * frame_height_);
+  std::vector<GpuHit> hits(std::size_t(frame_.width) * frame_.height);
   if (!hits.empty()) hits_.download(hits.data(), hits.size() * sizeof(GpuHit));
   return hits;
 }
@@ -453,8 +453,6 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
 
     GpuFrameCounters c{};
     counters_buffer_.download(&c, sizeof c);
-    frame_width_ = width;
-    frame_height_ = height;
     frame_ = DeviceFrame{&context_, &image_, width, height};
     primary_pending_ = true;
     // Cast and Whitted frames may stay on the device (presented in place); path and shadow

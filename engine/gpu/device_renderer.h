@@ -154,8 +154,7 @@ private:
   std::uint32_t light_count_ = 0;
   std::uint32_t max_depth_ = 0;
   mutable std::vector<std::uint32_t> primary_;
-  std::uint32_t frame_width_ = 0, frame_height_ = 0; ///< the last frame's size
-  DeviceFrame frame_;                                ///< the last frame where it is
+  DeviceFrame frame_; ///< the last frame: where it is, its size
   bool keep_on_device_ = false;
   mutable bool image_pending_ = false;   ///< the last frame is in image_ only
   mutable bool primary_pending_ = false; ///< primary_ not yet read from primary_buffer_

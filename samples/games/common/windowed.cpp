@@ -62,7 +62,7 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
   job.gpu.device = window->context();
   prepare_rendering(game.registry(), std::move(job));
   Tracer& tracer = *game.registry().resource<ActiveTracer>().tracer;
-  const bool on_device = keep_frames_on_device(tracer, true);
+  keep_frames_on_device(tracer, true); // false, nothing kept, for a CPU backend
   std::uint64_t in_place = 0;
   Schedule schedule;
   std::vector<GameInput> played;
@@ -103,7 +103,7 @@ int run_windowed(Game& game, const std::string& game_name, const WindowedOptions
     ImGui::Text("%.1f ms/frame, %s", done.last.ms, done.backend.c_str());
     ImGui::End();
     ImGui::Render();
-    if (const gpu::DeviceFrame* shown = on_device ? device_frame(tracer) : nullptr) {
+    if (const gpu::DeviceFrame* shown = device_frame(tracer)) {
       window->present(*shown, ImGui::GetDrawData());
       ++in_place;
     } else {
