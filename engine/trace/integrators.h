@@ -128,8 +128,9 @@ struct PathWave {
   std::vector<vec3> radiance;       ///< per sample of the batch
   std::vector<Path> paths, wave_paths, hit_paths;
   std::vector<VertexSamples> samples; ///< per path of the wave being shaded
-  std::vector<ShadingPoint> points;   ///< per hit of the wave being shaded (wave 0: per pixel)
+  std::vector<ShadingPoint> points;   ///< per hit of the wave being shaded (from wave 1 on)
   std::vector<Hit> primary_hits;      ///< wave 0: the tile's primary hits
+  std::vector<ShadingPoint> primary_points; ///< and their shading points, for every batch
   std::vector<Ray> rays, wave_rays;
   std::vector<Hit> hits;
   std::vector<Ray> shadow_rays;

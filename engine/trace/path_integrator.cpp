@@ -78,6 +78,16 @@ public:
     tile.for_each_pixel(
         [&](std::uint32_t x, std::uint32_t y) { w_.pixel.push_back(y * frame_.width + x); });
     counts_[RayKind::Primary] += n;
+    // The primary hits and their shading points, once for every batch of the tile.
+    w_.primary_hits.resize(n);
+    for (std::uint32_t i = 0; i < n; ++i) w_.primary_hits[i] = primary_.hit(i);
+    w_.primary_points.resize(n);
+    if (n > 0)
+      detail::shading_points(tables_, w_.primary_hits,
+                             Directions{primary_.dir_x.data(), primary_.dir_y.data(),
+                                        primary_.dir_z.data(), 1},
+                             w_.primary_points);
+    if (frame_.guides != nullptr) write_guides();
 
     const std::uint32_t spp = std::max(1u, settings_.spp);
     w_.sum.assign(n, vec3(0.0f));
@@ -118,13 +128,9 @@ private:
       }
     }
     draw_samples(w_.hit_paths, 0);
-    w_.primary_hits.resize(n);
-    for (std::uint32_t i = 0; i < n; ++i) w_.primary_hits[i] = primary_.hit(i);
-    shading_points(w_.primary_hits, Directions{primary_.dir_x.data(), primary_.dir_y.data(),
-                                               primary_.dir_z.data(), 1});
-    if (first == 0 && frame_.guides != nullptr) write_guides();
     for (std::uint32_t i = 0; i < n; ++i)
-      shade_pixel(w_.primary_hits[i], primary_.direction(i), w_.points[i], i * count, count);
+      shade_pixel(w_.primary_hits[i], primary_.direction(i), w_.primary_points[i], i * count,
+                  count);
     trace_shadows(true);
     for (std::uint32_t depth = 1; !w_.paths.empty(); ++depth) {
       w_.wave_paths.swap(w_.paths);
@@ -167,7 +173,7 @@ private:
         w_.sum[i] += finite_or_counted(w_.radiance[i * count + s], counts_);
   }
 
-  /// The denoiser's guides from wave 0's primary hits and their shading points (w_.points).
+  /// The denoiser's guides from the primary hits and their shading points.
   void write_guides() {
     GuideBuffers& g = *frame_.guides;
     for (std::uint32_t i = 0; i < primary_.size(); ++i) {
@@ -177,7 +183,7 @@ private:
         write_guide(g, pixel, nullptr);
         continue;
       }
-      write_guide(g, pixel, &material(hit), w_.points[i].shading_normal, hit.t);
+      write_guide(g, pixel, &material(hit), w_.primary_points[i].shading_normal, hit.t);
     }
   }
 
