@@ -83,10 +83,10 @@ public:
     for (std::uint32_t i = 0; i < n; ++i) w_.primary_hits[i] = primary_.hit(i);
     w_.primary_points.resize(n);
     if (n > 0)
-      detail::shading_points(tables_, w_.primary_hits,
-                             Directions{primary_.dir_x.data(), primary_.dir_y.data(),
-                                        primary_.dir_z.data(), 1},
-                             w_.primary_points);
+      detail::shading_points(
+          tables_, w_.primary_hits,
+          Directions{primary_.dir_x.data(), primary_.dir_y.data(), primary_.dir_z.data(), 1},
+          w_.primary_points);
     if (frame_.guides != nullptr) write_guides();
 
     const std::uint32_t spp = std::max(1u, settings_.spp);
