@@ -3,7 +3,6 @@
 #include "specula/accel/common/simd_lanes.h"
 
 #include <tbb/parallel_invoke.h>
-#include <tbb/parallel_sort.h>
 
 #include <immintrin.h>
 
@@ -217,50 +216,68 @@ struct Subtree {
   return k < 2 ? 0 : std::uint64_t(k) * std::uint64_t(std::bit_width(k - 1));
 }
 
-/// The bounds of triangle (p0, p1, p2) clipped to `box`: Sutherland–Hodgman against the six
-/// planes, then widened by a few ulp on the triangle's non-flat axes (the clipped vertices are
-/// rounded) and cut back to the box and to the triangle's own box. False when nothing is left.
-bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& whole,
-                    const Aabb& box, Aabb& out) {
-  std::array<vec3, 9> poly_a, poly_b; // a triangle clipped by six planes has at most 9 vertices
-  vec3* in = poly_a.data();
-  vec3* cut = poly_b.data();
+/// Room for a clipped triangle: Sutherland–Hodgman adds at most one vertex per plane, and a
+/// straddler is clipped by its node's six planes and then split by one more.
+constexpr int kMaxPolygon = 3 + 6 + 1;
+
+/// One Sutherland–Hodgman step: the part of polygon in[0, n) on one side of the plane at `plane`
+/// on `axis` (keep_below: q[axis] <= plane, else q[axis] >= plane) into `out`; returns its size.
+/// Each edge (a, b) in turn, b the next vertex: the crossing of the plane, if any, then b when it
+/// is inside (the output starts one vertex later than the input; the polygon is the same).
+int clip_polygon(const vec3* in, int n, int axis, float plane, bool keep_below, vec3* out) {
+  auto inside = [&](const vec3& q) { return keep_below ? q[axis] <= plane : q[axis] >= plane; };
+  int m = 0;
+  const vec3* a = &in[n - 1];
+  bool a_in = inside(*a);
+  for (int i = 0; i < n; ++i) {
+    const vec3& b = in[i];
+    const bool b_in = inside(b);
+    if (a_in != b_in) { // a and b lie on opposite sides: the denominator is not zero
+      const float t = (plane - (*a)[axis]) / (b[axis] - (*a)[axis]);
+      vec3 p = *a + t * (b - *a);
+      p[axis] = plane;
+      out[m++] = p;
+    }
+    if (b_in) out[m++] = b;
+    a = &b;
+    a_in = b_in;
+  }
+  return m;
+}
+
+/// Triangle (p0, p1, p2), whose box is `whole`, clipped to `box` into `poly` (kMaxPolygon
+/// vertices); returns the vertex count (0: nothing is left). A plane that every vertex of the
+/// triangle lies inside leaves the polygon as it is.
+int clip_to_box(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& whole, const Aabb& box,
+                vec3* poly) {
+  std::array<vec3, kMaxPolygon> other;
+  vec3* in = poly;
+  vec3* cut = other.data();
   in[0] = p0;
   in[1] = p1;
   in[2] = p2;
   int n = 3;
   for (int axis = 0; axis < 3 && n > 0; ++axis) {
-    for (int side = 0; side < 2 && n > 0; ++side) {
-      const float plane = side == 0 ? box.min[axis] : box.max[axis];
-      // A plane that every vertex of the triangle lies inside leaves the polygon as it is.
-      if (side == 0 ? whole.min[axis] >= plane : whole.max[axis] <= plane) continue;
-      // Each edge (a, b) in turn, b the next vertex: the crossing of the plane, if any, then b
-      // when it is inside (the output starts one vertex later than the input; the polygon is the
-      // same).
-      auto inside = [&](const vec3& q) { return side == 0 ? q[axis] >= plane : q[axis] <= plane; };
-      int m = 0;
-      const vec3* a = &in[n - 1];
-      bool a_in = inside(*a);
-      for (int i = 0; i < n; ++i) {
-        const vec3& b = in[i];
-        const bool b_in = inside(b);
-        if (a_in != b_in) { // a and b lie on opposite sides: the denominator is not zero
-          const float t = (plane - (*a)[axis]) / (b[axis] - (*a)[axis]);
-          vec3 p = *a + t * (b - *a);
-          p[axis] = plane;
-          cut[m++] = p;
-        }
-        if (b_in) cut[m++] = b;
-        a = &b;
-        a_in = b_in;
-      }
+    if (whole.min[axis] < box.min[axis]) {
+      n = clip_polygon(in, n, axis, box.min[axis], false, cut);
       std::swap(in, cut);
-      n = m;
+    }
+    if (n > 0 && whole.max[axis] > box.max[axis]) {
+      n = clip_polygon(in, n, axis, box.max[axis], true, cut);
+      std::swap(in, cut);
     }
   }
+  if (in != poly) std::copy(in, in + n, poly);
+  return n;
+}
+
+/// The bounds of polygon[0, n), a part of a triangle whose box is `whole` clipped to `box`,
+/// widened by a few ulp on the triangle's non-flat axes (the clipped vertices are rounded) and
+/// cut back to the box and to the triangle's own box. False when nothing is left.
+bool polygon_bounds(const vec3* poly, int n, const Aabb& whole, const Aabb& box, Aabb& out) {
   if (n == 0) return false;
   Aabb b;
-  for (int i = 0; i < n; ++i) b.grow(in[i]);
+  for (int i = 0; i < n; ++i) b.grow(poly[i]);
   for (int axis = 0; axis < 3; ++axis) {
     // Every axis the triangle has extent on, flat or not after rounding: a sliver thinner than an
     // ulp (a triangle's corner clipped by a plane a fraction of an ulp from its vertex, far from
@@ -282,6 +299,40 @@ bool clipped_bounds(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& 
   if (b.empty()) return false;
   out = b;
   return true;
+}
+
+/// Sorts the root's event list, made triangle by triangle (equal positions and types are already
+/// in ascending index order): a stable least-significant-digit radix sort on the 34 bits above
+/// the index, in three passes of 11, 11 and 12 bits, through `tmp` (room for n). The result is the
+/// list sorted as whole words, as std::sort would leave it, in linear time. A pass whose digit is
+/// the same in every event is skipped. Returns the events moved (the work counter's measure).
+std::uint64_t radix_sort_root_events(Event* data, std::size_t n, Event* tmp) {
+  constexpr int kShift[3] = {30, 41, 52};
+  constexpr int kBits[3] = {11, 11, 12};
+  std::vector<std::uint32_t> count((std::size_t(1) << 11) * 2 + (std::size_t(1) << 12), 0);
+  std::uint32_t* hist[3] = {count.data(), count.data() + (1u << 11), count.data() + (2u << 11)};
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint64_t b = data[i].bits;
+    for (int p = 0; p < 3; ++p) ++hist[p][(b >> kShift[p]) & ((1u << kBits[p]) - 1u)];
+  }
+  std::uint64_t moved = n;
+  Event* from = data;
+  Event* to = tmp;
+  for (int p = 0; p < 3; ++p) {
+    const std::size_t buckets = std::size_t(1) << kBits[p];
+    std::uint32_t* h = hist[p];
+    if (n > 0 && h[(from[0].bits >> kShift[p]) & (buckets - 1)] == n) continue;
+    std::uint32_t sum = 0;
+    for (std::size_t d = 0; d < buckets; ++d) sum += std::exchange(h[d], sum);
+    for (std::size_t i = 0; i < n; ++i) {
+      const Event e = from[i];
+      to[h[(e.bits >> kShift[p]) & (buckets - 1)]++] = e;
+    }
+    std::swap(from, to);
+    moved += n;
+  }
+  if (from != data) std::copy(from, from + n, data);
+  return moved;
 }
 
 template <class Lists>
@@ -408,34 +459,53 @@ private:
     const Event* e = ev.data();
     const std::size_t m = ev.size();
     std::int32_t n_below = 0, n_above = std::int32_t(n);
+    // The best so far in registers (the Split is written once, at the end).
+    float best_cost = kInf, best_pos = 0.0f;
+    bool best_planar_below = true;
     for (std::size_t i = 0; i < m;) {
-      // The events at one position, counted by type (the list is sorted end < planar < start).
+      // The events at one position, counted by type (the list is sorted end < planar < start),
+      // without indexing an array by the type: the counts stay in registers.
       const std::uint32_t pk = e[i].pos_key();
       const float p = from_ordered_key(pk);
-      std::int32_t count[3] = {0, 0, 0};
+      std::int32_t ending = 0, planar = 0, starting = 0;
       do {
-        ++count[e[i].type()];
+        const std::uint32_t type = e[i].type();
+        ending += std::int32_t(type == kEnd);
+        planar += std::int32_t(type == kPlanar);
+        starting += std::int32_t(type == kStart);
         ++i;
       } while (i < m && e[i].pos_key() == pk);
-      const std::int32_t ending = count[kEnd], planar = count[kPlanar], starting = count[kStart];
       n_above -= planar + ending;
       const float p_below = (cap + (p - lo) * perimeter) * inv_area;
       const float p_above = (cap + (hi - p) * perimeter) * inv_area;
       if (p > lo && p < hi) {
         const float cost_below = sah(p_below, p_above, n_below + planar, n_above);
         const float cost_above = sah(p_below, p_above, n_below, n_above + planar);
-        if (cost_below < best.cost) best = {cost_below, axis, p, true};
-        if (cost_above < best.cost) best = {cost_above, axis, p, false};
+        if (cost_below < best_cost) {
+          best_cost = cost_below;
+          best_pos = p;
+          best_planar_below = true;
+        }
+        if (cost_above < best_cost) {
+          best_cost = cost_above;
+          best_pos = p;
+          best_planar_below = false;
+        }
       } else if (planar > 0) {
         // Triangles lying in a face of the box (a floor, a wall) split off into a flat cell of
         // their own; otherwise every cell along that face keeps them.
         const bool at_lo = p == lo;
         const float cost = at_lo ? sah(p_below, p_above, planar, n_above)
                                  : sah(p_below, p_above, n_below, planar);
-        if (cost < best.cost) best = {cost, axis, p, at_lo};
+        if (cost < best_cost) {
+          best_cost = cost;
+          best_pos = p;
+          best_planar_below = at_lo;
+        }
       }
       n_below += starting + planar;
     }
+    if (best_cost < kInf) best = {best_cost, axis, best_pos, best_planar_below};
     return best;
   }
 
@@ -530,13 +600,26 @@ private:
       const std::uint32_t l = straddling[k];
       const std::uint32_t prim = in.tris[l];
       const Aabb whole = tris_.bounds(prim);
+      // The triangle's part in the node, clipped once and split by the plane into its parts in
+      // the two children (the same polygons as clipping to each child's box, with one pass over
+      // the node's planes instead of two).
+      std::array<vec3, kMaxPolygon> in_node, part_below, part_above;
+      int n_part[2] = {0, 0};
+      if (options_.perfect_splits) {
+        const int m = clip_to_box(tris_.vertex(prim, 0), tris_.vertex(prim, 1),
+                                  tris_.vertex(prim, 2), whole, in.box, in_node.data());
+        if (m > 0) {
+          n_part[0] =
+              clip_polygon(in_node.data(), m, split.axis, split.pos, true, part_below.data());
+          n_part[1] =
+              clip_polygon(in_node.data(), m, split.axis, split.pos, false, part_above.data());
+        }
+      }
       for (int child = 0; child < 2; ++child) {
         const Aabb& box = child == 0 ? below.box : above.box;
         Aabb part;
-        const bool clipped =
-            options_.perfect_splits && clipped_bounds(tris_.vertex(prim, 0), tris_.vertex(prim, 1),
-                                                      tris_.vertex(prim, 2), whole, box, part);
-        if (!clipped) {
+        if (!polygon_bounds(child == 0 ? part_below.data() : part_above.data(), n_part[child],
+                            whole, box, part)) {
           // No clipping, or clipping lost the sliver to rounding: the triangle's box cut to the
           // child box, never empty for a triangle that straddles the plane.
           part.min = glm::max(whole.min, box.min);
@@ -649,12 +732,18 @@ void KdTree::build(const TriangleView& tris, const KdBuildOptions& options) {
   }
   root.box = bounds_;
   Counters sorting;
-  for (std::size_t a = 0; a < 3; ++a) {
-    sorting.sort_work += sort_cost(root.events[a].size());
-    if (options.parallel)
-      tbb::parallel_sort(root.events[a].begin(), root.events[a].end());
+  {
+    std::array<std::uint64_t, 3> moved{};
+    auto sort_axis = [&](std::size_t a) {
+      EventList& list = root.events[a];
+      const auto tmp = std::make_unique_for_overwrite<Event[]>(list.size());
+      moved[a] = radix_sort_root_events(list.data(), list.size(), tmp.get());
+    };
+    if (options.parallel && n >= kParallelAxes)
+      tbb::parallel_invoke([&] { sort_axis(0); }, [&] { sort_axis(1); }, [&] { sort_axis(2); });
     else
-      std::sort(root.events[a].begin(), root.events[a].end());
+      for (std::size_t a = 0; a < 3; ++a) sort_axis(a);
+    sorting.sort_work = moved[0] + moved[1] + moved[2];
   }
 
   std::uint32_t max_depth = options.max_depth;

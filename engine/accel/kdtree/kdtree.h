@@ -3,9 +3,10 @@
 /// The SAH kd-tree for static geometry: Wald & Havran, "On building fast kd-Trees for Ray Tracing,
 /// and on doing that in O(N log N)" (IEEE RT 2006).
 ///
-/// Build: the event lists are sorted once per axis; every node then sweeps them for the best SAH
-/// plane, classifies its triangles (below / above / both) and splits the lists in linear time. Only
-/// the triangles that straddle the plane get new events: each is clipped to the two child boxes
+/// Build: the event lists are sorted once per axis (a radix sort); every node then sweeps them for
+/// the best SAH plane, classifies its triangles (below / above / both) and splits the lists in
+/// linear time. Only the triangles that straddle the plane get new events: each is clipped to the
+/// node's box and the clipped polygon split by the plane into its parts in the two child boxes
 /// (Sutherland–Hodgman, the "perfect splits" of §4.2), and the short sorted lists of new events are
 /// merged into the split lists. Subtrees above a size threshold are built in parallel (TBB) into
 /// their own arrays and spliced, so the result is the same, node for node, for any thread count.
@@ -30,7 +31,10 @@ namespace specula::accel {
 
 struct KdBuildOptions {
   float traversal_cost = 1.0f;    ///< K_T: cost of one interior node step
-  float intersection_cost = 1.5f; ///< K_I: cost of one triangle test
+  /// K_I: cost of one triangle test, in units of K_T, measured rather than assumed: on the bench's
+  /// scenes 1.0 traces every kind of ray as fast as 1.5 or faster, with a tree a third smaller
+  /// built 1.2x faster; lower values build faster still but slow single rays (PERFORMANCE.md).
+  float intersection_cost = 1.0f;
   float empty_bonus = 0.8f;       ///< λ: cost factor of a split with one empty side
   std::uint32_t max_depth = 0;    ///< 0: 8 + 1.3 log2 n; never more than 63 (the stack)
   std::uint32_t leaf_size = 1;    ///< nodes with this many triangles or fewer are never split
@@ -46,7 +50,8 @@ struct KdBuildStats {
   std::size_t bytes = 0; ///< nodes and index array
   /// Work counters, for the complexity check (tests): events touched by the per-node linear
   /// passes (sweep, classification, list split, new events of straddling triangles), and the
-  /// comparison work of every sort, counted as k·⌈log2 k⌉ for a sort of k events.
+  /// work of every sort: the root's radix sorts count the events they read and move (k per pass
+  /// of k events), the comparison sorts of the straddlers' new events k·⌈log2 k⌉.
   std::uint64_t events_processed = 0;
   std::uint64_t sort_work = 0;
   std::uint32_t skipped_triangles = 0; ///< triangles left out for a non-finite vertex
