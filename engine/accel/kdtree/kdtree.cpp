@@ -532,20 +532,29 @@ private:
     const std::size_t n = in.tris.size();
     const auto axis = std::size_t(split.axis);
     // Classification without branches: a triangle gets at most one of the two flags (an end at or
-    // below the plane means its start lies below it; planar events are one or the other).
+    // below the plane means its start lies below it; planar events are one or the other). The
+    // list is sorted, so it falls into three runs (positions below, at and above the plane), and
+    // within each run an event's flag depends on its type alone.
     std::vector<std::uint8_t>& side = scratch.side;
     side.assign(n, kBoth);
     {
-      const std::uint32_t sp = ordered_key(split.pos);
-      const bool pb = split.planar_below;
-      for (const Event& e : in.events[axis]) {
-        const std::uint32_t type = e.type();
-        const std::uint32_t ep = e.pos_key();
-        const bool planar_below = ep < sp || (ep == sp && pb);
-        const bool is_below = (type == kEnd && ep <= sp) || (type == kPlanar && planar_below);
-        const bool is_above = (type == kStart && ep >= sp) || (type == kPlanar && !planar_below);
-        side[e.local()] |= std::uint8_t(std::uint32_t(is_below) | (std::uint32_t(is_above) << 1));
-      }
+      const EventList& events = in.events[axis];
+      const std::uint64_t at = std::uint64_t(ordered_key(split.pos)) << 32;
+      const Event* first = events.begin();
+      const Event* last = events.end();
+      const Event* mid = std::lower_bound(first, last, Event{at});
+      const Event* high = std::lower_bound(mid, last, Event{at + (std::uint64_t(1) << 32)});
+      std::uint8_t* sd = side.data();
+      // Below the plane: ends and planar events are below, starts say nothing.
+      for (const Event* e = first; e != mid; ++e)
+        sd[e->local()] |= std::uint8_t(e->type() != kStart);
+      // In the plane: ends below, starts above, planar events on the split's side for them.
+      const std::uint8_t flag[3] = {kBelowOnly, split.planar_below ? kBelowOnly : kAboveOnly,
+                                    kAboveOnly}; // by type: end, planar, start
+      for (const Event* e = mid; e != high; ++e) sd[e->local()] |= flag[e->type()];
+      // Above the plane: starts and planar events are above, ends say nothing.
+      for (const Event* e = high; e != last; ++e)
+        sd[e->local()] |= std::uint8_t(std::uint32_t(e->type() != kEnd) << 1);
     }
 
     // New local indices keep the old order, so the filtered lists stay sorted.
