@@ -216,20 +216,24 @@ struct Subtree {
   return k < 2 ? 0 : std::uint64_t(k) * std::uint64_t(std::bit_width(k - 1));
 }
 
-/// Room for a clipped triangle: Sutherland–Hodgman adds at most one vertex per plane, and a
-/// straddler is clipped by its node's six planes and then split by one more.
-constexpr int kMaxPolygon = 3 + 6 + 1;
+/// Room for a clipped triangle. Sutherland–Hodgman adds at most one vertex per plane to a convex
+/// polygon, and a straddler is clipped by its node's six planes and split by one more: 10. Rounded
+/// vertices can make the polygon a little non-convex, so there is slack, and a step that would
+/// still overflow gives up (clip_polygon returns -1; the caller then uses the boxes alone).
+constexpr int kMaxPolygon = 16;
 
 /// One Sutherland–Hodgman step: the part of polygon in[0, n) on one side of the plane at `plane`
-/// on `axis` (keep_below: q[axis] <= plane, else q[axis] >= plane) into `out`; returns its size.
-/// Each edge (a, b) in turn, b the next vertex: the crossing of the plane, if any, then b when it
-/// is inside (the output starts one vertex later than the input; the polygon is the same).
+/// on `axis` (keep_below: q[axis] <= plane, else q[axis] >= plane) into `out` (kMaxPolygon
+/// vertices); returns its size, or -1 when it would not fit. Each edge (a, b) in turn, b the next
+/// vertex: the crossing of the plane, if any, then b when it is inside (the output starts one
+/// vertex later than the input; the polygon is the same).
 int clip_polygon(const vec3* in, int n, int axis, float plane, bool keep_below, vec3* out) {
   auto inside = [&](const vec3& q) { return keep_below ? q[axis] <= plane : q[axis] >= plane; };
   int m = 0;
   const vec3* a = &in[n - 1];
   bool a_in = inside(*a);
   for (int i = 0; i < n; ++i) {
+    if (m + 2 > kMaxPolygon) return -1;
     const vec3& b = in[i];
     const bool b_in = inside(b);
     if (a_in != b_in) { // a and b lie on opposite sides: the denominator is not zero
@@ -246,8 +250,8 @@ int clip_polygon(const vec3* in, int n, int axis, float plane, bool keep_below, 
 }
 
 /// Triangle (p0, p1, p2), whose box is `whole`, clipped to `box` into `poly` (kMaxPolygon
-/// vertices); returns the vertex count (0: nothing is left). A plane that every vertex of the
-/// triangle lies inside leaves the polygon as it is.
+/// vertices); returns the vertex count (0: nothing is left; -1: clipping gave up). A plane that
+/// every vertex of the triangle lies inside leaves the polygon as it is.
 int clip_to_box(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& whole, const Aabb& box,
                 vec3* poly) {
   std::array<vec3, kMaxPolygon> other;
@@ -267,15 +271,15 @@ int clip_to_box(const vec3& p0, const vec3& p1, const vec3& p2, const Aabb& whol
       std::swap(in, cut);
     }
   }
-  if (in != poly) std::copy(in, in + n, poly);
+  if (n > 0 && in != poly) std::copy(in, in + n, poly);
   return n;
 }
 
 /// The bounds of polygon[0, n), a part of a triangle whose box is `whole` clipped to `box`,
 /// widened by a few ulp on the triangle's non-flat axes (the clipped vertices are rounded) and
-/// cut back to the box and to the triangle's own box. False when nothing is left.
+/// cut back to the box and to the triangle's own box. False when nothing is left (or n is -1).
 bool polygon_bounds(const vec3* poly, int n, const Aabb& whole, const Aabb& box, Aabb& out) {
-  if (n == 0) return false;
+  if (n <= 0) return false;
   Aabb b;
   for (int i = 0; i < n; ++i) b.grow(poly[i]);
   for (int axis = 0; axis < 3; ++axis) {
@@ -629,8 +633,8 @@ private:
         Aabb part;
         if (!polygon_bounds(child == 0 ? part_below.data() : part_above.data(), n_part[child],
                             whole, box, part)) {
-          // No clipping, or clipping lost the sliver to rounding: the triangle's box cut to the
-          // child box, never empty for a triangle that straddles the plane.
+          // No clipping, or clipping lost the sliver to rounding or gave up: the triangle's box
+          // cut to the child box, never empty for a triangle that straddles the plane.
           part.min = glm::max(whole.min, box.min);
           part.max = glm::min(whole.max, box.max);
         }
