@@ -10,6 +10,8 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -301,6 +303,60 @@ TEST(KdTree, RaysLyingInSplitPlanes) {
   check_against_brute_force<TriangleTest::watertight>(lattice, rays);
   check_packets<4>(lattice, rays, false);
   check_packets<8>(lattice, rays, false);
+}
+
+// Single rays test a leaf's triangles four at a time (SSE lanes over triangles) where it holds
+// three or more. The lanes must give what the scalar test gives one triangle at a time, to the bit:
+// the same triangle (the first in the leaf's order at equal distance: here exact duplicates), the
+// same t, u and v, the same any-hit answer, also for rays aimed at vertices (an edge function of
+// exactly 0 sends the group to the scalar test's double fallback). Shallow trees with large leaves
+// put every size of group, and groups with a scalar tail, on the rays' way.
+TEST(KdTree, LeavesTestedFourAtATimeMatchTheScalarTestBitForBit) {
+  Mesh mesh = soup(700, 0.35f, 61);
+  mesh.name = "soup with duplicates";
+  for (std::uint32_t i = 0; i < 150; ++i) mesh.triangles.push_back(mesh.triangles[3 * i]);
+  const TriangleView view = mesh.view();
+  std::vector<PreparedRay> rays = make_rays(mesh.bounds(), 6000, 62);
+  std::mt19937 rng(63);
+  std::uniform_int_distribution<std::uint32_t> pick(0, std::uint32_t(mesh.positions.size()) - 1);
+  const vec3 eye = mesh.bounds().center() + vec3(0.4f, 2.5f, 3.0f);
+  for (int i = 0; i < 3000; ++i) {
+    const vec3 target = mesh.positions[pick(rng)];
+    rays.push_back(PreparedRay::make(eye, target - eye, 0.0f, kInf));
+  }
+  // Leaves of every group shape over the three trees: 3 and 4 triangles (one group), 5 to 7 (a
+  // group and a scalar tail), 8 or more (several groups).
+  std::array<int, 9> leaves_of{};
+  for (const auto& [leaf_size, max_depth] : {std::pair{6u, 10u}, {12u, 8u}, {40u, 5u}}) {
+    SCOPED_TRACE("leaf size " + std::to_string(leaf_size));
+    KdTree tree;
+    KdBuildOptions options;
+    options.leaf_size = leaf_size;
+    options.max_depth = max_depth;
+    tree.build(view, options);
+    for (const gpu::KdNode& n : tree.nodes())
+      if ((n.bits & 3u) == gpu::kKdLeaf) ++leaves_of[std::min<std::size_t>(n.bits >> 2, 8)];
+    int wrong = 0, hits = 0, occlusion_wrong = 0;
+    for (const PreparedRay& ray : rays) {
+      const TriangleHit want = brute_force_closest(view, ray);
+      PreparedRay r = ray;
+      TriangleHit got;
+      tree.intersect(r, got);
+      hits += want.hit();
+      const bool ok = got.prim == want.prim &&
+                      std::bit_cast<std::uint32_t>(got.t) == std::bit_cast<std::uint32_t>(want.t) &&
+                      std::bit_cast<std::uint32_t>(got.u) == std::bit_cast<std::uint32_t>(want.u) &&
+                      std::bit_cast<std::uint32_t>(got.v) == std::bit_cast<std::uint32_t>(want.v);
+      if (!ok && ++wrong <= 5)
+        ADD_FAILURE() << "kd prim " << got.prim << " t " << got.t << ", reference prim "
+                      << want.prim << " t " << want.t;
+      occlusion_wrong += tree.occluded(ray) != want.hit();
+    }
+    EXPECT_EQ(wrong, 0);
+    EXPECT_EQ(occlusion_wrong, 0);
+    EXPECT_GT(hits, int(rays.size()) / 4);
+  }
+  for (std::size_t c = 3; c <= 8; ++c) EXPECT_GT(leaves_of[c], 0) << c << " triangles";
 }
 
 TEST(KdTree, PacketsMatchSingleRays) {

@@ -786,6 +786,111 @@ void KdTree::build(const TriangleView& tris, const KdBuildOptions& options) {
 
 // ---- Single-ray traversal -----------------------------------------------------------------------
 
+namespace {
+
+/// Single rays test a leaf's triangles four at a time from this many on (bench, native section:
+/// groups from 2 on cost the small scene's primary rays 5%, from 3 on they gain 5-8% on both).
+constexpr std::uint32_t kMinLeafGroup = 3;
+
+/// Up to four triangles of a leaf, ids[0, k), against one ray at once (SSE lanes: triangles):
+/// the same result as intersect_closest (AnyHit: intersect_any) on each in turn, to the bit. The
+/// lanes compute Woop et al.'s test with the scalar test's operations in its order, against the
+/// ray's tfar at the start; the lanes that pass are then taken in order, each against the tfar
+/// its predecessors left (the two comparisons that depend on it), as the scalar loop would.
+/// A lane whose edge function rounds to 0 sends the group to the scalar test (its double
+/// fallback). Returns whether it hit (AnyHit: whether any lies within the interval).
+template <bool AnyHit>
+bool leaf4_watertight(PreparedRay& r, const TriangleView& tris, const std::uint32_t* ids, int k,
+                      TriangleHit* hit) {
+  alignas(16) float g[9][4]; // vertex v, ray-frame component c: g[3 * v + c][lane]
+  for (int j = 0; j < 4; ++j) {
+    const uvec3 tri = tris.triangles[ids[j < k ? j : 0]];
+    for (int v = 0; v < 3; ++v) {
+      const vec3& p = tris.positions[tri[v]];
+      g[3 * v + 0][j] = p[r.kx] - r.org[r.kx];
+      g[3 * v + 1][j] = p[r.ky] - r.org[r.ky];
+      g[3 * v + 2][j] = p[r.kz] - r.org[r.kz];
+    }
+  }
+  const __m128 sx = _mm_set1_ps(r.sx), sy = _mm_set1_ps(r.sy), sz = _mm_set1_ps(r.sz);
+  const __m128 az0 = _mm_load_ps(g[2]), bz0 = _mm_load_ps(g[5]), cz0 = _mm_load_ps(g[8]);
+  const __m128 ax = _mm_sub_ps(_mm_load_ps(g[0]), _mm_mul_ps(sx, az0));
+  const __m128 ay = _mm_sub_ps(_mm_load_ps(g[1]), _mm_mul_ps(sy, az0));
+  const __m128 bx = _mm_sub_ps(_mm_load_ps(g[3]), _mm_mul_ps(sx, bz0));
+  const __m128 by = _mm_sub_ps(_mm_load_ps(g[4]), _mm_mul_ps(sy, bz0));
+  const __m128 cx = _mm_sub_ps(_mm_load_ps(g[6]), _mm_mul_ps(sx, cz0));
+  const __m128 cy = _mm_sub_ps(_mm_load_ps(g[7]), _mm_mul_ps(sy, cz0));
+  const __m128 U = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
+  const __m128 V = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
+  const __m128 W = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
+  const __m128 zero = _mm_setzero_ps();
+  const unsigned lanes = (1u << k) - 1u;
+  const unsigned zero_edge =
+      unsigned(_mm_movemask_ps(_mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(U, zero), _mm_cmpeq_ps(V, zero)),
+                                         _mm_cmpeq_ps(W, zero)))) &
+      lanes;
+  if (zero_edge != 0) [[unlikely]] {
+    bool found = false;
+    for (int j = 0; j < k; ++j) {
+      if constexpr (AnyHit) {
+        if (intersect_any<TriangleTest::watertight>(r, tris, ids[j])) return true;
+      } else {
+        found |= intersect_closest<TriangleTest::watertight>(r, tris, ids[j], *hit);
+      }
+    }
+    return found;
+  }
+  const __m128 negative =
+      _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(U, zero), _mm_cmplt_ps(V, zero)), _mm_cmplt_ps(W, zero));
+  const __m128 positive =
+      _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(U, zero), _mm_cmpgt_ps(V, zero)), _mm_cmpgt_ps(W, zero));
+  unsigned pass = unsigned(_mm_movemask_ps(_mm_andnot_ps(_mm_and_ps(negative, positive),
+                                                         _mm_castsi128_ps(_mm_set1_epi32(-1))))) &
+                  lanes;
+  if (pass == 0) return false;
+  const __m128 det = _mm_add_ps(_mm_add_ps(U, V), W);
+  pass &= ~unsigned(_mm_movemask_ps(_mm_cmpeq_ps(det, zero)));
+  if (pass == 0) return false;
+  const __m128 az = _mm_mul_ps(sz, az0), bz = _mm_mul_ps(sz, bz0), cz = _mm_mul_ps(sz, cz0);
+  const __m128 T = _mm_add_ps(_mm_add_ps(_mm_mul_ps(U, az), _mm_mul_ps(V, bz)), _mm_mul_ps(W, cz));
+  const __m128 sign = _mm_set1_ps(-0.0f);
+  const __m128 abs_det = _mm_andnot_ps(sign, det);
+  const __m128 signed_t = _mm_xor_ps(T, _mm_and_ps(det, sign));
+  const __m128 tnear = _mm_set1_ps(r.tnear), tmax = _mm_set1_ps(r.tfar);
+  pass &= unsigned(_mm_movemask_ps(_mm_and_ps(_mm_cmpgt_ps(signed_t, _mm_mul_ps(tnear, abs_det)),
+                                              _mm_cmplt_ps(signed_t, _mm_mul_ps(tmax, abs_det)))));
+  if (pass == 0) return false;
+  const __m128 inv_det = _mm_div_ps(_mm_set1_ps(1.0f), det);
+  const __m128 t = _mm_mul_ps(T, inv_det);
+  pass &= unsigned(_mm_movemask_ps(_mm_and_ps(_mm_cmpgt_ps(t, tnear), _mm_cmplt_ps(t, tmax))));
+  if (pass == 0) return false;
+  if constexpr (AnyHit) {
+    return true;
+  } else {
+    alignas(16) float lane_t[4], lane_st[4], lane_ad[4], lane_u[4], lane_v[4];
+    _mm_store_ps(lane_t, t);
+    _mm_store_ps(lane_st, signed_t);
+    _mm_store_ps(lane_ad, abs_det);
+    _mm_store_ps(lane_u, _mm_mul_ps(V, inv_det));
+    _mm_store_ps(lane_v, _mm_mul_ps(W, inv_det));
+    bool found = false;
+    for (; pass != 0; pass &= pass - 1) {
+      const int j = std::countr_zero(pass);
+      // Against the tfar the lanes before it left, as the scalar loop tests it.
+      if (!(lane_st[j] < r.tfar * lane_ad[j]) || !(lane_t[j] < r.tfar)) continue;
+      r.tfar = lane_t[j];
+      hit->t = lane_t[j];
+      hit->u = lane_u[j];
+      hit->v = lane_v[j];
+      hit->prim = ids[j];
+      found = true;
+    }
+    return found;
+  }
+}
+
+} // namespace
+
 template <TriangleTest Test, bool AnyHit>
 bool KdTree::traverse(PreparedRay& r, TriangleHit* hit) const {
   if (nodes_.empty() || !r.valid()) return false;
@@ -831,7 +936,20 @@ bool KdTree::traverse(PreparedRay& r, TriangleHit* hit) const {
 
     const std::uint32_t count = n.bits >> 2;
     const std::uint32_t* ids = indices_.data() + n.first;
-    for (std::uint32_t k = 0; k < count; ++k) {
+    std::uint32_t k = 0;
+    if constexpr (Test == TriangleTest::watertight) {
+      // Groups of up to four; one or two left over go to the scalar test, which is faster for
+      // them (gathering the lanes costs about what two early-out scalar tests do).
+      while (k + kMinLeafGroup <= count) {
+        const std::uint32_t group = std::min<std::uint32_t>(4, count - k);
+        if (leaf4_watertight<AnyHit>(r, tris_, ids + k, int(group), hit)) {
+          if constexpr (AnyHit) return true;
+          found = true;
+        }
+        k += group;
+      }
+    }
+    for (; k < count; ++k) {
       if constexpr (AnyHit) {
         if (intersect_any<Test>(r, tris_, ids[k])) return true;
       } else {
