@@ -15,7 +15,9 @@
 /// (the child below the split is the next node), plus one array of triangle indices.
 ///
 /// Traversal: front to back with a fixed stack (as in pbrt's KdTreeAggregate), its interval
-/// decisions taken with a small relative slack; closest hit or any hit. Packets of 4 (SSE) or 8
+/// decisions taken with a small relative slack; closest hit or any hit; a leaf of three or more
+/// triangles tested four at a time (SSE lanes over triangles, the scalar loop's result to the
+/// bit). Packets of 4 (SSE) or 8
 /// (AVX2, chosen at run time) rays sharing their direction signs are traversed together (Wald et
 /// al., "Interactive Rendering with Coherent Ray Tracing", 2001), other packets one lane at a time.
 
