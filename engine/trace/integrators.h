@@ -8,11 +8,12 @@
 #include "specula/trace/camera_rays.h"
 #include "specula/trace/packet_tile.h"
 #include "specula/trace/radiance_hook.h"
+#include "specula/trace/render_frame.h"
 #include "specula/trace/shading.h"
 #include "specula/trace/shadow_samples.h"
-#include "specula/trace/render_frame.h"
 #include "specula/trace/stats.h"
 #include "specula/trace/tracer.h"
+#include "specula/trace/vertex_starts.h"
 
 #include <algorithm>
 #include <cmath>
@@ -131,6 +132,7 @@ struct PathWave {
   std::vector<ShadingPoint> points;   ///< per hit of the wave being shaded (from wave 1 on)
   std::vector<Hit> primary_hits;      ///< wave 0: the tile's primary hits
   std::vector<ShadingPoint> primary_points; ///< and their shading points, for every batch
+  VertexStarts starts;                      ///< per path of the wave being shaded (vertex_starts.h)
   std::vector<Ray> rays, wave_rays;
   std::vector<Hit> hits;
   std::vector<Ray> shadow_rays;

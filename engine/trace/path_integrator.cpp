@@ -17,6 +17,7 @@
 #include "specula/trace/sampler.h"
 #include "specula/trace/shading.h"
 #include "specula/trace/shading_batch.h"
+#include "specula/trace/vertex_starts.h"
 
 #include <algorithm>
 #include <array>
@@ -128,6 +129,7 @@ private:
       }
     }
     draw_samples(w_.hit_paths, 0);
+    starts(w_.primary_hits, w_.primary_points, count, w_.hit_paths.size(), 0);
     for (std::uint32_t i = 0; i < n; ++i)
       shade_pixel(w_.primary_hits[i], primary_.direction(i), w_.primary_points[i], i * count,
                   count);
@@ -156,14 +158,15 @@ private:
       shading_points(w_.hits, Directions::aos(reinterpret_cast<const float*>(w_.wave_rays.data()) +
                                                   offsetof(Ray, direction) / sizeof(float),
                                               sizeof(Ray) / sizeof(float)));
+      starts(w_.hits, w_.points, 1, w_.wave_paths.size(), depth);
       for (std::size_t k = 0; k < w_.wave_paths.size(); ++k) {
         const std::uint32_t e = hook_ != nullptr ? w_.exit_of[k] : kNoInstance;
         const Hit& hit = w_.hits[k];
         const vec3& d = w_.wave_rays[k].direction;
         if (e == kNoInstance)
-          shade(w_.wave_paths[k], w_.samples[k], hit, d, w_.points[k], depth);
+          shade(w_.wave_paths[k], w_.samples[k], hit, d, w_.points[k], k, depth);
         else
-          shade_leaving(w_.wave_paths[k], w_.samples[k], hit, d, w_.points[k], depth);
+          shade_leaving(w_.wave_paths[k], w_.samples[k], hit, d, w_.points[k], k, depth);
       }
       trace_shadows(false);
     }
@@ -217,6 +220,22 @@ private:
     draw_sample_dims(keys, std::span(requests.data(), count), kStride);
   }
 
+  /// What the wave's vertices start from (vertex_starts.h), into w_.starts: vertex k is hit
+  /// k / per_point; area-light samples where this depth samples lights.
+  void starts(std::span<const Hit> hits, std::span<const ShadingPoint> points,
+              std::size_t per_point, std::size_t count, std::uint32_t depth) {
+    VertexInputs in{hits, points, per_point, count};
+    if (kArea && settings_.sampling != LightSampling::Bsdf && depth < settings_.max_depth &&
+        count > 0) {
+      static_assert(offsetof(VertexSamples, light) == 0 &&
+                    sizeof(VertexSamples) % sizeof(float) == 0);
+      in.emitters = &emitters_;
+      in.light_u = w_.samples[0].light;
+      in.stride = sizeof(VertexSamples) / sizeof(float);
+    }
+    vertex_starts(in, w_.starts);
+  }
+
   /// The shading points of a wave's hits (misses skipped), into w_.points.
   void shading_points(std::span<const Hit> hits, const Directions& directions) {
     w_.points.resize(hits.size());
@@ -234,18 +253,17 @@ private:
       }
       return;
     }
-    const Vertex v = vertex(hit, sp);
     for (std::uint32_t s = first; s < first + count; ++s)
-      shade_vertex(w_.hit_paths[s], w_.samples[s], v, d, 0);
+      shade_vertex(w_.hit_paths[s], w_.samples[s], vertex(hit, sp, s), d, 0);
   }
 
   void shade(const Path& p, const VertexSamples& u, const Hit& hit, const vec3& d,
-             const ShadingPoint& sp, std::uint32_t depth) {
+             const ShadingPoint& sp, std::size_t k, std::uint32_t depth) {
     if (!hit.hit()) {
       contribute(p.slot, p.leaving, p.throughput * settings_.background);
       return;
     }
-    shade_vertex(p, u, vertex(hit, sp), d, depth);
+    shade_vertex(p, u, vertex(hit, sp, k), d, depth);
   }
 
   /// The first hit of a ray that left a cached object (its record is p.leaving), as the hook
@@ -253,7 +271,7 @@ private:
   /// served (the sample takes emission + the cached radiance, the path ends); or refreshed (the
   /// sample takes the same, and the path goes on for the record alone).
   void shade_leaving(Path& p, const VertexSamples& u, const Hit& hit, const vec3& d,
-                     const ShadingPoint& sp, std::uint32_t depth) {
+                     const ShadingPoint& sp, std::size_t k, std::uint32_t depth) {
     PathLeaving& rec = w_.records[p.leaving];
     const CacheAnswer answer = rec.ray.answer;
     if (!hit.hit() || answer == CacheAnswer::Trace) {
@@ -261,10 +279,10 @@ private:
         contribute(p.slot, p.leaving, p.throughput * settings_.background);
         return;
       }
-      shade_vertex(p, u, vertex(hit, sp), d, depth, p.leaving);
+      shade_vertex(p, u, vertex(hit, sp, k), d, depth, p.leaving);
       return;
     }
-    const Vertex v = vertex(hit, sp);
+    const Vertex v = vertex(hit, sp, k);
     // The leaving ray is specular (no light-sampling strategy reaches its hit): its emission
     // counts fully.
     vec3 emitted(0.0f);
@@ -281,15 +299,17 @@ private:
     shade_vertex(p, u, v, d, depth, kNoInstance, false);
   }
 
-  /// What a hit's shading needs: its shading point (computed for the whole wave) and material.
+  /// What a hit's shading needs: its shading point and starts (computed for the whole wave) and
+  /// material.
   struct Vertex {
     const ShadingPoint& sp; ///< computed for the whole wave (shading_points)
     const gpu::GpuMaterial* m;
     std::uint32_t instance, primitive;
+    std::size_t start; ///< its entry of w_.starts
   };
 
-  [[nodiscard]] Vertex vertex(const Hit& hit, const ShadingPoint& sp) const {
-    return Vertex{sp, &material(hit), hit.instance, hit.primitive};
+  [[nodiscard]] Vertex vertex(const Hit& hit, const ShadingPoint& sp, std::size_t k) const {
+    return Vertex{sp, &material(hit), hit.instance, hit.primitive, k};
   }
 
   /// Emission (weighted against light sampling where the ray was BSDF-sampled at a diffuse
@@ -335,7 +355,7 @@ private:
 
     vec3 origin(0.0f);
     if (diffuse > 0.0f) {
-      origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
+      origin = w_.starts.origin(v.start);
       const vec3 f = m.base_color * (diffuse * kInvPi);
       if constexpr (kPunctual) {
         // Whitted's own shadow rays (shading.h), so that with nothing else the images agree.
@@ -349,17 +369,21 @@ private:
       // BSDF strategy would need a ray beyond the depth limit).
       if constexpr (kArea) {
         if (!last && settings_.sampling != LightSampling::Bsdf) {
-          const AreaLightSample ls =
-              sample_area_light(emitters_, sp.position, u.light[0], u.light[1], u.light[2]);
-          const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
-          if (ls.pdf > 0.0f && glm::dot(ls.to_light, sp.geometric_normal) > 0.0f &&
-              cos_theta > 0.0f && max_component(ls.emission) > 0.0f) {
+          // The light sample (sample_area_light), drawn for the whole wave.
+          const VertexStarts& ls = w_.starts;
+          const std::size_t k = v.start;
+          const float pdf = ls.pdf[k];
+          const vec3 to_light = ls.to_light(k);
+          const vec3 light = ls.emission(k);
+          const float cos_theta = glm::dot(to_light, sp.shading_normal);
+          if (pdf > 0.0f && glm::dot(to_light, sp.geometric_normal) > 0.0f && cos_theta > 0.0f &&
+              max_component(light) > 0.0f) {
             const float weight = settings_.sampling == LightSampling::Mis
-                                     ? power_heuristic(ls.pdf, p_diffuse * cos_theta * kInvPi)
+                                     ? power_heuristic(pdf, p_diffuse * cos_theta * kInvPi)
                                      : 1.0f;
             // Stop short of the light point, relatively: its own triangle must not block it.
-            add_shadow(origin, ls.to_light, ls.distance * (1.0f - 1e-4f), p,
-                       p.throughput * f * ls.emission * (cos_theta * weight / ls.pdf));
+            add_shadow(origin, to_light, ls.distance[k] * (1.0f - 1e-4f), p,
+                       p.throughput * f * light * (cos_theta * weight / pdf));
           }
         }
       }

@@ -5,7 +5,7 @@
 #include "specula/trace/shading_batch.h"
 
 #include "specula/core/assert.h"
-#include "specula/trace/sampler_avx2.h"
+#include "specula/trace/lanes_avx2.h"
 
 #include <bit>
 #include <cstddef>
@@ -26,61 +26,7 @@ static_assert(std::is_standard_layout_v<Hit> && sizeof(Hit) == 8 * sizeof(float)
 
 constexpr int word(std::size_t bytes) { return int(bytes / sizeof(float)); }
 
-struct V3 {
-  __m256 x, y, z;
-};
-
-SPECULA_AVX2 inline __m256 add(__m256 a, __m256 b) { return _mm256_add_ps(a, b); }
-SPECULA_AVX2 inline __m256 sub(__m256 a, __m256 b) { return _mm256_sub_ps(a, b); }
-SPECULA_AVX2 inline __m256 mul(__m256 a, __m256 b) { return _mm256_mul_ps(a, b); }
-SPECULA_AVX2 inline __m256 neg(__m256 a) { return _mm256_xor_ps(a, _mm256_set1_ps(-0.0f)); }
-SPECULA_AVX2 inline V3 scale(__m256 s, const V3& v) {
-  return {mul(s, v.x), mul(s, v.y), mul(s, v.z)};
-}
-SPECULA_AVX2 inline V3 add(const V3& a, const V3& b) {
-  return {add(a.x, b.x), add(a.y, b.y), add(a.z, b.z)};
-}
-SPECULA_AVX2 inline V3 sub(const V3& a, const V3& b) {
-  return {sub(a.x, b.x), sub(a.y, b.y), sub(a.z, b.z)};
-}
-/// glm::dot: the products, then (x + y) + z.
-SPECULA_AVX2 inline __m256 dot(const V3& a, const V3& b) {
-  return add(add(mul(a.x, b.x), mul(a.y, b.y)), mul(a.z, b.z));
-}
-/// glm::cross.
-SPECULA_AVX2 inline V3 cross(const V3& a, const V3& b) {
-  return {sub(mul(a.y, b.z), mul(b.y, a.z)), sub(mul(a.z, b.x), mul(b.z, a.x)),
-          sub(mul(a.x, b.y), mul(b.x, a.y))};
-}
-/// glm::abs (x >= 0 ? x : -x, so −0 stays −0).
-SPECULA_AVX2 inline __m256 abs(__m256 x) {
-  return _mm256_blendv_ps(neg(x), x, _mm256_cmp_ps(x, _mm256_setzero_ps(), _CMP_GE_OQ));
-}
-SPECULA_AVX2 inline V3 abs(const V3& v) { return {abs(v.x), abs(v.y), abs(v.z)}; }
-/// glm::max and std::max: (x < y) ? y : x.
-SPECULA_AVX2 inline __m256 max(__m256 x, __m256 y) { return _mm256_max_ps(y, x); }
-SPECULA_AVX2 inline V3 max(const V3& a, const V3& b) {
-  return {max(a.x, b.x), max(a.y, b.y), max(a.z, b.z)};
-}
-/// w·a + u·b + v·c, as glm evaluates it: (w·a + u·b) + v·c.
-SPECULA_AVX2 inline V3 interpolate(__m256 w, __m256 u, __m256 v, const V3& a, const V3& b,
-                                   const V3& c) {
-  return add(add(scale(w, a), scale(u, b)), scale(v, c));
-}
-
-SPECULA_AVX2 inline __m256i gather_i(const void* base, __m256i index, __m256i mask) {
-  return _mm256_mask_i32gather_epi32(_mm256_setzero_si256(), static_cast<const int*>(base), index,
-                                     mask, 4);
-}
-SPECULA_AVX2 inline __m256 gather_f(const float* base, __m256i index, __m256i mask) {
-  return _mm256_mask_i32gather_ps(_mm256_setzero_ps(), base, index, _mm256_castsi256_ps(mask), 4);
-}
-/// The three coordinates of vector `index` (in vec3 units) of a vec3 array.
-SPECULA_AVX2 inline V3 gather3(const vec3* base, __m256i index, __m256i mask) {
-  const float* f = &base->x;
-  const __m256i i3 = _mm256_mullo_epi32(index, _mm256_set1_epi32(3));
-  return {gather_f(f, i3, mask), gather_f(f + 1, i3, mask), gather_f(f + 2, i3, mask)};
-}
+using namespace avx2;
 
 /// ShadingPoint as 16 words, in member order: position, spawn point, spawn error, geometric and
 /// shading normals (15 floats), then front_face in the low byte of the last word (1 or 0, the
@@ -92,30 +38,6 @@ static_assert(sizeof(ShadingPoint) == 16 * sizeof(float) &&
               offsetof(ShadingPoint, shading_normal) == 12 * sizeof(float) &&
               offsetof(ShadingPoint, front_face) == 15 * sizeof(float) &&
               std::is_trivially_copyable_v<ShadingPoint>);
-
-/// Rows become columns: r[i][j] ← r[j][i].
-SPECULA_AVX2 inline void transpose8(__m256 (&r)[8]) {
-  const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
-  const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
-  const __m256 t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
-  const __m256 t6 = _mm256_unpacklo_ps(r[6], r[7]), t7 = _mm256_unpackhi_ps(r[6], r[7]);
-  const __m256 u0 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0));
-  const __m256 u1 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
-  const __m256 u2 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
-  const __m256 u3 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(3, 2, 3, 2));
-  const __m256 u4 = _mm256_shuffle_ps(t4, t6, _MM_SHUFFLE(1, 0, 1, 0));
-  const __m256 u5 = _mm256_shuffle_ps(t4, t6, _MM_SHUFFLE(3, 2, 3, 2));
-  const __m256 u6 = _mm256_shuffle_ps(t5, t7, _MM_SHUFFLE(1, 0, 1, 0));
-  const __m256 u7 = _mm256_shuffle_ps(t5, t7, _MM_SHUFFLE(3, 2, 3, 2));
-  r[0] = _mm256_permute2f128_ps(u0, u4, 0x20);
-  r[1] = _mm256_permute2f128_ps(u1, u5, 0x20);
-  r[2] = _mm256_permute2f128_ps(u2, u6, 0x20);
-  r[3] = _mm256_permute2f128_ps(u3, u7, 0x20);
-  r[4] = _mm256_permute2f128_ps(u0, u4, 0x31);
-  r[5] = _mm256_permute2f128_ps(u1, u5, 0x31);
-  r[6] = _mm256_permute2f128_ps(u2, u6, 0x31);
-  r[7] = _mm256_permute2f128_ps(u3, u7, 0x31);
-}
 
 /// Hits i0 … i0 + 7; returns the mask of the lanes it wrote (the rest are the caller's).
 SPECULA_AVX2 unsigned eight_points(const SceneTables& tables, const Hit* hits,

@@ -8,7 +8,7 @@
 #include "specula/trace/shadow_samples.h"
 
 #include "specula/trace/area_lights.h"
-#include "specula/trace/sampler_avx2.h"
+#include "specula/trace/lanes_avx2.h"
 
 #include <algorithm>
 #include <cmath>
@@ -53,9 +53,11 @@ void ShadowLightRays::resize(std::size_t n) {
 
 namespace {
 
-static_assert(std::is_standard_layout_v<EmitterTriangle> &&
-                  sizeof(EmitterTriangle) % sizeof(float) == 0,
-              "the vector code gathers EmitterTriangle fields as floats");
+using avx2::dot;
+using avx2::mul;
+using avx2::TableInMemory;
+using avx2::TableInRegisters;
+using avx2::V3;
 
 /// A light point from one sample: dimension 0 picks the triangle and, rescaled to its interval of
 /// the CDF, places the point along with dimension 1. Dimensions (0, 1) of a pixel's first 2^m
@@ -95,12 +97,6 @@ void one_ray(const EmitterTable& table, const ShadowSurfaces& s, std::size_t n, 
   out.vb[n] = value.z;
 }
 
-SPECULA_AVX2 inline __m256 dot8(__m256 ax, __m256 ay, __m256 az, __m256 bx, __m256 by, __m256 bz) {
-  // glm::dot of vec3: the products, then (x + y) + z.
-  return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
-                       _mm256_mul_ps(az, bz));
-}
-
 SPECULA_AVX2 inline __m256 load8(const std::vector<float>& v, std::size_t n0) {
   return _mm256_loadu_ps(v.data() + n0);
 }
@@ -109,76 +105,9 @@ SPECULA_AVX2 inline __m256i load8(const std::vector<std::uint32_t>& v, std::size
   return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(v.data() + n0));
 }
 
-constexpr int kStride = int(sizeof(EmitterTriangle) / sizeof(float));
-
-/// The emitter table read from memory, any size: a triangle is its offset in floats (index ×
-/// kStride), a field a gather, the pick EmitterTable::pick's branch-free search, a gather a step.
-struct TableInMemory {
-  const float* base;
-  std::size_t count;
-
-  SPECULA_AVX2 __m256 field(__m256i element, std::size_t offset) const {
-    return _mm256_i32gather_ps(base + offset / sizeof(float), element, 4);
-  }
-  /// The picked triangles, and the mask of lanes whose u0 is at or above every cdf.
-  SPECULA_AVX2 __m256i pick(__m256 u0, __m256i& past) const {
-    const __m256i stride = _mm256_set1_epi32(kStride);
-    __m256i first = _mm256_setzero_si256(); // in floats: triangle index × kStride
-    std::size_t n = count;
-    while (n > 1) {
-      const std::size_t half = n / 2;
-      const __m256i ahead = _mm256_add_epi32(first, _mm256_set1_epi32(int(half) * kStride));
-      const __m256 below =
-          _mm256_cmp_ps(u0, field(ahead, offsetof(EmitterTriangle, cdf)), _CMP_LT_OQ);
-      first = _mm256_blendv_epi8(ahead, first, _mm256_castps_si256(below));
-      n -= half;
-    }
-    const __m256 below =
-        _mm256_cmp_ps(u0, field(first, offsetof(EmitterTriangle, cdf)), _CMP_LT_OQ);
-    first = _mm256_blendv_epi8(_mm256_add_epi32(first, stride), first, _mm256_castps_si256(below));
-    past = _mm256_cmpeq_epi32(first, _mm256_set1_epi32(int(count) * kStride));
-    return first;
-  }
-};
-
-/// A table of at most eight triangles held in registers: a triangle is its index, a field a
-/// permute of the eight triangles' values, the pick a count of the cdfs at or below u0 — the
-/// index the search finds, since the cdfs never decrease.
-struct TableInRegisters {
-  static constexpr std::size_t kMost = 8;
-  __m256 fields[kStride];
-  __m256 cdf[kMost]; ///< each triangle's cdf in every lane
-  std::size_t count;
-
-  SPECULA_AVX2 explicit TableInRegisters(const std::vector<EmitterTriangle>& triangles)
-      : count(triangles.size()) {
-    alignas(32) float column[kMost] = {};
-    const auto* words = reinterpret_cast<const float*>(triangles.data());
-    for (int f = 0; f < kStride; ++f) {
-      for (std::size_t t = 0; t < kMost; ++t)
-        column[t] = t < count ? words[t * std::size_t(kStride) + std::size_t(f)] : 0.0f;
-      fields[f] = _mm256_load_ps(column);
-    }
-    for (std::size_t t = 0; t < count; ++t) cdf[t] = _mm256_set1_ps(triangles[t].cdf);
-  }
-  SPECULA_AVX2 __m256 field(__m256i index, std::size_t offset) const {
-    return _mm256_permutevar8x32_ps(fields[offset / sizeof(float)], index);
-  }
-  SPECULA_AVX2 __m256i pick(__m256 u0, __m256i& past) const {
-    __m256i k = _mm256_setzero_si256();
-    for (std::size_t t = 0; t < count; ++t) // − (all ones) where !(u0 < cdf)
-      k = _mm256_sub_epi32(k, _mm256_castps_si256(_mm256_cmp_ps(u0, cdf[t], _CMP_NLT_UQ)));
-    past = _mm256_cmpeq_epi32(k, _mm256_set1_epi32(int(count)));
-    return k;
-  }
-};
-
-/// p0 + b1 · e1 + b2 · e2, one coordinate (the offsets of its p0, e1 and e2).
-template <typename Table>
-SPECULA_AVX2 inline __m256 point8(const Table& table, __m256i k, __m256 b1, __m256 b2,
-                                  std::size_t p0, std::size_t e1, std::size_t e2) {
-  return _mm256_add_ps(_mm256_add_ps(table.field(k, p0), _mm256_mul_ps(b1, table.field(k, e1))),
-                       _mm256_mul_ps(b2, table.field(k, e2)));
+SPECULA_AVX2 inline avx2::V3 load8(const std::vector<float>& x, const std::vector<float>& y,
+                                   const std::vector<float>& z, std::size_t n0) {
+  return {load8(x, n0), load8(y, n0), load8(z, n0)};
 }
 
 /// Surfaces n0 … n0 + 7's samples.
@@ -208,55 +137,25 @@ SPECULA_AVX2 void eight_rays(const EmitterTable& emitters, const Table& table,
   const __m256 low = _mm256_blendv_ps(v, zero, _mm256_cmp_ps(v, zero, _CMP_LT_OQ));
   const __m256 reused = _mm256_blendv_ps(low, top, _mm256_cmp_ps(top, low, _CMP_LT_OQ));
 
-  // sample_emitter_triangle.
-  const __m256 r = _mm256_sqrt_ps(reused);
-  const __m256 b1 = _mm256_sub_ps(_mm256_set1_ps(1.0f), r);
-  const __m256 b2 = _mm256_mul_ps(u1, r);
-  constexpr std::size_t kP0 = offsetof(EmitterTriangle, p0);
-  constexpr std::size_t kE1 = offsetof(EmitterTriangle, e1);
-  constexpr std::size_t kE2 = offsetof(EmitterTriangle, e2);
-  constexpr std::size_t kF = sizeof(float);
-  const __m256 dx = _mm256_sub_ps(point8(table, k, b1, b2, kP0, kE1, kE2), load8(s.ox, n0));
-  const __m256 dy =
-      _mm256_sub_ps(point8(table, k, b1, b2, kP0 + kF, kE1 + kF, kE2 + kF), load8(s.oy, n0));
-  const __m256 dz = _mm256_sub_ps(
-      point8(table, k, b1, b2, kP0 + 2 * kF, kE1 + 2 * kF, kE2 + 2 * kF), load8(s.oz, n0));
-  const __m256 dist = _mm256_sqrt_ps(dot8(dx, dy, dz, dx, dy, dz));
-  const __m256 inf = _mm256_set1_ps(std::numeric_limits<float>::infinity());
-  __m256 ok =
-      _mm256_and_ps(_mm256_cmp_ps(dist, zero, _CMP_GT_OQ), _mm256_cmp_ps(dist, inf, _CMP_LT_OQ));
-  const __m256 tx = _mm256_div_ps(dx, dist);
-  const __m256 ty = _mm256_div_ps(dy, dist);
-  const __m256 tz = _mm256_div_ps(dz, dist);
-  constexpr std::size_t kN = offsetof(EmitterTriangle, normal);
-  const __m256 cos_l =
-      _mm256_andnot_ps(_mm256_set1_ps(-0.0f), dot8(table.field(k, kN), table.field(k, kN + kF),
-                                                   table.field(k, kN + 2 * kF), tx, ty, tz));
-  ok = _mm256_and_ps(ok, _mm256_cmp_ps(cos_l, zero, _CMP_GT_OQ));
-  const __m256 area = table.field(k, offsetof(EmitterTriangle, area));
-  const __m256 pdf =
-      _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(_mm256_div_ps(pick, area), dist), dist), cos_l);
-  ok = _mm256_and_ps(
-      ok, _mm256_and_ps(_mm256_cmp_ps(pdf, zero, _CMP_GT_OQ), _mm256_cmp_ps(pdf, inf, _CMP_LT_OQ)));
-
-  // The integrator's tests: in front of the surface, lit side of the shading normal.
-  const __m256 facing = dot8(tx, ty, tz, load8(s.gx, n0), load8(s.gy, n0), load8(s.gz, n0));
-  ok = _mm256_and_ps(ok, _mm256_cmp_ps(facing, zero, _CMP_NLE_UQ));
-  const __m256 cos_theta = dot8(tx, ty, tz, load8(s.sx, n0), load8(s.sy, n0), load8(s.sz, n0));
+  // sample_emitter_triangle, then the integrator's tests: in front of the surface, lit side of
+  // the shading normal.
+  const avx2::EmitterSample8 ls =
+      avx2::emitter_sample8(table, k, load8(s.ox, s.oy, s.oz, n0), reused, u1);
+  const V3& t = ls.to_light;
+  __m256 ok = ls.ok;
+  ok = _mm256_and_ps(ok, _mm256_cmp_ps(dot(t, load8(s.gx, s.gy, s.gz, n0)), zero, _CMP_NLE_UQ));
+  const __m256 cos_theta = dot(t, load8(s.sx, s.sy, s.sz, n0));
   ok = _mm256_and_ps(ok, _mm256_cmp_ps(cos_theta, zero, _CMP_NLE_UQ));
 
-  const __m256 w = _mm256_mul_ps(_mm256_div_ps(cos_theta, pdf), _mm256_set1_ps(inv_samples));
-  constexpr std::size_t kEm = offsetof(EmitterTriangle, emission);
-  _mm256_storeu_ps(out.dx.data() + n0, tx);
-  _mm256_storeu_ps(out.dy.data() + n0, ty);
-  _mm256_storeu_ps(out.dz.data() + n0, tz);
-  _mm256_storeu_ps(out.tfar.data() + n0, _mm256_mul_ps(dist, _mm256_set1_ps(1.0f - 1e-5f)));
-  _mm256_storeu_ps(out.vr.data() + n0,
-                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ar, n0), table.field(k, kEm)), w));
-  _mm256_storeu_ps(out.vg.data() + n0,
-                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ag, n0), table.field(k, kEm + kF)), w));
-  _mm256_storeu_ps(out.vb.data() + n0,
-                   _mm256_mul_ps(_mm256_mul_ps(load8(s.ab, n0), table.field(k, kEm + 2 * kF)), w));
+  const __m256 w = mul(_mm256_div_ps(cos_theta, ls.pdf), _mm256_set1_ps(inv_samples));
+  const V3 emission = avx2::field3(table, k, offsetof(EmitterTriangle, emission));
+  _mm256_storeu_ps(out.dx.data() + n0, t.x);
+  _mm256_storeu_ps(out.dy.data() + n0, t.y);
+  _mm256_storeu_ps(out.dz.data() + n0, t.z);
+  _mm256_storeu_ps(out.tfar.data() + n0, mul(ls.distance, _mm256_set1_ps(1.0f - 1e-5f)));
+  _mm256_storeu_ps(out.vr.data() + n0, mul(mul(load8(s.ar, n0), emission.x), w));
+  _mm256_storeu_ps(out.vg.data() + n0, mul(mul(load8(s.ag, n0), emission.y), w));
+  _mm256_storeu_ps(out.vb.data() + n0, mul(mul(load8(s.ab, n0), emission.z), w));
   const int mask = _mm256_movemask_ps(ok);
   for (int lane = 0; lane < 8; ++lane) out.valid[n0 + std::size_t(lane)] = (mask >> lane) & 1;
 }
@@ -272,7 +171,7 @@ SPECULA_AVX2 std::size_t eight_at_a_time(const EmitterTable& emitters, const Sha
     for (; first + 8 <= s.size(); first += 8)
       eight_rays(emitters, table, s, first, index, inv_samples, out);
   } else {
-    const TableInMemory table{reinterpret_cast<const float*>(triangles.data()), triangles.size()};
+    const TableInMemory table(triangles);
     for (; first + 8 <= s.size(); first += 8)
       eight_rays(emitters, table, s, first, index, inv_samples, out);
   }
@@ -296,10 +195,8 @@ void shadow_light_rays(const EmitterTable& table, const ShadowSurfaces& surfaces
   }
   std::size_t first = 0;
   // The gathers index the triangles' floats with 32-bit offsets.
-  constexpr std::size_t kMostTriangles = std::size_t(std::numeric_limits<std::int32_t>::max()) /
-                                             sizeof(EmitterTriangle) * sizeof(float) -
-                                         1;
-  if (simd && shadow_light_rays_vectorised() && table.triangles().size() <= kMostTriangles)
+  if (simd && shadow_light_rays_vectorised() &&
+      table.triangles().size() <= avx2::kMostEmitterTriangles)
     first = eight_at_a_time(table, surfaces, index, inv_samples, out);
   for (; first < n; ++first) one_ray(table, surfaces, first, index, inv_samples, out);
 }
