@@ -224,7 +224,12 @@ private:
   /// k / per_point; area-light samples where this depth samples lights.
   void starts(std::span<const Hit> hits, std::span<const ShadingPoint> points,
               std::size_t per_point, std::size_t count, std::uint32_t depth) {
-    VertexInputs in{hits, points, per_point, count};
+    VertexInputs in;
+    in.hits = hits;
+    in.points = points;
+    in.per_point = per_point;
+    in.count = count;
+    if (kPunctual) in.lights = tables_.lights;
     if (kArea && settings_.sampling != LightSampling::Bsdf && depth < settings_.max_depth &&
         count > 0) {
       static_assert(offsetof(VertexSamples, light) == 0 &&
@@ -359,11 +364,15 @@ private:
       const vec3 f = m.base_color * (diffuse * kInvPi);
       if constexpr (kPunctual) {
         // Whitted's own shadow rays (shading.h), so that with nothing else the images agree.
-        for (const gpu::GpuLight& light : tables_.lights)
-          punctual_shadow_ray(light, sp, origin, f,
-                              [&](const vec3& direction, float tfar, const vec3& value) {
-                                add_shadow(origin, direction, tfar, p, p.throughput * value);
-                              });
+        // Sampled for the whole wave (w_.starts: sample_light and shadow_tfar).
+        const VertexStarts& ls = w_.starts;
+        for (std::size_t l = 0, e = v.start; l < tables_.lights.size(); ++l, e += ls.count()) {
+          lit_shadow_ray(
+              ls.light_direction(e), ls.irradiance(e), [&] { return ls.ptfar[e]; }, sp, f,
+              [&](const vec3& direction, float tfar, const vec3& value) {
+                add_shadow(origin, direction, tfar, p, p.throughput * value);
+              });
+        }
       }
       // Area lights are sampled towards the next vertex, which the last one does not have (the
       // BSDF strategy would need a ray beyond the depth limit).

@@ -146,6 +146,27 @@ struct SpecularSplit {
   return std::max(0.0f, 1.0f - m.reflectivity - m.transmission);
 }
 
+/// How far a shadow ray from `origin` towards `light` (sampled as `ls` from the shading point)
+/// goes: to just short of the light, so that a light placed on a surface does not shadow itself;
+/// forever towards a directional light.
+[[nodiscard]] inline float shadow_tfar(const gpu::GpuLight& light, const LightSample& ls,
+                                       const vec3& origin) {
+  return std::isinf(ls.distance)
+             ? ls.distance
+             : float(glm::length(glm::dvec3(light.position - origin)) * (1.0 - 1e-5));
+}
+
+/// punctual_shadow_ray once the light is sampled (towards `to_light`, `irradiance` at normal
+/// incidence; `tfar()` the ray's far distance, asked only for a ray that is emitted).
+template <class Tfar, class Emit>
+inline void lit_shadow_ray(const vec3& to_light, const vec3& irradiance, Tfar&& tfar,
+                           const ShadingPoint& sp, const vec3& albedo, Emit&& emit) {
+  if (glm::dot(to_light, sp.geometric_normal) <= 0.0f) return; // behind
+  const float cos_theta = glm::dot(to_light, sp.shading_normal);
+  if (cos_theta <= 0.0f || max_component(irradiance) <= 0.0f) return;
+  emit(to_light, tfar(), albedo * irradiance * cos_theta);
+}
+
 /// The shadow ray from shading point `sp` (leaving from `origin`, its offset spawn point) towards
 /// `light`, for a diffuse part of reflectance `albedo`: `emit(direction, tfar, value)` with the
 /// ray's direction and far distance and the radiance it brings when nothing blocks it (albedo ×
@@ -158,14 +179,8 @@ template <class Emit>
 inline void punctual_shadow_ray(const gpu::GpuLight& light, const ShadingPoint& sp,
                                 const vec3& origin, const vec3& albedo, Emit&& emit) {
   const LightSample ls = sample_light(light, sp.position);
-  if (glm::dot(ls.to_light, sp.geometric_normal) <= 0.0f) return; // behind
-  const float cos_theta = glm::dot(ls.to_light, sp.shading_normal);
-  if (cos_theta <= 0.0f || max_component(ls.irradiance) <= 0.0f) return;
-  // Stop just short of the light: a light placed on a surface must not shadow itself.
-  const float tfar = std::isinf(ls.distance)
-                         ? ls.distance
-                         : float(glm::length(glm::dvec3(light.position - origin)) * (1.0 - 1e-5));
-  emit(ls.to_light, tfar, albedo * ls.irradiance * cos_theta);
+  lit_shadow_ray(
+      ls.to_light, ls.irradiance, [&] { return shadow_tfar(light, ls, origin); }, sp, albedo, emit);
 }
 
 /// Stores a ray part by part (see punctual_shadow_ray).

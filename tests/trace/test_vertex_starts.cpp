@@ -1,5 +1,6 @@
 // What a wave's path vertices start from (trace/vertex_starts.h): the AVX2 code and the
-// one-at-a-time code must give offset_ray_origin's and sample_area_light's bits for every hit —
+// one-at-a-time code must give offset_ray_origin's, sample_light's (with shadow_tfar) and
+// sample_area_light's bits for every hit —
 // on hard points too (on an emitter's corner and plane, behind it, far enough for the distance to
 // overflow, normals with zero and negative components, zero and huge error bounds), with picks
 // past the last cdf, with emitter tables small enough for registers and large ones, and with
@@ -8,6 +9,8 @@
 #include "scene_builder.h"
 #include "specula/geometry/ray_offset.h"
 #include "specula/trace/area_lights.h"
+#include "specula/trace/lights.h"
+#include "specula/trace/shading.h"
 #include "specula/trace/vertex_starts.h"
 
 #include <gtest/gtest.h>
@@ -40,9 +43,35 @@ bool same_bits(float a, float b) {
   return std::bit_cast<std::uint32_t>(a) == std::bit_cast<std::uint32_t>(b);
 }
 
+gpu::GpuLight light(std::uint32_t type, const vec3& position, const vec3& intensity,
+                    float range = 0.0f) {
+  gpu::GpuLight l{};
+  l.type = type;
+  l.position = position;
+  l.direction = glm::normalize(vec3(0.3f, -1.0f, 0.2f));
+  l.intensity = intensity;
+  l.range = range;
+  l.cos_inner = 0.9f;
+  l.cos_outer = 0.7f;
+  return l;
+}
+
+/// Punctual lights: point lights without a range (the vector code's), near and far, one of
+/// 1e20 cd (irradiance capped where a vertex sits 1e-6 from it), and the kinds left to the scalar
+/// code (a range, a spot, a directional light).
+std::vector<gpu::GpuLight> punctual_lights() {
+  return {light(gpu::kLightPoint, vec3(0.0f, 1.85f, 0.0f), vec3(3.0f, 2.5f, 2.1f)),
+          light(gpu::kLightPoint, vec3(-1.0f, 0.5f, 2.0f), vec3(1e20f)),
+          light(gpu::kLightPoint, vec3(1e18f, 0.0f, -1e18f), vec3(5.0f, 0.0f, 1.0f)),
+          light(gpu::kLightPoint, vec3(2.0f, 2.0f, 2.0f), vec3(1.0f), 3.0f),
+          light(gpu::kLightSpot, vec3(0.0f, 3.0f, 0.0f), vec3(10.0f)),
+          light(gpu::kLightDirectional, vec3(0.0f), vec3(0.7f))};
+}
+
 /// Random vertices around the emitters of `table` and the hard ones; `per_point` vertices share
 /// each hit. Returns how many light samples were usable.
 std::size_t expect_vector_equals_scalar(const EmitterTable& table, std::size_t per_point) {
+  const std::vector<gpu::GpuLight> lights = punctual_lights();
   std::mt19937 rng(20261129);
   std::uniform_real_distribution<float> coordinate(-4.0f, 4.0f), unit(0.0f, 1.0f);
   std::normal_distribution<float> gauss;
@@ -57,6 +86,8 @@ std::size_t expect_vector_equals_scalar(const EmitterTable& table, std::size_t p
     if (i % 11 == 0) sp.position = e.p0 + unit(rng) * 0.5f * e.e1 + unit(rng) * 0.5f * e.e2;
     if (i % 13 == 0) sp.position = e.p0;                       // distance 0 from a corner
     if (i % 17 == 0) sp.position = vec3(3e19f, -2e19f, 1e19f); // the distance overflows
+    if (i % 31 == 0) sp.position = lights[0].position;         // on a point light
+    if (i % 37 == 0) sp.position = lights[1].position + vec3(1e-6f, 0.0f, 0.0f);
     sp.spawn_point = sp.position + vec3(1e-6f);
     sp.spawn_error = i % 7 == 0 ? vec3(0.0f) : glm::abs(sp.position) * 1e-6f + vec3(1e-30f);
     sp.geometric_normal = direction();
@@ -74,7 +105,7 @@ std::size_t expect_vector_equals_scalar(const EmitterTable& table, std::size_t p
     if (k % 23 == 0) u[k * kStride] = 0x1.fffffep-1f; // at or above every cdf: the fallback
     if (k % 29 == 0) u[k * kStride + 1] = 0.0f;       // the triangle's corner p0
   }
-  detail::VertexInputs in{hits, points, per_point, count, &table, u.data(), kStride};
+  detail::VertexInputs in{hits, points, per_point, count, &table, u.data(), kStride, lights};
   detail::VertexStarts vector, scalar;
   detail::vertex_starts(in, vector, true);
   detail::vertex_starts(in, scalar, false);
@@ -99,6 +130,20 @@ std::size_t expect_vector_equals_scalar(const EmitterTable& table, std::size_t p
             << (o == &vector ? "vector" : "scalar") << " column " << c << " of vertex " << k << ": "
             << got[c] << " against " << want[c];
       if (::testing::Test::HasFailure()) return usable;
+      for (std::size_t l = 0; l < lights.size(); ++l) {
+        const LightSample s = sample_light(lights[l], sp.position);
+        const float tfar = shadow_tfar(lights[l], s, origin);
+        const std::size_t e = l * count + k;
+        const float want_l[] = {s.to_light.x,   s.to_light.y,   s.to_light.z, s.irradiance.x,
+                                s.irradiance.y, s.irradiance.z, tfar};
+        const float got_l[] = {o->plx[e], o->ply[e], o->plz[e],  o->pir[e],
+                               o->pig[e], o->pib[e], o->ptfar[e]};
+        for (std::size_t c = 0; c < std::size(want_l); ++c)
+          EXPECT_TRUE(same_bits(got_l[c], want_l[c]))
+              << (o == &vector ? "vector" : "scalar") << " light " << l << " column " << c
+              << " of vertex " << k << ": " << got_l[c] << " against " << want_l[c];
+        if (::testing::Test::HasFailure()) return usable;
+      }
     }
     usable += ls.pdf > 0.0f ? 1 : 0;
   }
@@ -136,7 +181,11 @@ TEST(VertexStarts, WithoutEmittersOnlyTheOriginsAreComputed) {
   }
   for (const bool simd : {false, true}) {
     detail::VertexStarts out;
-    detail::vertex_starts({hits, points, 1, hits.size()}, out, simd);
+    detail::VertexInputs in;
+    in.hits = hits;
+    in.points = points;
+    in.count = hits.size();
+    detail::vertex_starts(in, out, simd);
     for (std::size_t i = 0; i < hits.size(); ++i) {
       const vec3 want = offset_ray_origin(points[i].spawn_point, points[i].spawn_error,
                                           points[i].geometric_normal);
