@@ -401,23 +401,24 @@ private:
 
     // The continuation: a lobe picked by its weight, the throughput divided by its probability.
     // Dimensions: 0 the lobe, 1 reflect or refract, 2 and 3 the diffuse direction.
-    Path next = p;
-    Ray ray;
+    // The next path and its ray are assembled in registers and written to their waves part by
+    // part (a Path copied whole after piecewise writes was read back before they had reached
+    // memory, as punctual_shadow_ray notes of rays).
+    vec3 throughput = p.throughput;
+    float bsdf_pdf = 0.0f;
+    vec3 ray_origin = origin, direction;
     RayKind kind = RayKind::Reflection;
     bool exits = false; // a specular ray leaving the object outwards
     if (!(kMirror || kDielectric) || u.bsdf[0] * total < diffuse) {
-      const vec3 wi = cosine_direction(sp.shading_normal, u.bsdf[2], u.bsdf[3]);
-      const float cos_theta = glm::dot(wi, sp.shading_normal);
-      if (glm::dot(wi, sp.geometric_normal) <= 0.0f || !(cos_theta > 0.0f)) return;
+      direction = cosine_direction(sp.shading_normal, u.bsdf[2], u.bsdf[3]);
+      const float cos_theta = glm::dot(direction, sp.shading_normal);
+      if (glm::dot(direction, sp.geometric_normal) <= 0.0f || !(cos_theta > 0.0f)) return;
       // f·cos / pdf = (diffuse·base/π·cos) / (p_diffuse·cos/π).
-      next.throughput *= m.base_color * total;
-      next.bsdf_pdf = p_diffuse * cos_theta * kInvPi;
-      ray = Ray{origin, 0.0f, wi, std::numeric_limits<float>::infinity()};
+      throughput *= m.base_color * total;
+      bsdf_pdf = p_diffuse * cos_theta * kInvPi;
     } else {
-      next.bsdf_pdf = 0.0f;
-      next.throughput *= total;
+      throughput *= total;
       bool reflect = true;
-      vec3 direction;
       if constexpr (kDielectric) {
         const SpecularSplit split = split_specular(m, sp, d);
         const float both = split.reflect_weight + split.refract_weight;
@@ -430,23 +431,30 @@ private:
       }
       kind = reflect ? RayKind::Reflection : RayKind::Refraction;
       exits = reflect == sp.front_face;
-      ray = Ray{offset_ray_origin(sp.spawn_point, sp.spawn_error,
-                                  reflect ? sp.geometric_normal : -sp.geometric_normal),
-                0.0f, direction, std::numeric_limits<float>::infinity()};
+      ray_origin = offset_ray_origin(sp.spawn_point, sp.spawn_error,
+                                     reflect ? sp.geometric_normal : -sp.geometric_normal);
     }
     if (depth >= kRouletteDepth) {
-      const float survival = std::clamp(max_component(next.throughput), 0.05f, 1.0f);
+      const float survival = std::clamp(max_component(throughput), 0.05f, 1.0f);
       if (u.roulette >= survival) return;
-      next.throughput /= survival;
+      throughput /= survival;
     }
-    if (!(max_component(next.throughput) > 0.0f)) return; // a black surface ends it
-    next.previous = sp.position;
+    if (!(max_component(throughput) > 0.0f)) return; // a black surface ends it
     ++counts_[kind];
     if (hook_ != nullptr && exits)
       w_.exits.push_back(PathExit{std::uint32_t(w_.paths.size()), v.instance, kind,
-                                  next.throughput / glm::max(p.throughput, vec3(1e-30f))});
-    w_.paths.push_back(next);
-    w_.rays.push_back(ray);
+                                  throughput / glm::max(p.throughput, vec3(1e-30f))});
+    Path& next = w_.paths.emplace_back();
+    next.throughput = throughput;
+    next.bsdf_pdf = bsdf_pdf;
+    next.previous = sp.position;
+    next.slot = p.slot;
+    next.pixel = p.pixel;
+    next.stream = p.stream;
+    next.sample = p.sample;
+    next.leaving = p.leaving;
+    store_ray(w_.rays.emplace_back(), ray_origin, direction,
+              std::numeric_limits<float>::infinity());
   }
 
   /// A shadow ray (stored part by part: see punctual_shadow_ray) and what it brings unblocked.
