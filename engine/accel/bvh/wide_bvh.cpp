@@ -320,11 +320,13 @@ bool WideBvh::traverse(PreparedRay& r, TriangleHit* hit, std::uint32_t start_chi
             stack[top++] = {n.child[i], n.count[i], entry[i]};
           }
           cur = {n.child[first], n.count[first], entry[first]};
-        } else if (std::has_single_bit(mask)) {
-          // One child (most nodes near the leaves): nothing to order.
+        } else if ((mask & (mask - 1)) == 0) {
+          // One child (most nodes near the leaves): nothing to order. (Bit tests rather than
+          // std::has_single_bit and std::popcount, which without POPCNT in the baseline ISA are
+          // library calls, one per node step.)
           const int i = std::countr_zero(mask);
           cur = {n.child[i], n.count[i], entry[i]};
-        } else if (std::popcount(mask) == 2) {
+        } else if (const unsigned rest = mask & (mask - 1); (rest & (rest - 1)) == 0) {
           // Two: the nearer first, the lower slot on a tie (as the insertion below orders them).
           const int i = std::countr_zero(mask), j = std::countr_zero(mask & (mask - 1));
           const bool swap = entry[i] > entry[j];
@@ -435,7 +437,7 @@ bool prepare_packet_walk(const RayPacket<N>& rays, const bool* active, PreparedR
                          unsigned& mask, std::uint32_t neg[3], WatertightLanesOf<N>& lanes) {
   const bool vector_prepared = prepare_coherent_lanes<N>(rays, active, nullptr, prepared, nullptr,
                                                          nullptr, mask, neg, lanes);
-  return vector_prepared && Test == TriangleTest::watertight && std::popcount(mask) > 1;
+  return vector_prepared && Test == TriangleTest::watertight && (mask & (mask - 1)) != 0;
 }
 
 } // namespace

@@ -110,7 +110,7 @@ SPECULA_SIMD_TARGET unsigned occlude_packet(const WideBvhNode* nodes, const Wide
   TriangleHit scratch[kLanes];
   Entry cur{0, 0, mask};
   for (;;) {
-    if (std::has_single_bit(cur.mask)) {
+    if ((cur.mask & (cur.mask - 1)) == 0) { // one lane (cur.mask is never 0 here)
       // One lane left in this subtree: its own walk (no vector work for seven idle lanes).
       if (single(std::countr_zero(cur.mask), cur.child, cur.count)) {
         blocked |= cur.mask;

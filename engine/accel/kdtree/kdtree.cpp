@@ -1054,7 +1054,9 @@ unsigned KdTree::walk_packet(const RayPacket<N>& rays, const bool* active, Prepa
   if (mask == 0) return 0;
 
   // One direction sign per axis over the live lanes, or each lane on its own.
-  bool coherent = std::popcount(mask) > 1;
+  // Two lanes or more (not std::popcount: without POPCNT in the baseline ISA it is a library
+  // call).
+  bool coherent = (mask & (mask - 1)) != 0;
   if (!vector_prepared) {
     const int lead = std::countr_zero(mask);
     for (int a = 0; a < 3 && coherent; ++a) {
