@@ -34,6 +34,9 @@ constexpr float kInvPi = std::numbers::inv_pi_v<float>;
 /// many paths, which bounds the scratch memory whatever --spp asks.
 constexpr std::size_t kMaxPathsPerBatch = 8192;
 
+/// Most punctual lights whose samples a wave computes ahead (vertex_starts.h).
+constexpr std::size_t kMostBatchedLights = 8;
+
 /// Vertices from this depth on (0: the primary hit) continue only by Russian roulette.
 constexpr std::uint32_t kRouletteDepth = 3;
 
@@ -229,7 +232,7 @@ private:
     in.points = points;
     in.per_point = per_point;
     in.count = count;
-    if (kPunctual) in.lights = tables_.lights;
+    if (kPunctual && batched_lights()) in.lights = tables_.lights;
     if (kArea && settings_.sampling != LightSampling::Bsdf && depth < settings_.max_depth &&
         count > 0) {
       static_assert(offsetof(VertexSamples, light) == 0 &&
@@ -240,6 +243,11 @@ private:
     }
     vertex_starts(in, w_.starts);
   }
+
+  /// Whether the wave's vertex starts hold the punctual lights' samples (seven floats per light
+  /// and vertex): only for a few lights, so that a scene with thousands of them does not make the
+  /// wave's scratch thousands of times larger; beyond that each vertex samples them as it shades.
+  [[nodiscard]] bool batched_lights() const { return tables_.lights.size() <= kMostBatchedLights; }
 
   /// The shading points of a wave's hits (misses skipped), into w_.points.
   void shading_points(std::span<const Hit> hits, const Directions& directions) {
@@ -364,14 +372,19 @@ private:
       const vec3 f = m.base_color * (diffuse * kInvPi);
       if constexpr (kPunctual) {
         // Whitted's own shadow rays (shading.h), so that with nothing else the images agree.
-        // Sampled for the whole wave (w_.starts: sample_light and shadow_tfar).
-        const VertexStarts& ls = w_.starts;
-        for (std::size_t l = 0, e = v.start; l < tables_.lights.size(); ++l, e += ls.count()) {
-          lit_shadow_ray(
-              ls.light_direction(e), ls.irradiance(e), [&] { return ls.ptfar[e]; }, sp, f,
-              [&](const vec3& direction, float tfar, const vec3& value) {
-                add_shadow(origin, direction, tfar, p, p.throughput * value);
-              });
+        // Sampled for the whole wave where there are few lights (w_.starts: sample_light and
+        // shadow_tfar), here otherwise; the same values either way.
+        const auto emit = [&](const vec3& direction, float tfar, const vec3& value) {
+          add_shadow(origin, direction, tfar, p, p.throughput * value);
+        };
+        if (batched_lights()) {
+          const VertexStarts& ls = w_.starts;
+          for (std::size_t l = 0, e = v.start; l < tables_.lights.size(); ++l, e += ls.count())
+            lit_shadow_ray(
+                ls.light_direction(e), ls.irradiance(e), [&] { return ls.ptfar[e]; }, sp, f, emit);
+        } else {
+          for (const gpu::GpuLight& light : tables_.lights)
+            punctual_shadow_ray(light, sp, origin, f, emit);
         }
       }
       // Area lights are sampled towards the next vertex, which the last one does not have (the

@@ -399,6 +399,48 @@ TEST(PathPointLights, ASceneWithPointLightsOnlyMatchesWhittedAtDepthZero) {
   }
 }
 
+TEST(PathPointLights, ManyLightsShadeAsTheWavesBatchedSamplesDo) {
+  // A wave samples up to eight point lights ahead for all its vertices at once (vertex_starts.h);
+  // with more, each vertex samples them as it shades. A ninth light of zero intensity adds
+  // nothing, so the two ways must give the same image, bit for bit, here with bounces, an area
+  // light and a mirror.
+  const auto scene = [](ecs::Registry& reg, bool ninth) {
+    test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(10.0f)), test::at(vec3(0.0f)),
+                   diffuse(vec3(0.7f, 0.6f, 0.5f)));
+    Material mirror = diffuse(vec3(0.9f));
+    mirror.reflectivity = 0.6f;
+    test::add_mesh(reg, test::primitive("sphere", 0.6f, vec3(1.0f), 32, 16),
+                   test::at(vec3(0.0f, 0.7f, 0.0f)), mirror);
+    test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(0.8f)),
+                   test::at(vec3(0.0f, 3.0f, 0.0f), vec3(1.0f), quat(0, 1, 0, 0)),
+                   diffuse(vec3(0.0f), vec3(3.0f, 2.5f, 2.0f)));
+    for (int l = 0; l < 8; ++l) {
+      const float a = 0.785f * float(l);
+      test::add_point_light(reg,
+                            vec3(2.5f * std::cos(a), 1.0f + 0.3f * float(l), 2.5f * std::sin(a)),
+                            2.0f + float(l));
+    }
+    if (ninth) test::add_point_light(reg, vec3(0.5f, 2.0f, -1.0f), 0.0f);
+  };
+  ecs::Registry few_reg, many_reg;
+  scene(few_reg, false);
+  scene(many_reg, true);
+  test::TracedWorld few(few_reg), many(many_reg);
+  ASSERT_EQ(few.layer.tables().lights.size(), 8u);
+  ASSERT_EQ(many.layer.tables().lights.size(), 9u);
+  const Camera camera = camera_at(vec3(0.5f, 2.0f, 5.0f), vec3(0.0f, 0.5f, 0.0f), 50.0f);
+  const TraceSettings settings = path_settings(2, 7, LightSampling::Mis, 4);
+  const Framebuffer a = render(few, camera, settings, 48, 36);
+  const Framebuffer b = render(many, camera, settings, 48, 36);
+  std::size_t lit = 0;
+  for (std::size_t i = 0; i < a.pixel_count(); ++i) {
+    ASSERT_EQ(a.pixels()[i], b.pixels()[i]) << "pixel " << i;
+    const vec3 c = a.pixels()[i];
+    lit += std::max(c.x, std::max(c.y, c.z)) > 0.0f;
+  }
+  EXPECT_GT(lit, a.pixel_count() / 2);
+}
+
 TEST(PathCounts, RaysAreCountedByKind) {
   SmallCornell scene;
   Framebuffer image(16, 12);
