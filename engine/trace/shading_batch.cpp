@@ -7,7 +7,6 @@
 #include "specula/core/assert.h"
 #include "specula/trace/lanes_avx2.h"
 
-#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <limits>

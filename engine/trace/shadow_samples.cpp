@@ -14,8 +14,6 @@
 #include <cmath>
 #include <cstddef>
 #include <immintrin.h>
-#include <limits>
-#include <type_traits>
 
 namespace specula::detail {
 

@@ -170,7 +170,7 @@ TEST(VertexStarts, VectorisedStartsEqualTheScalarOnesBitForBit) {
   }
 }
 
-TEST(VertexStarts, WithoutEmittersOnlyTheOriginsAreComputed) {
+TEST(VertexStarts, WithoutLightsTheOriginsAreStillOffsetOffTheSurface) {
   std::vector<Hit> hits(21);
   std::vector<ShadingPoint> points(21);
   for (std::size_t i = 0; i < hits.size(); ++i) {
