@@ -387,7 +387,16 @@ public:
     // children, so that the largest lists are never held along the whole path.
     const Arena::Mark mark = scratch.arena.mark();
     NodeInput below, above;
-    split_node(in, split, below, above, c, scratch, n >= kHeapLists ? nullptr : &scratch.arena);
+    const Sides sides =
+        split_node(in, split, below, above, c, scratch, n >= kHeapLists ? nullptr : &scratch.arena);
+    if (sides != Sides::kBoth) {
+      // A cut that leaves one side empty (most splits of a deep tree: each empty leaf is one):
+      // every triangle is on the other side, with the same local index, so that child's lists
+      // are the node's own, event for event. They are handed over instead of filtered and copied.
+      NodeInput& full = sides == Sides::kAllBelow ? below : above;
+      full.tris = std::move(in.tris);
+      full.events = std::move(in.events);
+    }
     in = NodeInput{};
     c.sah += double(options_.traversal_cost) * double(area);
 
@@ -530,10 +539,17 @@ private:
 
   enum Side : std::uint8_t { kBoth = 0, kBelowOnly = 1, kAboveOnly = 2 };
 
+  /// Where split_node's classification put the node's triangles.
+  enum class Sides { kBoth, kAllBelow, kAllAbove };
+
   /// Classification, list split and the straddling triangles' new events (Wald & Havran §5.2–5.3),
-  /// all linear in the node's events but for the sort of the new events.
-  void split_node(const NodeInput& in, const Split& split, NodeInput& below, NodeInput& above,
-                  Counters& c, Scratch& scratch, Arena* arena) const {
+  /// all linear in the node's events but for the sort of the new events. Sets both children's
+  /// boxes; when every triangle lies on one side (kAllBelow, kAllAbove) it stops after the
+  /// classification and leaves both children's lists empty: the caller hands the node's own
+  /// lists to the full side.
+  [[nodiscard]] Sides split_node(const NodeInput& in, const Split& split, NodeInput& below,
+                                 NodeInput& above, Counters& c, Scratch& scratch,
+                                 Arena* arena) const {
     const std::size_t n = in.tris.size();
     const auto axis = std::size_t(split.axis);
     // Classification without branches: a triangle gets at most one of the two flags (an end at or
@@ -569,6 +585,13 @@ private:
       n_above += side[l] != kBelowOnly;
       n_both += side[l] == kBoth;
     }
+    below.box = in.box;
+    below.box.max[split.axis] = split.pos;
+    above.box = in.box;
+    above.box.min[split.axis] = split.pos;
+    if (n_above == 0) return Sides::kAllBelow;
+    if (n_below == 0) return Sides::kAllAbove;
+
     std::vector<std::uint32_t>& remap = scratch.remap; // the index in its child (below if both)
     std::vector<std::uint32_t>& straddling = scratch.straddling;
     std::vector<std::uint32_t>& above_index = scratch.above_index; // a straddler's index above
@@ -597,11 +620,6 @@ private:
         }
       }
     }
-
-    below.box = in.box;
-    below.box.max[split.axis] = split.pos;
-    above.box = in.box;
-    above.box.min[split.axis] = split.pos;
 
     // The straddling triangles' events in each child, from their parts inside the child box.
     NewEventLists& new_below = scratch.new_below;
@@ -686,6 +704,7 @@ private:
     c.events += 2 * (in.events[0].size() + in.events[1].size() + in.events[2].size());
     for (std::size_t a = 0; a < 3; ++a)
       c.sort_work += sort_cost(new_below[a].size()) + sort_cost(new_above[a].size());
+    return Sides::kBoth;
   }
 
   /// Merges the sorted `extra` into the sorted out[0, kept) in place, from the back (out has room
