@@ -494,12 +494,18 @@ private:
       const float p_above = (cap + (hi - p) * perimeter) * inv_area;
       if (p > lo && p < hi) {
         const float cost_below = sah(p_below, p_above, n_below + planar, n_above);
-        const float cost_above = sah(p_below, p_above, n_below, n_above + planar);
         if (cost_below < best_cost) {
           best_cost = cost_below;
           best_pos = p;
           best_planar_below = true;
         }
+        // Without triangles in the plane (nearly every position) the other side's cost is the
+        // same number, which never wins a strict comparison: it is not computed.
+        if (planar == 0) {
+          n_below += starting;
+          continue;
+        }
+        const float cost_above = sah(p_below, p_above, n_below, n_above + planar);
         if (cost_above < best_cost) {
           best_cost = cost_above;
           best_pos = p;
