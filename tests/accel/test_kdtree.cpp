@@ -549,6 +549,47 @@ TEST(KdTree, SliversThinnerThanAnUlpStayInTheirCells) {
   }
 }
 
+// A cut with one side empty hands the node's own event lists to the other child instead of
+// filtering them. Here the root holds a dense sphere and one far-off triangle, so the first cuts
+// are one-sided and large (lists on the heap, children built as parallel tasks): the tree must
+// still find every hit brute force finds, on one thread and two alike.
+TEST(KdTree, OneSidedCutsOfLargeNodesKeepEveryTriangle) {
+  Mesh mesh = uv_sphere(48, 96, 1.0f, vec3(0.0f));
+  mesh.name = "sphere and a far triangle";
+  mesh.add(vec3(40.0f, 40.0f, 40.0f), vec3(40.5f, 40.0f, 40.0f), vec3(40.0f, 40.5f, 40.0f));
+  KdTree one, two;
+  tbb::task_arena(2).execute([&] { two.build(mesh.view()); });
+  tbb::task_arena(1).execute([&] { one.build(mesh.view()); });
+  EXPECT_TRUE(same_tree(one, two));
+  // Find a one-sided cut near the root whose full side holds most of the mesh.
+  std::uint32_t large_one_sided = 0;
+  std::vector<std::uint32_t> subtree_refs(one.nodes().size(), 0);
+  for (std::size_t i = one.nodes().size(); i-- > 0;) {
+    const gpu::KdNode n = one.nodes()[i];
+    if ((n.bits & 3u) == gpu::kKdLeaf) {
+      subtree_refs[i] = n.bits >> 2;
+      continue;
+    }
+    const std::uint32_t below = std::uint32_t(i) + 1, above = n.bits >> 2;
+    subtree_refs[i] = subtree_refs[below] + subtree_refs[above];
+    const bool below_empty = subtree_refs[below] == 0, above_empty = subtree_refs[above] == 0;
+    if ((below_empty || above_empty) && subtree_refs[i] >= 2048) ++large_one_sided;
+  }
+  EXPECT_GE(large_one_sided, 1u) << "the mesh should make the tree cut off empty space early";
+  // Rays at the sphere, rays anywhere, and rays aimed at the far triangle.
+  std::vector<PreparedRay> rays = make_rays(Aabb{vec3(-1.0f), vec3(1.0f)}, 3000, 91);
+  const std::vector<PreparedRay> wide = make_rays(mesh.bounds(), 1000, 92);
+  rays.insert(rays.end(), wide.begin(), wide.end());
+  std::mt19937 rng(93);
+  std::uniform_real_distribution<float> unit(0.0f, 0.15f);
+  for (int i = 0; i < 200; ++i) {
+    const vec3 target(40.0f + unit(rng), 40.0f + unit(rng), 40.0f);
+    rays.push_back(
+        PreparedRay::make(vec3(0.0f, 0.0f, 5.0f), target - vec3(0.0f, 0.0f, 5.0f), 0.0f, kInf));
+  }
+  check_against_brute_force<TriangleTest::watertight>(mesh, rays);
+}
+
 TEST(KdTree, BuildIsDeterministicForAnyThreadCount) {
   const Mesh mesh = soup(40000, 0.03f, 3);
   KdTree one, two, sequential;
