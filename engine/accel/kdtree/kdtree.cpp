@@ -168,7 +168,25 @@ private:
 
 using EventList = ArenaList<Event>;
 using EventLists = std::array<EventList, 3>;
-using NewEventLists = std::array<std::vector<Event>, 3>;
+/// The straddling triangles' new events of one child and axis: a buffer that only grows (sized
+/// before the node's straddlers are clipped, so a push does not check its room).
+class NewEvents {
+public:
+  void prepare(std::size_t capacity) {
+    if (buffer_.size() < capacity) buffer_.resize(capacity);
+    size_ = 0;
+  }
+  void push_back(const Event& e) { buffer_[size_++] = e; }
+  [[nodiscard]] std::size_t size() const { return size_; }
+  [[nodiscard]] Event* begin() { return buffer_.data(); }
+  [[nodiscard]] Event* end() { return buffer_.data() + size_; }
+  [[nodiscard]] const Event& operator[](std::size_t i) const { return buffer_[i]; }
+
+private:
+  std::vector<Event> buffer_;
+  std::size_t size_ = 0;
+};
+using NewEventLists = std::array<NewEvents, 3>;
 
 /// Per-task scratch arrays of split_node, reused from node to node (their capacity stays), and
 /// the task's arena. A parallel child gets its own.
@@ -601,51 +619,55 @@ private:
     std::vector<std::uint32_t>& remap = scratch.remap; // the index in its child (below if both)
     std::vector<std::uint32_t>& straddling = scratch.straddling;
     std::vector<std::uint32_t>& above_index = scratch.above_index; // a straddler's index above
+    // Without branches on the side (its outcome is data): every triangle is written to each list
+    // and the write positions advance only on its sides, so each list has room for one more.
     remap.resize(n);
-    straddling.resize(n_both);
-    above_index.resize(n_both);
-    below.tris.allocate(arena, n_below);
-    above.tris.allocate(arena, n_above);
+    straddling.resize(n_both + 1);
+    above_index.resize(n_both + 1);
+    below.tris.allocate(arena, n_below + 1);
+    above.tris.allocate(arena, n_above + 1);
     below.tris.set_size(n_below);
     above.tris.set_size(n_above);
     {
       std::uint32_t b = 0, a = 0, k = 0;
+      std::uint32_t* bt = below.tris.data();
+      std::uint32_t* at = above.tris.data();
       for (std::uint32_t l = 0; l < n; ++l) {
         const std::uint8_t sd = side[l];
-        if (sd == kBoth) {
-          straddling[k] = l;
-          above_index[k++] = a;
-        }
-        if (sd != kAboveOnly) {
-          remap[l] = b;
-          below.tris[b++] = in.tris[l];
-        }
-        if (sd != kBelowOnly) {
-          if (sd == kAboveOnly) remap[l] = a;
-          above.tris[a++] = in.tris[l];
-        }
+        const std::uint32_t prim = in.tris[l];
+        straddling[k] = l;
+        above_index[k] = a;
+        remap[l] = sd == kAboveOnly ? a : b;
+        bt[b] = prim;
+        at[a] = prim;
+        k += std::uint32_t(sd == kBoth);
+        b += std::uint32_t(sd != kAboveOnly);
+        a += std::uint32_t(sd != kBelowOnly);
       }
     }
 
     // The straddling triangles' events in each child, from their parts inside the child box.
     NewEventLists& new_below = scratch.new_below;
     NewEventLists& new_above = scratch.new_above;
-    for (std::size_t a = 0; a < 3; ++a) {
-      new_below[a].clear();
-      new_above[a].clear();
+    for (std::size_t a = 0; a < 3; ++a) { // at most two events per straddler, child and axis
+      new_below[a].prepare(2 * n_both);
+      new_above[a].prepare(2 * n_both);
     }
     for (std::size_t k = 0; k < n_both; ++k) {
       const std::uint32_t l = straddling[k];
       const std::uint32_t prim = in.tris[l];
-      const Aabb whole = tris_.bounds(prim);
+      const vec3 v0 = tris_.vertex(prim, 0), v1 = tris_.vertex(prim, 1), v2 = tris_.vertex(prim, 2);
+      Aabb whole; // tris_.bounds(prim), from the vertices already read
+      whole.grow(v0);
+      whole.grow(v1);
+      whole.grow(v2);
       // The triangle's part in the node, clipped once and split by the plane into its parts in
       // the two children (the same polygons as clipping to each child's box, with one pass over
       // the node's planes instead of two).
       std::array<vec3, kMaxPolygon> in_node, part_below, part_above;
       int n_part[2] = {0, 0};
       if (options_.perfect_splits) {
-        const int m = clip_to_box(tris_.vertex(prim, 0), tris_.vertex(prim, 1),
-                                  tris_.vertex(prim, 2), whole, in.box, in_node.data());
+        const int m = clip_to_box(v0, v1, v2, whole, in.box, in_node.data());
         if (m > 0) {
           n_part[0] =
               clip_polygon(in_node.data(), m, split.axis, split.pos, true, part_below.data());
@@ -679,8 +701,8 @@ private:
     }
     auto split_axis = [&](std::size_t a) {
       const EventList& events = in.events[a];
-      std::vector<Event>& nb = new_below[a];
-      std::vector<Event>& na = new_above[a];
+      NewEvents& nb = new_below[a];
+      NewEvents& na = new_above[a];
       std::sort(nb.begin(), nb.end());
       std::sort(na.begin(), na.end());
       EventList& out_below = below.events[a];
@@ -715,7 +737,7 @@ private:
 
   /// Merges the sorted `extra` into the sorted out[0, kept) in place, from the back (out has room
   /// for both); returns the merged size. Keys are unique, so there are no ties.
-  static std::size_t merge_back(Event* out, std::size_t kept, const std::vector<Event>& extra) {
+  static std::size_t merge_back(Event* out, std::size_t kept, const NewEvents& extra) {
     std::size_t i = kept, j = extra.size(), k = kept + extra.size();
     // Without branches on the comparison (its outcome is data): a kept event is taken while it
     // is the larger; once none is left, the sentinel (all bits 0, below every event) is never
