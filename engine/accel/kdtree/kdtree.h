@@ -5,7 +5,8 @@
 ///
 /// Build: the event lists are sorted once per axis (a radix sort); every node then sweeps them for
 /// the best SAH plane, classifies its triangles (below / above / both) and splits the lists in
-/// linear time. Only the triangles that straddle the plane get new events: each is clipped to the
+/// linear time (a cut that leaves one side empty hands the node's lists to the other child
+/// unchanged). Only the triangles that straddle the plane get new events: each is clipped to the
 /// node's box and the clipped polygon split by the plane into its parts in the two child boxes
 /// (Sutherland–Hodgman, the "perfect splits" of §4.2), and the short sorted lists of new events are
 /// merged into the split lists. Subtrees above a size threshold are built in parallel (TBB) into
