@@ -255,11 +255,20 @@ SPECULA_SIMD_TARGET inline bool make_watertight_lanes(const PreparedRay* rays, u
 }
 
 /// A leaf's triangles against the lanes in `mask` (which share their ray space): closer hits land
-/// in hits[i] and rays[i].tfar.
+/// in hits[i] and rays[i].tfar, and in `tfar`, the lanes' tfar kept in a register by the caller
+/// (its lanes equal to rays[i].tfar on entry; so on return).
+SPECULA_SIMD_TARGET inline void
+intersect_leaf_lanes(const WatertightLanes& w, PreparedRay* rays, TriangleHit* hits, Vf& tfar,
+                     unsigned mask, const TriangleView& tris, const std::uint32_t* ids,
+                     std::uint32_t count) {
+  for (std::uint32_t k = 0; k < count; ++k)
+    intersect_watertight_lanes(w, rays, hits, tfar, mask, tris, ids[k]);
+}
+
+/// The same for a caller without the lanes' tfar in a register.
 SPECULA_SIMD_TARGET inline void
 intersect_leaf_lanes(const WatertightLanes& w, PreparedRay* rays, TriangleHit* hits, unsigned mask,
                      const TriangleView& tris, const std::uint32_t* ids, std::uint32_t count) {
   Vf tfar = load_tfar(rays);
-  for (std::uint32_t k = 0; k < count; ++k)
-    intersect_watertight_lanes(w, rays, hits, tfar, mask, tris, ids[k]);
+  intersect_leaf_lanes(w, rays, hits, tfar, mask, tris, ids, count);
 }

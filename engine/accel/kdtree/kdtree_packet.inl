@@ -73,14 +73,14 @@ SPECULA_SIMD_TARGET unsigned traverse_packet(const KdView& kd, PreparedRay* rays
       const std::uint32_t count = n.bits >> 2;
       const std::uint32_t* ids = kd.indices + n.first;
       if (Test == TriangleTest::watertight && shared_axes && count != 0) {
-        intersect_leaf_lanes(w, rays, hits, mask, *kd.tris, ids, count);
-      } else {
+        intersect_leaf_lanes(w, rays, hits, tfar, mask, *kd.tris, ids, count); // tfar kept current
+      } else if (count != 0) {
         for (unsigned m = mask; m; m &= m - 1) {
           const int i = std::countr_zero(m);
           intersect_leaf<Test>(rays[i], *kd.tris, ids, count, hits[i]);
         }
+        tfar = load_tfar(rays);
       }
-      if (count != 0) tfar = load_tfar(rays);
       if constexpr (AnyHit) {
         for (unsigned m = mask; m; m &= m - 1)
           if (hits[std::countr_zero(m)].hit()) blocked |= 1u << std::countr_zero(m);
