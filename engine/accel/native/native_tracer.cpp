@@ -346,11 +346,10 @@ bool NativeTracer::occluded_dynamic(const PreparedRay& r) const {
 
 namespace {
 
-/// Rays [first, first + count) of a batch as a packet (the lanes past count inactive copies).
 /// The batch's ray indices grouped by the signs of their directions (in batch order within a
 /// group), so that a packet holds rays that walk a tree in one order; a packet whose lanes
 /// disagree on a sign walks lane by lane. Reflected rays off a curved surface change octant
-/// often; grouping them made the kd-tree's reflection batches 1.08-1.10x faster (PERFORMANCE.md
+/// often; grouping them made the kd-tree's reflection batches about 1.08x faster (PERFORMANCE.md
 /// §6).
 std::vector<std::uint32_t> octant_order(std::span<const Ray> rays) {
   auto octant = [](const Ray& r) {
@@ -365,7 +364,8 @@ std::vector<std::uint32_t> octant_order(std::span<const Ray> rays) {
   return order;
 }
 
-/// Packet lanes from rays order[first, first + count) (order null: the batch's own order).
+/// Rays order[first, first + count) of a batch as a packet (order null: the batch's own order;
+/// the lanes past count inactive copies).
 template <int N>
 void fill_packet(std::span<const Ray> rays, const std::uint32_t* order, std::size_t first,
                  std::size_t count, accel::RayPacket<N>& p, bool* active) {
@@ -388,10 +388,10 @@ void fill_packet(std::span<const Ray> rays, const std::uint32_t* order, std::siz
 
 void NativeTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
   SPECULA_ASSERT(hits.size() == rays.size());
-  // The kd-tree takes consecutive rays as packets too: its packet walk gives each lane its single
-  // ray's hit to the bit (KdTree.PacketsMatchSingleRays), so a ray's hit does not depend on the
-  // rays beside it in the batch. (The wide BVH's closest-hit packets may keep the other of two
-  // triangles an ulp apart: its batches stay one ray at a time.)
+  // The kd-tree takes the batch as packets too, its rays grouped by octant first: its packet walk
+  // gives each lane its single ray's hit to the bit (KdTree.PacketsMatchSingleRays), so a ray's
+  // hit does not depend on the rays beside it in the packet. (The wide BVH's closest-hit packets
+  // may keep the other of two triangles an ulp apart: its batches stay one ray at a time.)
   if (has_static_ && options_.static_structure == StaticStructure::kdtree) {
     if (accel::cpu_has_avx2())
       intersect_packets<8>(rays, hits);
