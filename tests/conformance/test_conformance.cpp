@@ -6,7 +6,8 @@
 //     inside and from outside, never leak through;
 //   - any-hit (occluded) agrees with closest-hit (intersect) on the same rays, and coherent
 //     batches (occluded_coherent, packets where a backend has them) answer as occluded does;
-//   - primary packets of every width find the hits single rays find;
+//   - primary packets of every width find the hits single rays find, and each ray of a batch
+//     in every direction the hit it finds alone;
 //   - structure updates: only what the scene layer reports changed causes work, and the hits
 //     follow moved, deformed and destroyed entities;
 //   - images of the sample scenes agree with the reference backend's (Embree) and with the
@@ -263,6 +264,49 @@ TEST_P(Conformance, OccludedAgreesWithClosestHitOnTheSameRays) {
   EXPECT_EQ(agree, compared);
   EXPECT_GT(occluded, compared / 10) << "the scene must block a fair share of the rays";
   EXPECT_LT(occluded, compared * 9 / 10);
+}
+
+// A batch whose neighbouring rays point into different octants (as reflected rays off a curved
+// surface do): each ray's hit is the one it finds when traced alone, whatever the backend does
+// with the batch (the native kd-tree groups it by octant into packets and writes the hits back),
+// and lands in its own place. Untraceable rays are mixed in.
+TEST_P(Conformance, ABatchInEveryDirectionFindsWhatEachRayFindsAlone) {
+  ecs::Registry reg;
+  test::add_mesh(reg, test::primitive("plane", 1.0f, vec3(20.0f)), test::at(vec3(0)));
+  test::add_mesh(reg, test::primitive("sphere", 1.0f), test::at(vec3(0, 1.5f, 0)));
+  test::add_mesh(reg, test::primitive("sphere", 0.7f), test::at(vec3(2, 1, -1)), Material{},
+                 Kinematics::Type::Free);
+  test::add_mesh(reg, test::primitive("box", 1.0f, vec3(1, 3, 1)), test::at(vec3(-2, 1.5f, 1)));
+  const test::TracedWorld world(reg, backend());
+  std::mt19937 rng(47);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<Ray> rays;
+  for (int i = 0; i < 301; ++i) {
+    Ray ray;
+    ray.origin = vec3(u(rng) * 4.0f, 0.2f + 2.0f * (u(rng) + 1.0f), u(rng) * 4.0f);
+    ray.direction = glm::normalize(vec3(u(rng), u(rng), u(rng)));
+    rays.push_back(ray);
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  rays[17].origin = vec3(nan, 0.0f, 0.0f);
+  rays[40].direction = vec3(0.0f);
+  std::vector<Hit> batch(rays.size());
+  world.tracer->intersect(rays, batch);
+  int hits = 0;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    Hit alone;
+    world.tracer->intersect(std::span<const Ray>(&rays[i], 1), std::span<Hit>(&alone, 1));
+    hits += alone.hit();
+    EXPECT_EQ(batch[i].instance, alone.instance) << "ray " << i;
+    if (!alone.hit()) continue;
+    EXPECT_FLOAT_EQ(batch[i].t, alone.t) << "ray " << i;
+    // The native backends answer each ray of a batch as they answer it alone, to the bit.
+    if (backend().rfind("native", 0) == 0) {
+      EXPECT_EQ(batch[i].t, alone.t) << "ray " << i;
+      EXPECT_EQ(batch[i].primitive, alone.primitive) << "ray " << i;
+    }
+  }
+  EXPECT_GT(hits, int(rays.size()) / 4) << "the scene must stop a fair share of the rays";
 }
 
 /// Shadow rays as the shadow caster and Whitted emit them: from a grid of points on the ground,
