@@ -1,6 +1,7 @@
 #include "specula/accel/kdtree/kdtree.h"
 
 #include "specula/accel/common/simd_lanes.h"
+#include "specula/core/assert.h"
 
 #include <tbb/parallel_invoke.h>
 #include <tbb/task_arena.h>
@@ -405,8 +406,23 @@ public:
     // children, so that the largest lists are never held along the whole path.
     const Arena::Mark mark = scratch.arena.mark();
     NodeInput below, above;
-    const Sides sides =
-        split_node(in, split, below, above, c, scratch, n >= kHeapLists ? nullptr : &scratch.arena);
+    // A cut off empty space is known from the ends of the split axis's list; only a cut through
+    // the triangles classifies them.
+    Sides sides = one_sided(in, split);
+    if (sides == Sides::kBoth) {
+      sides = split_node(in, split, below, above, c, scratch,
+                         n >= kHeapLists ? nullptr : &scratch.arena);
+    } else {
+#ifndef NDEBUG
+      Counters ignored;
+      SPECULA_ASSERT(split_node(in, split, below, above, ignored, scratch, &scratch.arena) ==
+                     sides);
+#endif
+      below.box = in.box;
+      below.box.max[split.axis] = split.pos;
+      above.box = in.box;
+      above.box.min[split.axis] = split.pos;
+    }
     if (sides != Sides::kBoth) {
       // A cut that leaves one side empty (most splits of a deep tree: each empty leaf is one):
       // every triangle is on the other side, with the same local index, so that child's lists
@@ -466,14 +482,18 @@ private:
     c.sah += double(options_.intersection_cost) * double(n) * double(area);
   }
 
-  // Counts are signed 32-bit here: their conversion to float is one instruction.
-  [[nodiscard]] float sah(float p_below, float p_above, std::int32_t n_below,
-                          std::int32_t n_above) const {
-    const float cost =
-        options_.traversal_cost +
-        options_.intersection_cost * (p_below * float(n_below) + p_above * float(n_above));
-    return (n_below == 0 || n_above == 0) ? options_.empty_bonus * cost : cost;
-  }
+  /// The SAH cost of a plane, the options' three constants held by value (read through the
+  /// options reference, they were loaded again at every position of a sweep).
+  struct Sah {
+    float traversal, intersection, empty_bonus;
+    // Counts are signed 32-bit here: their conversion to float is one instruction.
+    [[nodiscard]] float operator()(float p_below, float p_above, std::int32_t n_below,
+                                   std::int32_t n_above) const {
+      const float cost =
+          traversal + intersection * (p_below * float(n_below) + p_above * float(n_above));
+      return (n_below == 0 || n_above == 0) ? empty_bonus * cost : cost;
+    }
+  };
 
   /// The sweep of Wald & Havran §5.1 over one axis's sorted events: the best plane inside the box,
   /// or in one of its faces when triangles lie in that face (they go to a flat cell; a face plane
@@ -484,6 +504,7 @@ private:
     const float lo = in.box.min[axis], hi = in.box.max[axis];
     if (!(hi > lo)) return best;
     const float inv_area = 1.0f / half_area(extent);
+    const Sah sah{options_.traversal_cost, options_.intersection_cost, options_.empty_bonus};
     const int u = (axis + 1) % 3, v = (axis + 2) % 3;
     const float cap = extent[u] * extent[v];
     const float perimeter = extent[u] + extent[v];
@@ -565,6 +586,26 @@ private:
 
   /// Where split_node's classification put the node's triangles.
   enum class Sides { kBoth, kAllBelow, kAllAbove };
+
+  /// Whether the split's plane leaves every triangle on one side, from the ends of its axis's
+  /// sorted list alone (a cut off empty space: most splits of a deep tree): the classification's
+  /// answer without classifying. At the plane's position the types sort end < planar < start, and
+  /// a triangle with a start there ends beyond it.
+  [[nodiscard]] static Sides one_sided(const NodeInput& in, const Split& split) {
+    const EventList& events = in.events[std::size_t(split.axis)];
+    const std::uint32_t at = ordered_key(split.pos);
+    const Event& last = events[events.size() - 1];
+    if (last.pos_key() < at ||
+        (last.pos_key() == at &&
+         (last.type() == kEnd || (last.type() == kPlanar && split.planar_below))))
+      return Sides::kAllBelow;
+    const Event& first = events[0];
+    if (first.pos_key() > at ||
+        (first.pos_key() == at &&
+         (first.type() == kStart || (first.type() == kPlanar && !split.planar_below))))
+      return Sides::kAllAbove;
+    return Sides::kBoth;
+  }
 
   /// Classification, list split and the straddling triangles' new events (Wald & Havran §5.2–5.3),
   /// all linear in the node's events but for the sort of the new events. Sets both children's
