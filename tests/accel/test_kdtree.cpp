@@ -611,6 +611,49 @@ TEST(KdTree, OneSidedCutsOfLargeNodesKeepEveryTriangle) {
   check_against_brute_force<TriangleTest::watertight>(mesh, rays);
 }
 
+// The sweep takes long event lists eight events at a time with AVX2: per lane the counts by
+// type (prefix sums), whether the event is its position's last, the counts before the position
+// (a max-scan), the costs, and each lane's first best, reduced in list order. It must choose the
+// scalar sweep's plane every time, ties and all, or the trees differ: positions shared by many
+// triangles (a grid's rows: runs of equal keys across blocks), triangles in split planes and in the
+// box's faces (the box lattice, the floor), degenerate triangles, and long lists at every level.
+TEST(KdTree, SimdSweepBuildsTheScalarSweepsTree) {
+  if (!cpu_has_avx2()) GTEST_SKIP() << "no AVX2: the scalar sweep is the only one";
+  std::vector<Mesh> meshes = test_meshes();
+  meshes.push_back(soup(20000, 0.05f, 5));
+  Mesh floor_and_ball = test::flat_grid(48, 48, -8.0f, 8.0f, 0.0f);
+  const Mesh ball = uv_sphere(32, 64, 1.0f, vec3(0.0f, 0.0f, 2.0f));
+  const auto base = std::uint32_t(floor_and_ball.positions.size());
+  floor_and_ball.positions.insert(floor_and_ball.positions.end(), ball.positions.begin(),
+                                  ball.positions.end());
+  for (const uvec3& t : ball.triangles) floor_and_ball.triangles.push_back(t + uvec3(base));
+  floor_and_ball.name = "floor and ball";
+  meshes.push_back(std::move(floor_and_ball));
+  // Two equal clusters of 16 triangles, x in [0, 1] and [3, 4], with the same extent on y and z:
+  // the planes at x = 1 and x = 3 cost the same to the bit, and their positions' last events
+  // (indices 31 and 47 of 64) fall in the same lane of two blocks, so the lane must keep the
+  // first (the scalar sweep's strict comparison keeps x = 1).
+  Mesh twins{"twin clusters", {}, {}};
+  for (const float shift : {0.0f, 3.0f})
+    for (int i = 0; i < 16; ++i)
+      twins.add(vec3(shift, 0.0f, 0.0f), vec3(shift + 1.0f, 1.0f, 0.0f),
+                vec3(shift + float(i + 1) / 32.0f, 0.5f, 1.0f));
+  meshes.push_back(twins);
+  for (const Mesh& mesh : meshes) {
+    KdBuildOptions scalar;
+    scalar.simd_sweep = false;
+    KdTree simd, reference;
+    simd.build(mesh.view());
+    reference.build(mesh.view(), scalar);
+    EXPECT_TRUE(same_tree(simd, reference)) << mesh.name;
+    EXPECT_EQ(simd.stats().sah_cost, reference.stats().sah_cost) << mesh.name;
+  }
+  KdTree twin_tree;
+  twin_tree.build(twins.view());
+  EXPECT_EQ(twin_tree.nodes()[0].bits & 3u, 0u) << "the twins' root should split on x";
+  EXPECT_EQ(twin_tree.nodes()[0].split, 1.0f) << "ties go to the first plane";
+}
+
 TEST(KdTree, BuildIsDeterministicForAnyThreadCount) {
   const Mesh mesh = soup(40000, 0.03f, 3);
   KdTree one, two, sequential;

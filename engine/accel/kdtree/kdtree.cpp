@@ -371,6 +371,242 @@ void push_events(const Aabb& b, std::uint32_t local, Lists& lists) {
   }
 }
 
+/// The SAH cost of a plane, the options' three constants held by value (read through the
+/// options reference, they were loaded again at every position of a sweep).
+struct Sah {
+  float traversal, intersection, empty_bonus;
+  // Counts are signed 32-bit here: their conversion to float is one instruction.
+  [[nodiscard]] float operator()(float p_below, float p_above, std::int32_t n_below,
+                                 std::int32_t n_above) const {
+    const float cost =
+        traversal + intersection * (p_below * float(n_below) + p_above * float(n_above));
+    return (n_below == 0 || n_above == 0) ? empty_bonus * cost : cost;
+  }
+};
+
+/// One axis's sweep: the node's extent along it, the areas' terms and the cost's constants.
+struct SweepFrame {
+  float lo, hi;    ///< the box along the axis
+  float cap;       ///< the area of the box's face across the axis
+  float perimeter; ///< half the perimeter of that face
+  float inv_area;  ///< 1 / the box's half area
+  std::int32_t n;  ///< the node's triangles
+  Sah sah;
+};
+
+/// Where a sweep stands between two positions: the triangles below and above the next one, and
+/// the best plane so far.
+struct SweepState {
+  std::int32_t n_below = 0, n_above = 0;
+  float best_cost = kInf, best_pos = 0.0f;
+  bool best_planar_below = true;
+};
+
+/// Event lists at least this long are swept eight events at a time (shorter ones: the blocks'
+/// set-up and the final reduction would cost more than they save).
+constexpr std::size_t kSimdSweepMin = 32;
+
+namespace sweep_avx2 {
+
+#define SPECULA_SWEEP_TARGET __attribute__((target("avx2")))
+
+/// x shifted up the lanes by the permutation `idx`, the lanes below `keep` zeroed.
+SPECULA_SWEEP_TARGET inline __m256i up(__m256i x, __m256i idx, __m256i keep) {
+  return _mm256_and_si256(_mm256_permutevar8x32_epi32(x, idx), keep);
+}
+
+/// The SAH cost of eight planes, with Sah's operations in its order (no fused multiply-add: the
+/// function's target does not allow one), so each lane is the scalar cost to the bit.
+SPECULA_SWEEP_TARGET inline __m256 sah8(__m256 p_below, __m256 p_above, __m256i n_below,
+                                        __m256i n_above, __m256 traversal, __m256 intersection,
+                                        __m256 bonus) {
+  const __m256 sum = _mm256_add_ps(_mm256_mul_ps(p_below, _mm256_cvtepi32_ps(n_below)),
+                                   _mm256_mul_ps(p_above, _mm256_cvtepi32_ps(n_above)));
+  const __m256 cost = _mm256_add_ps(traversal, _mm256_mul_ps(intersection, sum));
+  const __m256i zero = _mm256_setzero_si256();
+  const __m256i empty =
+      _mm256_or_si256(_mm256_cmpeq_epi32(n_below, zero), _mm256_cmpeq_epi32(n_above, zero));
+  return _mm256_blendv_ps(cost, _mm256_mul_ps(bonus, cost), _mm256_castsi256_ps(empty));
+}
+
+/// Per lane, `cost` and `index` become the best where `valid` and strictly below the best so far
+/// (a lane keeps its first best, as the scalar sweep does).
+SPECULA_SWEEP_TARGET inline void keep_better(__m256i valid, __m256 cost, __m256i index,
+                                             __m256& best, __m256i& best_index) {
+  const __m256i take =
+      _mm256_and_si256(valid, _mm256_castps_si256(_mm256_cmp_ps(cost, best, _CMP_LT_OQ)));
+  best = _mm256_blendv_ps(best, cost, _mm256_castsi256_ps(take));
+  best_index = _mm256_blendv_epi8(best_index, index, take);
+}
+
+/// The sweep over e[0, m) eight events at a time, lane i of a block holding event i: per lane,
+/// the counts by type before it (prefix sums), whether it is its position's last event (the next
+/// key differs), and the counts before its position's first event (carried up to it by a max-scan,
+/// the counts being non-decreasing); at a position's last event, the plane's costs as the scalar
+/// sweep weighs them there. Each lane keeps its first best; the lanes' bests are then reduced to
+/// the first best of all in list order (its index is 2·event, +1 for the cost with the planar
+/// triangles above), which is what the scalar sweep's strict comparisons keep. Stops before the
+/// last block (a block reads the key after it) and returns the first event of the position that
+/// block ends in, with `st` as the scalar sweep has it there; the scalar sweep goes on from it.
+SPECULA_SWEEP_TARGET std::size_t blocks(const Event* e, std::size_t m, const SweepFrame& f,
+                                        SweepState& st) {
+  const __m256i ones = _mm256_set1_epi32(1), all = _mm256_set1_epi32(-1);
+  const __m256i idx_next = _mm256_setr_epi32(1, 2, 3, 4, 5, 6, 7, 7);
+  const __m256i idx_up1 = _mm256_setr_epi32(0, 0, 1, 2, 3, 4, 5, 6);
+  const __m256i idx_up2 = _mm256_setr_epi32(0, 0, 0, 1, 2, 3, 4, 5);
+  const __m256i idx_up4 = _mm256_setr_epi32(0, 0, 0, 0, 0, 1, 2, 3);
+  const __m256i keep1 = _mm256_setr_epi32(0, -1, -1, -1, -1, -1, -1, -1);
+  const __m256i keep2 = _mm256_setr_epi32(0, 0, -1, -1, -1, -1, -1, -1);
+  const __m256i keep4 = _mm256_setr_epi32(0, 0, 0, 0, -1, -1, -1, -1);
+  const __m256i lane2 = _mm256_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14);
+  const __m256i field = _mm256_set1_epi32(1023);
+  const __m256i sign = _mm256_set1_epi32(std::int32_t(0x80000000u));
+  const __m256 lo = _mm256_set1_ps(f.lo), hi = _mm256_set1_ps(f.hi);
+  const __m256 cap = _mm256_set1_ps(f.cap), perimeter = _mm256_set1_ps(f.perimeter);
+  const __m256 inv_area = _mm256_set1_ps(f.inv_area);
+  const __m256 traversal = _mm256_set1_ps(f.sah.traversal);
+  const __m256 intersection = _mm256_set1_ps(f.sah.intersection);
+  const __m256 bonus = _mm256_set1_ps(f.sah.empty_bonus);
+  const __m256i n = _mm256_set1_epi32(f.n);
+
+  __m256 best = _mm256_set1_ps(kInf);
+  __m256i best_index = _mm256_setzero_si256();
+  const __m256i idx_last = _mm256_set1_epi32(7);
+  // Never a count: the max-scans' value for lanes whose position began before the block.
+  const __m256i none = _mm256_set1_epi32(-(1 << 30));
+  // Counts by type of the events before the block, and of those before the position the
+  // previous block ended in (that position may go on into this block), in every lane: the
+  // carries stay in vector registers, one permutation from block to block.
+  __m256i ends = _mm256_setzero_si256(), planars = ends, starts = ends;
+  __m256i open_starts = ends, open_planars = ends;
+  std::uint32_t prev_key = ~e[0].pos_key(); // differs from the first key
+  std::size_t i = 0;
+  for (; i + 8 < m; i += 8) {
+    const __m256 a = _mm256_loadu_ps(reinterpret_cast<const float*>(e + i));
+    const __m256 b = _mm256_loadu_ps(reinterpret_cast<const float*>(e + i + 4));
+    // High words (keys) and low words (type and triangle) of the eight events, in order.
+    const __m256i key = _mm256_permute4x64_epi64(
+        _mm256_castps_si256(_mm256_shuffle_ps(a, b, _MM_SHUFFLE(3, 1, 3, 1))), 0xD8);
+    const __m256i low = _mm256_permute4x64_epi64(
+        _mm256_castps_si256(_mm256_shuffle_ps(a, b, _MM_SHUFFLE(2, 0, 2, 0))), 0xD8);
+    const __m256i type = _mm256_srli_epi32(low, 30);
+    const __m256i next =
+        _mm256_blend_epi32(_mm256_permutevar8x32_epi32(key, idx_next),
+                           _mm256_set1_epi32(std::int32_t(e[i + 8].pos_key())), 0x80);
+    const __m256i prev = _mm256_blend_epi32(_mm256_permutevar8x32_epi32(key, idx_up1),
+                                            _mm256_set1_epi32(std::int32_t(prev_key)), 0x01);
+    const __m256i last = _mm256_xor_si256(_mm256_cmpeq_epi32(key, next), all);
+    const __m256i first = _mm256_xor_si256(_mm256_cmpeq_epi32(key, prev), all);
+    // The three counts packed ten bits apart (a block adds at most 8 to each), summed up the
+    // lanes in three steps.
+    __m256i x = _mm256_sllv_epi32(
+        ones, _mm256_add_epi32(_mm256_slli_epi32(type, 3), _mm256_slli_epi32(type, 1)));
+    x = _mm256_add_epi32(x, up(x, idx_up1, keep1));
+    x = _mm256_add_epi32(x, up(x, idx_up2, keep2));
+    x = _mm256_add_epi32(x, up(x, idx_up4, keep4));
+    const __m256i e_local = _mm256_and_si256(x, field);
+    const __m256i p_local = _mm256_and_si256(_mm256_srli_epi32(x, 10), field);
+    const __m256i s_local = _mm256_srli_epi32(x, 20);
+    const __m256i is_start = _mm256_and_si256(_mm256_cmpeq_epi32(type, _mm256_set1_epi32(2)), ones);
+    const __m256i is_planar = _mm256_and_si256(_mm256_cmpeq_epi32(type, ones), ones);
+    // Starts and planar events before each lane's position within the block: the exclusive
+    // counts at the position's first event, carried up the lanes by a max-scan (the counts do not
+    // decrease; a lane's permutation source below it is in its own prefix, so no lane needs
+    // masking). Lanes whose position began before the block keep `none`.
+    __m256i s_scan = _mm256_blendv_epi8(none, _mm256_sub_epi32(s_local, is_start), first);
+    __m256i p_scan = _mm256_blendv_epi8(none, _mm256_sub_epi32(p_local, is_planar), first);
+    s_scan = _mm256_max_epi32(s_scan, _mm256_permutevar8x32_epi32(s_scan, idx_up1));
+    p_scan = _mm256_max_epi32(p_scan, _mm256_permutevar8x32_epi32(p_scan, idx_up1));
+    s_scan = _mm256_max_epi32(s_scan, _mm256_permutevar8x32_epi32(s_scan, idx_up2));
+    p_scan = _mm256_max_epi32(p_scan, _mm256_permutevar8x32_epi32(p_scan, idx_up2));
+    s_scan = _mm256_max_epi32(s_scan, _mm256_permutevar8x32_epi32(s_scan, idx_up4));
+    p_scan = _mm256_max_epi32(p_scan, _mm256_permutevar8x32_epi32(p_scan, idx_up4));
+    // The carries added last: the scans above do not wait for the previous block.
+    const __m256i e_incl = _mm256_add_epi32(e_local, ends);
+    const __m256i p_incl = _mm256_add_epi32(p_local, planars);
+    const __m256i s_incl = _mm256_add_epi32(s_local, starts);
+    const __m256i s_before = _mm256_max_epi32(_mm256_add_epi32(s_scan, starts), open_starts);
+    const __m256i p_before = _mm256_max_epi32(_mm256_add_epi32(p_scan, planars), open_planars);
+
+    const __m256i n_above = _mm256_sub_epi32(_mm256_sub_epi32(n, e_incl), p_incl);
+    const __m256i planar = _mm256_sub_epi32(p_incl, p_before);
+    // The position from its key (from_ordered_key, lane by lane).
+    const __m256 p = _mm256_castsi256_ps(_mm256_xor_si256(
+        key, _mm256_or_si256(_mm256_andnot_si256(_mm256_srai_epi32(key, 31), all), sign)));
+    const __m256 p_below =
+        _mm256_mul_ps(_mm256_add_ps(cap, _mm256_mul_ps(_mm256_sub_ps(p, lo), perimeter)), inv_area);
+    const __m256 p_above =
+        _mm256_mul_ps(_mm256_add_ps(cap, _mm256_mul_ps(_mm256_sub_ps(hi, p), perimeter)), inv_area);
+    const __m256i inside = _mm256_castps_si256(
+        _mm256_and_ps(_mm256_cmp_ps(p, lo, _CMP_GT_OQ), _mm256_cmp_ps(p, hi, _CMP_LT_OQ)));
+    const __m256i at_lo = _mm256_castps_si256(_mm256_cmp_ps(p, lo, _CMP_EQ_OQ));
+    const __m256i has_planar = _mm256_cmpgt_epi32(planar, _mm256_setzero_si256());
+    const __m256i index = _mm256_add_epi32(_mm256_set1_epi32(std::int32_t(2 * i)), lane2);
+
+    // The planar triangles below: inside the box, or in its lower face when there are any.
+    {
+      const __m256i below = _mm256_blendv_epi8(planar, _mm256_add_epi32(s_before, p_incl), inside);
+      const __m256i valid =
+          _mm256_and_si256(last, _mm256_or_si256(inside, _mm256_and_si256(has_planar, at_lo)));
+      keep_better(valid, sah8(p_below, p_above, below, n_above, traversal, intersection, bonus),
+                  index, best, best_index);
+    }
+    // The planar triangles above: inside the box, or in its upper face (anywhere but the lower
+    // face), only where there are any (rarely).
+    const __m256i planar_last = _mm256_and_si256(last, has_planar);
+    if (!_mm256_testz_si256(planar_last, planar_last)) {
+      const __m256i below = _mm256_add_epi32(s_before, p_before);
+      const __m256i above = _mm256_blendv_epi8(planar, _mm256_add_epi32(n_above, planar), inside);
+      const __m256i valid =
+          _mm256_and_si256(planar_last, _mm256_or_si256(inside, _mm256_xor_si256(at_lo, all)));
+      keep_better(valid, sah8(p_below, p_above, below, above, traversal, intersection, bonus),
+                  _mm256_add_epi32(index, ones), best, best_index);
+    }
+    ends = _mm256_permutevar8x32_epi32(e_incl, idx_last);
+    planars = _mm256_permutevar8x32_epi32(p_incl, idx_last);
+    starts = _mm256_permutevar8x32_epi32(s_incl, idx_last);
+    open_starts = _mm256_permutevar8x32_epi32(s_before, idx_last);
+    open_planars = _mm256_permutevar8x32_epi32(p_before, idx_last);
+    prev_key = e[i + 7].pos_key();
+  }
+
+  // The lanes' bests reduced to the first best in list order.
+  alignas(32) float cost[8];
+  alignas(32) std::int32_t index[8];
+  _mm256_store_ps(cost, best);
+  _mm256_store_si256(reinterpret_cast<__m256i*>(index), best_index);
+  int winner = -1;
+  for (int l = 0; l < 8; ++l) {
+    if (!(cost[l] < kInf)) continue;
+    if (winner < 0 || cost[l] < cost[winner] ||
+        (cost[l] == cost[winner] && index[l] < index[winner]))
+      winner = l;
+  }
+  if (winner >= 0) {
+    st.best_cost = cost[winner];
+    st.best_pos = e[std::size_t(index[winner]) / 2].pos();
+    st.best_planar_below = (index[winner] & 1) == 0;
+  }
+  // Back to the first event of the position the last block ended in, with the counts before it.
+  std::int32_t n_ends = _mm256_cvtsi256_si32(ends), n_planars = _mm256_cvtsi256_si32(planars),
+               n_starts = _mm256_cvtsi256_si32(starts);
+  std::size_t g = i;
+  while (g > 0 && e[g - 1].pos_key() == e[i].pos_key()) {
+    --g;
+    const std::uint32_t t = e[g].type();
+    n_ends -= std::int32_t(t == kEnd);
+    n_planars -= std::int32_t(t == kPlanar);
+    n_starts -= std::int32_t(t == kStart);
+  }
+  st.n_below = n_starts + n_planars;
+  st.n_above = f.n - n_ends - n_planars;
+  return g;
+}
+
+#undef SPECULA_SWEEP_TARGET
+
+} // namespace sweep_avx2
+
 struct Split {
   float cost = kInf;
   int axis = -1;
@@ -482,19 +718,6 @@ private:
     c.sah += double(options_.intersection_cost) * double(n) * double(area);
   }
 
-  /// The SAH cost of a plane, the options' three constants held by value (read through the
-  /// options reference, they were loaded again at every position of a sweep).
-  struct Sah {
-    float traversal, intersection, empty_bonus;
-    // Counts are signed 32-bit here: their conversion to float is one instruction.
-    [[nodiscard]] float operator()(float p_below, float p_above, std::int32_t n_below,
-                                   std::int32_t n_above) const {
-      const float cost =
-          traversal + intersection * (p_below * float(n_below) + p_above * float(n_above));
-      return (n_below == 0 || n_above == 0) ? empty_bonus * cost : cost;
-    }
-  };
-
   /// The sweep of Wald & Havran §5.1 over one axis's sorted events: the best plane inside the box,
   /// or in one of its faces when triangles lie in that face (they go to a flat cell; a face plane
   /// cuts nothing else off).
@@ -503,19 +726,29 @@ private:
     const vec3 extent = in.box.extent();
     const float lo = in.box.min[axis], hi = in.box.max[axis];
     if (!(hi > lo)) return best;
-    const float inv_area = 1.0f / half_area(extent);
-    const Sah sah{options_.traversal_cost, options_.intersection_cost, options_.empty_bonus};
     const int u = (axis + 1) % 3, v = (axis + 2) % 3;
-    const float cap = extent[u] * extent[v];
-    const float perimeter = extent[u] + extent[v];
+    const SweepFrame f{lo,
+                       hi,
+                       extent[u] * extent[v],
+                       extent[u] + extent[v],
+                       1.0f / half_area(extent),
+                       std::int32_t(n),
+                       {options_.traversal_cost, options_.intersection_cost, options_.empty_bonus}};
+    const float cap = f.cap, perimeter = f.perimeter, inv_area = f.inv_area;
+    const Sah& sah = f.sah;
     const EventList& ev = in.events[std::size_t(axis)];
     const Event* e = ev.data();
     const std::size_t m = ev.size();
-    std::int32_t n_below = 0, n_above = std::int32_t(n);
-    // The best so far in registers (the Split is written once, at the end).
-    float best_cost = kInf, best_pos = 0.0f;
-    bool best_planar_below = true;
-    for (std::size_t i = 0; i < m;) {
+    // The state in registers (the Split is written once, at the end).
+    SweepState st;
+    st.n_above = std::int32_t(n);
+    std::size_t i = 0;
+    if (options_.simd_sweep && m >= kSimdSweepMin && m < (std::size_t(1) << 30) && cpu_has_avx2())
+      i = sweep_avx2::blocks(e, m, f, st);
+    std::int32_t n_below = st.n_below, n_above = st.n_above;
+    float best_cost = st.best_cost, best_pos = st.best_pos;
+    bool best_planar_below = st.best_planar_below;
+    while (i < m) {
       // The events at one position, counted by type (the list is sorted end < planar < start),
       // without indexing an array by the type: the counts stay in registers.
       const std::uint32_t pk = e[i].pos_key();
