@@ -611,13 +611,16 @@ TEST(KdTree, OneSidedCutsOfLargeNodesKeepEveryTriangle) {
   check_against_brute_force<TriangleTest::watertight>(mesh, rays);
 }
 
-// The sweep takes long event lists eight events at a time with AVX2: per lane the counts by
-// type (prefix sums), whether the event is its position's last, the counts before the position
-// (a max-scan), the costs, and each lane's first best, reduced in list order. It must choose the
+// With AVX2 the build sweeps long event lists eight events at a time (per lane the counts by type
+// as prefix sums, whether the event is its position's last, the counts before the position as a
+// max-scan, the costs, and each lane's first best, reduced in list order), and builds nodes of at
+// most eight triangles from their boxes (every start and end of a box a candidate lane, its counts
+// taken over the triangles, the first best in the scalar sweep's order). Both must choose the
 // scalar sweep's plane every time, ties and all, or the trees differ: positions shared by many
 // triangles (a grid's rows: runs of equal keys across blocks), triangles in split planes and in the
-// box's faces (the box lattice, the floor), degenerate triangles, and long lists at every level.
-TEST(KdTree, SimdSweepBuildsTheScalarSweepsTree) {
+// box's faces (the box lattice, the floor), degenerate triangles, and nodes of every size. The work
+// counters must be the event lists' too.
+TEST(KdTree, SimdBuildsTheScalarBuildsTree) {
   if (!cpu_has_avx2()) GTEST_SKIP() << "no AVX2: the scalar sweep is the only one";
   std::vector<Mesh> meshes = test_meshes();
   meshes.push_back(soup(20000, 0.05f, 5));
@@ -633,25 +636,39 @@ TEST(KdTree, SimdSweepBuildsTheScalarSweepsTree) {
   // the planes at x = 1 and x = 3 cost the same to the bit, and their positions' last events
   // (indices 31 and 47 of 64) fall in the same lane of two blocks, so the lane must keep the
   // first (the scalar sweep's strict comparison keeps x = 1).
-  Mesh twins{"twin clusters", {}, {}};
-  for (const float shift : {0.0f, 3.0f})
-    for (int i = 0; i < 16; ++i)
-      twins.add(vec3(shift, 0.0f, 0.0f), vec3(shift + 1.0f, 1.0f, 0.0f),
-                vec3(shift + float(i + 1) / 32.0f, 0.5f, 1.0f));
+  auto twin_clusters = [](int per_cluster, const char* name) {
+    Mesh m{name, {}, {}};
+    for (const float shift : {0.0f, 3.0f})
+      for (int i = 0; i < per_cluster; ++i)
+        m.add(vec3(shift, 0.0f, 0.0f), vec3(shift + 1.0f, 1.0f, 0.0f),
+              vec3(shift + float(i + 1) / float(2 * per_cluster), 0.5f, 1.0f));
+    return m;
+  };
+  const Mesh twins = twin_clusters(16, "twin clusters");
   meshes.push_back(twins);
+  // The same with two triangles a cluster: a node of four, built from boxes, whose planes at
+  // x = 1 and x = 3 tie in two lanes of one vector.
+  const Mesh small_twins = twin_clusters(2, "small twin clusters");
+  meshes.push_back(small_twins);
   for (const Mesh& mesh : meshes) {
     KdBuildOptions scalar;
-    scalar.simd_sweep = false;
+    scalar.simd = false;
     KdTree simd, reference;
     simd.build(mesh.view());
     reference.build(mesh.view(), scalar);
     EXPECT_TRUE(same_tree(simd, reference)) << mesh.name;
     EXPECT_EQ(simd.stats().sah_cost, reference.stats().sah_cost) << mesh.name;
+    // The small nodes' boxes count the work their event lists would have.
+    EXPECT_EQ(simd.stats().events_processed, reference.stats().events_processed) << mesh.name;
+    EXPECT_EQ(simd.stats().sort_work, reference.stats().sort_work) << mesh.name;
+    EXPECT_EQ(simd.stats().max_depth, reference.stats().max_depth) << mesh.name;
   }
-  KdTree twin_tree;
-  twin_tree.build(twins.view());
-  EXPECT_EQ(twin_tree.nodes()[0].bits & 3u, 0u) << "the twins' root should split on x";
-  EXPECT_EQ(twin_tree.nodes()[0].split, 1.0f) << "ties go to the first plane";
+  for (const Mesh* mesh : {&twins, &small_twins}) {
+    KdTree twin_tree;
+    twin_tree.build(mesh->view());
+    EXPECT_EQ(twin_tree.nodes()[0].bits & 3u, 0u) << mesh->name << ": the root should split on x";
+    EXPECT_EQ(twin_tree.nodes()[0].split, 1.0f) << mesh->name << ": ties go to the first plane";
+  }
 }
 
 TEST(KdTree, BuildIsDeterministicForAnyThreadCount) {

@@ -406,6 +406,29 @@ struct SweepState {
 /// set-up and the final reduction would cost more than they save).
 constexpr std::size_t kSimdSweepMin = 32;
 
+struct Split {
+  float cost = kInf;
+  int axis = -1;
+  float pos = 0.0f;
+  bool planar_below = true; ///< the side that takes the triangles lying in the plane
+};
+
+/// Nodes of at most this many triangles are built from their triangles' boxes (SmallNode) where
+/// AVX2 runs: one vector holds a coordinate of every triangle.
+constexpr std::uint32_t kSmallNode = 8;
+
+/// A node of at most kSmallNode triangles as its triangles' boxes: on each axis the positions its
+/// events would hold (min == max: the triangle lies in a plane of the axis). Lanes from n on hold
+/// +inf, which no count and no candidate plane takes up. Its splits classify and copy at most
+/// eight boxes instead of filtering, sorting and merging three event lists.
+struct SmallNode {
+  Aabb box;
+  std::uint32_t n = 0;
+  std::array<std::uint32_t, kSmallNode> tris{}; ///< ascending, as the node's list
+  alignas(32) float min[3][kSmallNode];
+  alignas(32) float max[3][kSmallNode];
+};
+
 namespace sweep_avx2 {
 
 #define SPECULA_SWEEP_TARGET __attribute__((target("avx2")))
@@ -427,6 +450,62 @@ SPECULA_SWEEP_TARGET inline __m256 sah8(__m256 p_below, __m256 p_above, __m256i 
   const __m256i empty =
       _mm256_or_si256(_mm256_cmpeq_epi32(n_below, zero), _mm256_cmpeq_epi32(n_above, zero));
   return _mm256_blendv_ps(cost, _mm256_mul_ps(bonus, cost), _mm256_castsi256_ps(empty));
+}
+
+/// A SweepFrame in every lane.
+struct Frame8 {
+  __m256 lo, hi, cap, perimeter, inv_area, traversal, intersection, bonus;
+  __m256i n;
+};
+SPECULA_SWEEP_TARGET inline Frame8 frame8(const SweepFrame& f) {
+  return {_mm256_set1_ps(f.lo),
+          _mm256_set1_ps(f.hi),
+          _mm256_set1_ps(f.cap),
+          _mm256_set1_ps(f.perimeter),
+          _mm256_set1_ps(f.inv_area),
+          _mm256_set1_ps(f.sah.traversal),
+          _mm256_set1_ps(f.sah.intersection),
+          _mm256_set1_ps(f.sah.empty_bonus),
+          _mm256_set1_epi32(f.n)};
+}
+
+/// The two costs of eight candidate planes, as the scalar sweep weighs them at a position:
+/// `below` with the planar triangles below (inside the box, or in its lower face when there are
+/// any), `above` with them above (inside, or in its upper face, only where there are any), each
+/// valid in the lanes where the scalar sweep weighs it.
+struct Costs8 {
+  __m256 below, above;
+  __m256i below_valid, above_valid; ///< above_valid all zero when no lane weighs `above`
+};
+
+/// The costs at positions p (lanes in `candidate`), given the triangles before each position
+/// (starts and planar ones), those lying in it, and those not ended at or before it.
+SPECULA_SWEEP_TARGET inline Costs8 weigh(const Frame8& f, __m256 p, __m256i candidate,
+                                         __m256i before, __m256i planar, __m256i n_above) {
+  const __m256 p_below = _mm256_mul_ps(
+      _mm256_add_ps(f.cap, _mm256_mul_ps(_mm256_sub_ps(p, f.lo), f.perimeter)), f.inv_area);
+  const __m256 p_above = _mm256_mul_ps(
+      _mm256_add_ps(f.cap, _mm256_mul_ps(_mm256_sub_ps(f.hi, p), f.perimeter)), f.inv_area);
+  const __m256i inside = _mm256_castps_si256(
+      _mm256_and_ps(_mm256_cmp_ps(p, f.lo, _CMP_GT_OQ), _mm256_cmp_ps(p, f.hi, _CMP_LT_OQ)));
+  const __m256i at_lo = _mm256_castps_si256(_mm256_cmp_ps(p, f.lo, _CMP_EQ_OQ));
+  const __m256i has_planar =
+      _mm256_and_si256(candidate, _mm256_cmpgt_epi32(planar, _mm256_setzero_si256()));
+  Costs8 c;
+  c.below_valid =
+      _mm256_and_si256(candidate, _mm256_or_si256(inside, _mm256_and_si256(has_planar, at_lo)));
+  c.below =
+      sah8(p_below, p_above, _mm256_blendv_epi8(planar, _mm256_add_epi32(before, planar), inside),
+           n_above, f.traversal, f.intersection, f.bonus);
+  c.above_valid = _mm256_setzero_si256();
+  c.above = c.below;
+  if (!_mm256_testz_si256(has_planar, has_planar)) {
+    c.above_valid = _mm256_andnot_si256(_mm256_andnot_si256(inside, at_lo), has_planar);
+    c.above = sah8(p_below, p_above, before,
+                   _mm256_blendv_epi8(planar, _mm256_add_epi32(n_above, planar), inside),
+                   f.traversal, f.intersection, f.bonus);
+  }
+  return c;
 }
 
 /// Per lane, `cost` and `index` become the best where `valid` and strictly below the best so far
@@ -461,13 +540,7 @@ SPECULA_SWEEP_TARGET std::size_t blocks(const Event* e, std::size_t m, const Swe
   const __m256i lane2 = _mm256_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14);
   const __m256i field = _mm256_set1_epi32(1023);
   const __m256i sign = _mm256_set1_epi32(std::int32_t(0x80000000u));
-  const __m256 lo = _mm256_set1_ps(f.lo), hi = _mm256_set1_ps(f.hi);
-  const __m256 cap = _mm256_set1_ps(f.cap), perimeter = _mm256_set1_ps(f.perimeter);
-  const __m256 inv_area = _mm256_set1_ps(f.inv_area);
-  const __m256 traversal = _mm256_set1_ps(f.sah.traversal);
-  const __m256 intersection = _mm256_set1_ps(f.sah.intersection);
-  const __m256 bonus = _mm256_set1_ps(f.sah.empty_bonus);
-  const __m256i n = _mm256_set1_epi32(f.n);
+  const Frame8 f8 = frame8(f);
 
   __m256 best = _mm256_set1_ps(kInf);
   __m256i best_index = _mm256_setzero_si256();
@@ -528,40 +601,16 @@ SPECULA_SWEEP_TARGET std::size_t blocks(const Event* e, std::size_t m, const Swe
     const __m256i s_before = _mm256_max_epi32(_mm256_add_epi32(s_scan, starts), open_starts);
     const __m256i p_before = _mm256_max_epi32(_mm256_add_epi32(p_scan, planars), open_planars);
 
-    const __m256i n_above = _mm256_sub_epi32(_mm256_sub_epi32(n, e_incl), p_incl);
+    const __m256i n_above = _mm256_sub_epi32(_mm256_sub_epi32(f8.n, e_incl), p_incl);
     const __m256i planar = _mm256_sub_epi32(p_incl, p_before);
     // The position from its key (from_ordered_key, lane by lane).
     const __m256 p = _mm256_castsi256_ps(_mm256_xor_si256(
         key, _mm256_or_si256(_mm256_andnot_si256(_mm256_srai_epi32(key, 31), all), sign)));
-    const __m256 p_below =
-        _mm256_mul_ps(_mm256_add_ps(cap, _mm256_mul_ps(_mm256_sub_ps(p, lo), perimeter)), inv_area);
-    const __m256 p_above =
-        _mm256_mul_ps(_mm256_add_ps(cap, _mm256_mul_ps(_mm256_sub_ps(hi, p), perimeter)), inv_area);
-    const __m256i inside = _mm256_castps_si256(
-        _mm256_and_ps(_mm256_cmp_ps(p, lo, _CMP_GT_OQ), _mm256_cmp_ps(p, hi, _CMP_LT_OQ)));
-    const __m256i at_lo = _mm256_castps_si256(_mm256_cmp_ps(p, lo, _CMP_EQ_OQ));
-    const __m256i has_planar = _mm256_cmpgt_epi32(planar, _mm256_setzero_si256());
     const __m256i index = _mm256_add_epi32(_mm256_set1_epi32(std::int32_t(2 * i)), lane2);
-
-    // The planar triangles below: inside the box, or in its lower face when there are any.
-    {
-      const __m256i below = _mm256_blendv_epi8(planar, _mm256_add_epi32(s_before, p_incl), inside);
-      const __m256i valid =
-          _mm256_and_si256(last, _mm256_or_si256(inside, _mm256_and_si256(has_planar, at_lo)));
-      keep_better(valid, sah8(p_below, p_above, below, n_above, traversal, intersection, bonus),
-                  index, best, best_index);
-    }
-    // The planar triangles above: inside the box, or in its upper face (anywhere but the lower
-    // face), only where there are any (rarely).
-    const __m256i planar_last = _mm256_and_si256(last, has_planar);
-    if (!_mm256_testz_si256(planar_last, planar_last)) {
-      const __m256i below = _mm256_add_epi32(s_before, p_before);
-      const __m256i above = _mm256_blendv_epi8(planar, _mm256_add_epi32(n_above, planar), inside);
-      const __m256i valid =
-          _mm256_and_si256(planar_last, _mm256_or_si256(inside, _mm256_xor_si256(at_lo, all)));
-      keep_better(valid, sah8(p_below, p_above, below, above, traversal, intersection, bonus),
-                  _mm256_add_epi32(index, ones), best, best_index);
-    }
+    const Costs8 c = weigh(f8, p, last, _mm256_add_epi32(s_before, p_before), planar, n_above);
+    keep_better(c.below_valid, c.below, index, best, best_index);
+    if (!_mm256_testz_si256(c.above_valid, c.above_valid)) // rarely: planar triangles
+      keep_better(c.above_valid, c.above, _mm256_add_epi32(index, ones), best, best_index);
     ends = _mm256_permutevar8x32_epi32(e_incl, idx_last);
     planars = _mm256_permutevar8x32_epi32(p_incl, idx_last);
     starts = _mm256_permutevar8x32_epi32(s_incl, idx_last);
@@ -603,24 +652,107 @@ SPECULA_SWEEP_TARGET std::size_t blocks(const Event* e, std::size_t m, const Swe
   return g;
 }
 
+/// Lanes where (cost, pos, variant) comes first in the scalar sweep's order: a lower cost, or the
+/// same cost at a lower position, or at the same position the planar triangles below (variant 0)
+/// before above (1).
+SPECULA_SWEEP_TARGET inline __m256 comes_first(__m256 cost, __m256 pos, __m256i variant,
+                                               __m256 best, __m256 best_pos, __m256i best_variant) {
+  return _mm256_or_ps(
+      _mm256_cmp_ps(cost, best, _CMP_LT_OQ),
+      _mm256_and_ps(_mm256_cmp_ps(cost, best, _CMP_EQ_OQ),
+                    _mm256_or_ps(_mm256_cmp_ps(pos, best_pos, _CMP_LT_OQ),
+                                 _mm256_and_ps(_mm256_cmp_ps(pos, best_pos, _CMP_EQ_OQ),
+                                               _mm256_castsi256_ps(
+                                                   _mm256_cmpgt_epi32(best_variant, variant))))));
+}
+
+/// Per lane, (cost, pos, variant) becomes the best where `valid`, finite and first.
+SPECULA_SWEEP_TARGET inline void keep_first(__m256i valid, __m256 cost, __m256 pos,
+                                            std::int32_t variant, __m256& best, __m256& best_pos,
+                                            __m256i& best_variant) {
+  const __m256i v = _mm256_set1_epi32(variant);
+  const __m256 take =
+      _mm256_and_ps(_mm256_and_ps(_mm256_castsi256_ps(valid),
+                                  comes_first(cost, pos, v, best, best_pos, best_variant)),
+                    _mm256_cmp_ps(cost, _mm256_set1_ps(kInf), _CMP_LT_OQ));
+  best = _mm256_blendv_ps(best, cost, take);
+  best_pos = _mm256_blendv_ps(best_pos, pos, take);
+  best_variant = _mm256_blendv_epi8(best_variant, v, _mm256_castps_si256(take));
+}
+
+/// The first of the eight lanes' bests, in every lane (three steps, each lane against a partner).
+SPECULA_SWEEP_TARGET inline void first_of_lanes(__m256& best, __m256& best_pos,
+                                                __m256i& best_variant) {
+  const __m256i partners[3] = {_mm256_setr_epi32(4, 5, 6, 7, 0, 1, 2, 3),
+                               _mm256_setr_epi32(2, 3, 0, 1, 6, 7, 4, 5),
+                               _mm256_setr_epi32(1, 0, 3, 2, 5, 4, 7, 6)};
+  for (const __m256i& partner : partners) {
+    const __m256 cost = _mm256_permutevar8x32_ps(best, partner);
+    const __m256 pos = _mm256_permutevar8x32_ps(best_pos, partner);
+    const __m256i variant = _mm256_permutevar8x32_epi32(best_variant, partner);
+    const __m256 take = comes_first(cost, pos, variant, best, best_pos, best_variant);
+    best = _mm256_blendv_ps(best, cost, take);
+    best_pos = _mm256_blendv_ps(best_pos, pos, take);
+    best_variant = _mm256_blendv_epi8(best_variant, variant, _mm256_castps_si256(take));
+  }
+}
+
+/// The sweep of a SmallNode's axis: every position a triangle's box starts or ends at is a
+/// candidate (a lane), the counts the scalar sweep has there taken over the n triangles (below it:
+/// the boxes starting below; above it: those not ending at or below it; in it: the flat ones
+/// there), and the costs weighed as the scalar sweep weighs them. The first best in the scalar
+/// sweep's order is kept (keep_first), so the plane is the one the event lists would give.
+SPECULA_SWEEP_TARGET Split small(const float* min, const float* max, std::uint32_t n,
+                                 const SweepFrame& f, int axis) {
+  const Frame8 f8 = frame8(f);
+  const __m256i all = _mm256_set1_epi32(-1);
+  __m256 best = _mm256_set1_ps(kInf), best_pos = best;
+  __m256i best_variant = _mm256_setzero_si256();
+  // The candidates: the boxes' starts, then their ends; up to four triangles, both in one vector.
+  const int passes = n <= 4 ? 1 : 2;
+  for (int pass = 0; pass < passes; ++pass) {
+    const __m256 p = passes == 1 ? _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(min)),
+                                                        _mm_load_ps(max), 1)
+                                 : _mm256_load_ps(pass == 0 ? min : max);
+    __m256i below = _mm256_setzero_si256(), ended = below, planar = below;
+    for (std::uint32_t j = 0; j < n; ++j) {
+      const __m256 mn = _mm256_set1_ps(min[j]), mx = _mm256_set1_ps(max[j]);
+      below = _mm256_sub_epi32(below, _mm256_castps_si256(_mm256_cmp_ps(mn, p, _CMP_LT_OQ)));
+      ended = _mm256_sub_epi32(ended, _mm256_castps_si256(_mm256_cmp_ps(mx, p, _CMP_LE_OQ)));
+      // Flat boxes (min == max) at the candidate: its triangles lying in the plane.
+      planar = _mm256_sub_epi32(
+          planar, _mm256_castps_si256(_mm256_and_ps(_mm256_cmp_ps(mn, mx, _CMP_EQ_OQ),
+                                                    _mm256_cmp_ps(mn, p, _CMP_EQ_OQ))));
+    }
+    const Costs8 c = weigh(f8, p, all, below, planar, _mm256_sub_epi32(f8.n, ended));
+    keep_first(c.below_valid, c.below, p, 0, best, best_pos, best_variant);
+    if (!_mm256_testz_si256(c.above_valid, c.above_valid))
+      keep_first(c.above_valid, c.above, p, 1, best, best_pos, best_variant);
+  }
+  first_of_lanes(best, best_pos, best_variant);
+  Split result;
+  const float cost = _mm256_cvtss_f32(best);
+  if (cost < kInf)
+    result = {cost, axis, _mm256_cvtss_f32(best_pos), _mm256_cvtsi256_si32(best_variant) == 0};
+  return result;
+}
+
 #undef SPECULA_SWEEP_TARGET
 
 } // namespace sweep_avx2
 
-struct Split {
-  float cost = kInf;
-  int axis = -1;
-  float pos = 0.0f;
-  bool planar_below = true; ///< the side that takes the triangles lying in the plane
-};
-
 class Builder {
 public:
   Builder(const TriangleView& tris, const KdBuildOptions& options, std::uint32_t max_depth)
-      : tris_(tris), options_(options), max_depth_(max_depth) {}
+      : tris_(tris), options_(options), max_depth_(max_depth),
+        simd_(options.simd && cpu_has_avx2()) {}
 
   /// Builds `in` at `depth`, appending its subtree (depth first) to `out`.
   void build(NodeInput&& in, std::uint32_t depth, Subtree& out, Scratch& scratch) const {
+    if (simd_ && in.tris.size() <= kSmallNode) {
+      build_small(small_node(in), depth, out);
+      return;
+    }
     Counters& c = out.counters;
     c.max_depth = std::max(c.max_depth, depth);
     const std::size_t n = in.tris.size();
@@ -707,15 +839,31 @@ private:
   }
 
   void make_leaf(const NodeInput& in, float area, Subtree& out, std::size_t node) const {
+    make_leaf(in.tris.data(), std::uint32_t(in.tris.size()), area, out, node);
+  }
+  void make_leaf(const std::uint32_t* tris, std::uint32_t n, float area, Subtree& out,
+                 std::size_t node) const {
     Counters& c = out.counters;
-    const auto n = std::uint32_t(in.tris.size());
     out.nodes[node].bits = (n << 2) | gpu::kKdLeaf;
     out.nodes[node].first = std::uint32_t(out.indices.size());
-    out.indices.insert(out.indices.end(), in.tris.begin(), in.tris.end());
+    out.indices.insert(out.indices.end(), tris, tris + n);
     ++c.leaves;
     if (n == 0) ++c.empty_leaves;
     c.references += n;
     c.sah += double(options_.intersection_cost) * double(n) * double(area);
+  }
+
+  /// The sweep's terms for `axis` of a node with box `box` and n triangles.
+  [[nodiscard]] SweepFrame frame(const Aabb& box, int axis, std::size_t n) const {
+    const vec3 extent = box.extent();
+    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+    return {box.min[axis],
+            box.max[axis],
+            extent[u] * extent[v],
+            extent[u] + extent[v],
+            1.0f / half_area(extent),
+            std::int32_t(n),
+            {options_.traversal_cost, options_.intersection_cost, options_.empty_bonus}};
   }
 
   /// The sweep of Wald & Havran §5.1 over one axis's sorted events: the best plane inside the box,
@@ -723,18 +871,9 @@ private:
   /// cuts nothing else off).
   [[nodiscard]] Split sweep(const NodeInput& in, int axis, std::size_t n) const {
     Split best;
-    const vec3 extent = in.box.extent();
-    const float lo = in.box.min[axis], hi = in.box.max[axis];
-    if (!(hi > lo)) return best;
-    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
-    const SweepFrame f{lo,
-                       hi,
-                       extent[u] * extent[v],
-                       extent[u] + extent[v],
-                       1.0f / half_area(extent),
-                       std::int32_t(n),
-                       {options_.traversal_cost, options_.intersection_cost, options_.empty_bonus}};
-    const float cap = f.cap, perimeter = f.perimeter, inv_area = f.inv_area;
+    if (!(in.box.max[axis] > in.box.min[axis])) return best;
+    const SweepFrame f = frame(in.box, axis, n);
+    const float lo = f.lo, hi = f.hi, cap = f.cap, perimeter = f.perimeter, inv_area = f.inv_area;
     const Sah& sah = f.sah;
     const EventList& ev = in.events[std::size_t(axis)];
     const Event* e = ev.data();
@@ -743,7 +882,7 @@ private:
     SweepState st;
     st.n_above = std::int32_t(n);
     std::size_t i = 0;
-    if (options_.simd_sweep && m >= kSimdSweepMin && m < (std::size_t(1) << 30) && cpu_has_avx2())
+    if (simd_ && m >= kSimdSweepMin && m < (std::size_t(1) << 30))
       i = sweep_avx2::blocks(e, m, f, st);
     std::int32_t n_below = st.n_below, n_above = st.n_above;
     float best_cost = st.best_cost, best_pos = st.best_pos;
@@ -819,6 +958,38 @@ private:
 
   /// Where split_node's classification put the node's triangles.
   enum class Sides { kBoth, kAllBelow, kAllAbove };
+
+  /// The bounds of a straddling triangle's parts in the two children (parts[0] below, parts[1]
+  /// above): its part in the node, clipped once and split by the plane (the same polygons as
+  /// clipping to each child's box, with one pass over the node's planes instead of two).
+  void straddler_parts(std::uint32_t prim, const Aabb& node_box, const Split& split,
+                       const Aabb& below_box, const Aabb& above_box, Aabb parts[2]) const {
+    const vec3 v0 = tris_.vertex(prim, 0), v1 = tris_.vertex(prim, 1), v2 = tris_.vertex(prim, 2);
+    Aabb whole; // tris_.bounds(prim), from the vertices already read
+    whole.grow(v0);
+    whole.grow(v1);
+    whole.grow(v2);
+    std::array<vec3, kMaxPolygon> in_node, part_below, part_above;
+    int n_part[2] = {0, 0};
+    if (options_.perfect_splits) {
+      const int m = clip_to_box(v0, v1, v2, whole, node_box, in_node.data());
+      if (m > 0) {
+        n_part[0] = clip_polygon(in_node.data(), m, split.axis, split.pos, true, part_below.data());
+        n_part[1] =
+            clip_polygon(in_node.data(), m, split.axis, split.pos, false, part_above.data());
+      }
+    }
+    for (int child = 0; child < 2; ++child) {
+      const Aabb& box = child == 0 ? below_box : above_box;
+      if (!polygon_bounds(child == 0 ? part_below.data() : part_above.data(), n_part[child], whole,
+                          box, parts[child])) {
+        // No clipping, or clipping lost the sliver to rounding or gave up: the triangle's box
+        // cut to the child box, never empty for a triangle that straddles the plane.
+        parts[child].min = glm::max(whole.min, box.min);
+        parts[child].max = glm::min(whole.max, box.max);
+      }
+    }
+  }
 
   /// Whether the split's plane leaves every triangle on one side, from the ends of its axis's
   /// sorted list alone (a cut off empty space: most splits of a deep tree): the classification's
@@ -929,39 +1100,10 @@ private:
     }
     for (std::size_t k = 0; k < n_both; ++k) {
       const std::uint32_t l = straddling[k];
-      const std::uint32_t prim = in.tris[l];
-      const vec3 v0 = tris_.vertex(prim, 0), v1 = tris_.vertex(prim, 1), v2 = tris_.vertex(prim, 2);
-      Aabb whole; // tris_.bounds(prim), from the vertices already read
-      whole.grow(v0);
-      whole.grow(v1);
-      whole.grow(v2);
-      // The triangle's part in the node, clipped once and split by the plane into its parts in
-      // the two children (the same polygons as clipping to each child's box, with one pass over
-      // the node's planes instead of two).
-      std::array<vec3, kMaxPolygon> in_node, part_below, part_above;
-      int n_part[2] = {0, 0};
-      if (options_.perfect_splits) {
-        const int m = clip_to_box(v0, v1, v2, whole, in.box, in_node.data());
-        if (m > 0) {
-          n_part[0] =
-              clip_polygon(in_node.data(), m, split.axis, split.pos, true, part_below.data());
-          n_part[1] =
-              clip_polygon(in_node.data(), m, split.axis, split.pos, false, part_above.data());
-        }
-      }
-      for (int child = 0; child < 2; ++child) {
-        const Aabb& box = child == 0 ? below.box : above.box;
-        Aabb part;
-        if (!polygon_bounds(child == 0 ? part_below.data() : part_above.data(), n_part[child],
-                            whole, box, part)) {
-          // No clipping, or clipping lost the sliver to rounding or gave up: the triangle's box
-          // cut to the child box, never empty for a triangle that straddles the plane.
-          part.min = glm::max(whole.min, box.min);
-          part.max = glm::min(whole.max, box.max);
-        }
-        push_events(part, child == 0 ? remap[l] : above_index[k],
-                    child == 0 ? new_below : new_above);
-      }
+      Aabb parts[2];
+      straddler_parts(in.tris[l], in.box, split, below.box, above.box, parts);
+      push_events(parts[0], remap[l], new_below);
+      push_events(parts[1], above_index[k], new_above);
     }
     c.events += 6 * n_both;
 
@@ -1027,9 +1169,137 @@ private:
     return kept + extra.size();
   }
 
+  // ---- Nodes of at most kSmallNode triangles, from their boxes (AVX2) ----
+
+  /// The node's triangles' boxes, read off its event lists.
+  static SmallNode small_node(const NodeInput& in) {
+    SmallNode s;
+    s.box = in.box;
+    s.n = std::uint32_t(in.tris.size());
+    std::copy(in.tris.begin(), in.tris.end(), s.tris.begin());
+    for (std::size_t a = 0; a < 3; ++a) {
+      std::fill(std::begin(s.min[a]), std::end(s.min[a]), kInf);
+      std::fill(std::begin(s.max[a]), std::end(s.max[a]), kInf);
+      for (const Event& e : in.events[a]) {
+        const float p = e.pos();
+        if (e.type() != kEnd) s.min[a][e.local()] = p;
+        if (e.type() != kStart) s.max[a][e.local()] = p;
+      }
+    }
+    return s;
+  }
+
+  /// build() for a small node: the same decisions on the same numbers, so the same subtree, and
+  /// the same work counters as its event lists would have counted.
+  void build_small(const SmallNode& in, std::uint32_t depth, Subtree& out) const {
+    Counters& c = out.counters;
+    c.max_depth = std::max(c.max_depth, depth);
+    const std::uint32_t n = in.n;
+    std::uint64_t events = 0; // the node's event lists' length
+    for (int a = 0; a < 3; ++a)
+      for (std::uint32_t i = 0; i < n; ++i) events += in.min[a][i] == in.max[a][i] ? 1 : 2;
+    c.events += events;
+    const float area = half_area(in.box.extent());
+    const std::size_t node = out.nodes.size();
+    out.nodes.push_back({});
+
+    Split split;
+    if (n > options_.leaf_size && depth < max_depth_ && area > 0.0f) {
+      for (int a = 0; a < 3; ++a) {
+        if (!(in.box.max[a] > in.box.min[a])) continue;
+        const Split s = sweep_avx2::small(in.min[a], in.max[a], n, frame(in.box, a, n), a);
+        if (split.axis < 0 || s.cost < split.cost) split = s; // ties go to the lower axis
+      }
+    }
+    if (split.axis < 0 || !(split.cost < options_.intersection_cost * float(n))) {
+      make_leaf(in.tris.data(), n, area, out, node);
+      return;
+    }
+
+    // Classification as split_node's, by the boxes: a triangle lying in the plane goes to the
+    // split's side for it; any other is below when it ends at or below the plane, above when it
+    // starts at or above it, and both otherwise.
+    const auto axis = std::size_t(split.axis);
+    const float p = split.pos;
+    SmallNode below, above;
+    below.box = in.box;
+    below.box.max[axis] = p;
+    above.box = in.box;
+    above.box.min[axis] = p;
+    std::array<std::uint8_t, kSmallNode> side{};
+    std::uint32_t n_below = 0, n_above = 0, n_both = 0;
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const float mn = in.min[axis][i], mx = in.max[axis][i];
+      std::uint8_t sd;
+      if (mn == mx)
+        sd = mn < p               ? kBelowOnly
+             : mn > p             ? kAboveOnly
+             : split.planar_below ? kBelowOnly
+                                  : kAboveOnly;
+      else
+        sd = mx <= p ? kBelowOnly : mn >= p ? kAboveOnly : kBoth;
+      side[i] = sd;
+      n_below += sd != kAboveOnly;
+      n_above += sd != kBelowOnly;
+      n_both += sd == kBoth;
+    }
+    c.sah += double(options_.traversal_cost) * double(area);
+    if (n_above == 0 || n_below == 0) {
+      // One side empty: the other child has the node's triangles, boxes and all.
+      SmallNode& full = n_above == 0 ? below : above;
+      full.n = n;
+      full.tris = in.tris;
+      std::copy(&in.min[0][0], &in.min[0][0] + 3 * kSmallNode, &full.min[0][0]);
+      std::copy(&in.max[0][0], &in.max[0][0] + 3 * kSmallNode, &full.max[0][0]);
+      (n_above == 0 ? above : below).n = 0;
+    } else {
+      // Straddlers get their parts' boxes in each child (as their new events would hold them);
+      // the work counters as split_node counts the same split.
+      c.events += 6 * std::uint64_t(n_both) + 2 * events;
+      std::array<std::uint32_t, 3> new_below{}, new_above{};
+      for (SmallNode* child : {&below, &above}) {
+        child->n = 0;
+        for (std::size_t a = 0; a < 3; ++a) {
+          std::fill(std::begin(child->min[a]), std::end(child->min[a]), kInf);
+          std::fill(std::begin(child->max[a]), std::end(child->max[a]), kInf);
+        }
+      }
+      for (std::uint32_t i = 0; i < n; ++i) {
+        Aabb parts[2];
+        if (side[i] == kBoth)
+          straddler_parts(in.tris[i], in.box, split, below.box, above.box, parts);
+        for (int k = 0; k < 2; ++k) {
+          if (side[i] == (k == 0 ? kAboveOnly : kBelowOnly)) continue;
+          SmallNode& child = k == 0 ? below : above;
+          const std::uint32_t j = child.n++;
+          child.tris[j] = in.tris[i];
+          for (std::size_t a = 0; a < 3; ++a) {
+            if (side[i] != kBoth) {
+              child.min[a][j] = in.min[a][i];
+              child.max[a][j] = in.max[a][i];
+              continue;
+            }
+            // Positions as events hold them (-0 made +0).
+            child.min[a][j] = parts[k].min[a] + 0.0f;
+            child.max[a][j] = parts[k].max[a] + 0.0f;
+            (k == 0 ? new_below : new_above)[a] += parts[k].min[a] == parts[k].max[a] ? 1 : 2;
+          }
+        }
+      }
+      for (std::size_t a = 0; a < 3; ++a)
+        c.sort_work += sort_cost(new_below[a]) + sort_cost(new_above[a]);
+    }
+    build_small(below, depth + 1, out);
+    const std::size_t above_index = out.nodes.size();
+    build_small(above, depth + 1, out);
+    out.nodes[node].bits = (std::uint32_t(above_index) << 2) | std::uint32_t(split.axis);
+    out.nodes[node].split = split.pos;
+  }
+
   const TriangleView& tris_;
   const KdBuildOptions& options_;
   std::uint32_t max_depth_;
+  bool simd_; ///< options_.simd on a CPU with AVX2
 };
 
 } // namespace

@@ -43,9 +43,11 @@ struct KdBuildOptions {
   std::uint32_t leaf_size = 1;    ///< nodes with this many triangles or fewer are never split
   bool perfect_splits = true;     ///< clip straddling triangles to the child boxes
   bool parallel = true;           ///< build large subtrees on the TBB pool
-  /// Sweep long event lists eight events at a time with AVX2 where the CPU has it (the same
-  /// costs, bit for bit, so the same tree; false: the scalar sweep everywhere, for comparison).
-  bool simd_sweep = true;
+  /// AVX2 where the CPU has it: long event lists swept eight events at a time, and nodes of at
+  /// most eight triangles built from their triangles' boxes, every candidate plane of an axis
+  /// weighed at once (the same costs, bit for bit, so the same tree; false: the event lists and
+  /// the scalar sweep everywhere, for comparison).
+  bool simd = true;
 };
 
 struct KdBuildStats {
