@@ -614,7 +614,7 @@ TEST(KdTree, OneSidedCutsOfLargeNodesKeepEveryTriangle) {
 // With AVX2 the build sweeps long event lists eight events at a time (per lane the counts by type
 // as prefix sums, whether the event is its position's last, the counts before the position as a
 // max-scan, the costs, and each lane's first best, reduced in list order), and builds nodes of at
-// most eight triangles from their boxes (every start and end of a box a candidate lane, its counts
+// most 16 triangles from their boxes (every start and end of a box a candidate lane, its counts
 // taken over the triangles, the first best in the scalar sweep's order). Both must choose the
 // scalar sweep's plane every time, ties and all, or the trees differ: positions shared by many
 // triangles (a grid's rows: runs of equal keys across blocks), triangles in split planes and in the
@@ -646,10 +646,13 @@ TEST(KdTree, SimdBuildsTheScalarBuildsTree) {
   };
   const Mesh twins = twin_clusters(16, "twin clusters");
   meshes.push_back(twins);
-  // The same with two triangles a cluster: a node of four, built from boxes, whose planes at
-  // x = 1 and x = 3 tie in two lanes of one vector.
-  const Mesh small_twins = twin_clusters(2, "small twin clusters");
+  // Nodes of up to 16 triangles are built from boxes. With two triangles a cluster the planes at
+  // x = 1 and x = 3 tie in two lanes of one vector; with eight, in one lane of two vectors, the
+  // one at x = 3 weighed first (the starts before the ends).
+  const Mesh small_twins = twin_clusters(2, "twin clusters of two");
   meshes.push_back(small_twins);
+  const Mesh eight_twins = twin_clusters(8, "twin clusters of eight");
+  meshes.push_back(eight_twins);
   for (const Mesh& mesh : meshes) {
     KdBuildOptions scalar;
     scalar.simd = false;
@@ -663,7 +666,7 @@ TEST(KdTree, SimdBuildsTheScalarBuildsTree) {
     EXPECT_EQ(simd.stats().sort_work, reference.stats().sort_work) << mesh.name;
     EXPECT_EQ(simd.stats().max_depth, reference.stats().max_depth) << mesh.name;
   }
-  for (const Mesh* mesh : {&twins, &small_twins}) {
+  for (const Mesh* mesh : {&twins, &small_twins, &eight_twins}) {
     KdTree twin_tree;
     twin_tree.build(mesh->view());
     EXPECT_EQ(twin_tree.nodes()[0].bits & 3u, 0u) << mesh->name << ": the root should split on x";

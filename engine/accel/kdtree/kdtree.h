@@ -44,7 +44,7 @@ struct KdBuildOptions {
   bool perfect_splits = true;     ///< clip straddling triangles to the child boxes
   bool parallel = true;           ///< build large subtrees on the TBB pool
   /// AVX2 where the CPU has it: long event lists swept eight events at a time, and nodes of at
-  /// most eight triangles built from their triangles' boxes, every candidate plane of an axis
+  /// most 16 triangles built from their triangles' boxes, every candidate plane of an axis
   /// weighed at once (the same costs, bit for bit, so the same tree; false: the event lists and
   /// the scalar sweep everywhere, for comparison).
   bool simd = true;
