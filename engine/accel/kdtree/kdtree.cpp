@@ -1250,12 +1250,11 @@ private:
     c.sah += double(options_.traversal_cost) * double(area);
     if (n_above == 0 || n_below == 0) {
       // One side empty: the other child has the node's triangles, boxes and all.
+      // (The empty child keeps n = 0.)
       SmallNode& full = n_above == 0 ? below : above;
-      full.n = n;
-      full.tris = in.tris;
-      std::copy(&in.min[0][0], &in.min[0][0] + 3 * kSmallNode, &full.min[0][0]);
-      std::copy(&in.max[0][0], &in.max[0][0] + 3 * kSmallNode, &full.max[0][0]);
-      (n_above == 0 ? above : below).n = 0;
+      const Aabb box = full.box;
+      full = in;
+      full.box = box;
     } else {
       // Straddlers get their parts' boxes in each child (as their new events would hold them);
       // the work counters as split_node counts the same split.
