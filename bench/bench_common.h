@@ -103,6 +103,8 @@ void section_path_cache(const Options& o);
 // The Vulkan backends beside the CPU ones (gpu_sections.cpp): kernel styles, structures, grid
 // resolution.
 void section_gpu(const Options& o);
+/// The gpu section's device list and traversal table alone (the lavapipe target).
+void section_gpu_traversal(const Options& o);
 // Ray-cache cubes on the device (gpu_sections.cpp; part of gpu, or alone as gpu-cache): the
 // mirror-spheres scene's frames/s cached against uncached, with the cached frames' PSNR.
 void section_gpu_cache(const Options& o);

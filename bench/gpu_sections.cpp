@@ -552,12 +552,26 @@ void section_gpu_path(const Options& o) {
   stochastic_table(o, "Cornell box", cornell);
 }
 
-void section_gpu(const Options& o) {
+namespace {
+
+void device_list() {
   std::string why;
   std::printf("\n### Vulkan devices\n\n");
   for (const VulkanDeviceEntry& d : vulkan_devices(&why))
     std::printf("- %s (%s)%s\n", d.name.c_str(), d.type.c_str(), d.chosen ? " — used" : "");
   if (!why.empty()) std::printf("- none used: %s\n", one_line(why).c_str());
+}
+
+} // namespace
+
+void section_gpu_traversal(const Options& o) {
+  device_list();
+  Scene bunny = mesh_scene(load_bunny(o), o.size);
+  traversal_table(o, bunny);
+}
+
+void section_gpu(const Options& o) {
+  device_list();
   const TriangleMesh bunny_mesh = load_bunny(o);
   Scene bunny = mesh_scene(bunny_mesh, o.size);
   traversal_table(o, bunny);

@@ -24,7 +24,8 @@
 //   gpu      the Vulkan backends (gpu_sections.cpp; not in the default list): primary Mrays/s on
 //            the bunny and the Cornell box per kernel style and structure beside native-bvh and
 //            Embree, vulkan-grid's resolution sweep, path and shadow frames per kernel style
-//            (also alone: gpu-path), and ray-cache cubes on the device (also alone: gpu-cache).
+//            (also alone: gpu-path), and ray-cache cubes on the device (also alone: gpu-cache);
+//            its traversal table alone (the lavapipe target): gpu-traversal.
 //   dynamic  animated scenes (dynamic_sections.cpp; not in the default list): the acceleration
 //            update against the frame per backend on the three-classes sample and a ~90k-triangle
 //            variant, per-frame plots, and the paper's Table 1 grid (under --out-dir).
@@ -357,7 +358,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 6));
   app.add_option("--sections", o.sections,
                  "Comma-separated: primary,tiles,whitted,depth,build,refit,native,paper,cache,"
-                 "cache-paper,path-reference,path-error,path-cache,gpu,gpu-cache,gpu-path,dynamic,editor");
+                 "cache-paper,path-reference,path-error,path-cache,gpu,gpu-traversal,gpu-cache,gpu-"
+                 "path,dynamic,editor");
   app.add_option("--out-dir", o.out_dir,
                  "Where cache, cache-paper and path-error write Markdown and PNGs (default: "
                  "SOURCE_DIR/docs/cache-report, SOURCE_DIR/docs/path-report)");
@@ -442,6 +444,7 @@ int main(int argc, char** argv) {
     if (has("editor")) section_editor(o);
 #endif
     if (has("gpu")) section_gpu(o);
+    if (has("gpu-traversal") && !has("gpu")) section_gpu_traversal(o);
     if (has("gpu-cache") && !has("gpu")) section_gpu_cache(o);
     if (has("gpu-path") && !has("gpu")) section_gpu_path(o);
   } catch (const std::exception& e) {
