@@ -14,7 +14,7 @@ void main() {
   if (n >= pc.count) return;
   GpuFrameNode node = nodes[n];
   if (node.depth != pc.depth) return;
-  precise vec3 radiance = node.radiance;
+  vec3 radiance = node.radiance;
   uint seen = node.seen, rays = node.rays;
   for (uint k = 0u; k < kLightCount; ++k) {
     if (k >= node.shadow_count) break;

@@ -15,7 +15,7 @@ layout(local_size_x = 64) in;
 // occlusion ray, traced by frame_trace before the ray itself).
 uint spawn(GpuFrameNode parent, vec3 origin, vec3 direction, float weight, uint kind,
            uint leaves) {
-  precise vec3 throughput = parent.throughput * weight;
+  vec3 throughput = parent.throughput * weight;
   if (max_component(throughput) < params.min_weight) return kNoIndex;
   uint n = atomicAdd(counters.node_count, 1u);
   if (n >= params.node_capacity) {
@@ -94,7 +94,7 @@ void main() {
     if (first + kLightCount > params.shadow_capacity) {
       atomicAdd(counters.dropped, kLightCount);
     } else {
-      precise vec3 albedo = m.base_color * (diffuse * kInvPi);
+      vec3 albedo = m.base_color * (diffuse * kInvPi);
       vec3 origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
       uint lit_count = 0u;
       for (uint l = 0u; l < kLightCount; ++l) {

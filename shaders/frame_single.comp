@@ -84,7 +84,7 @@ bool march_fits(uint leaves, inout uint budget) {
 bool push_child(uint base, uint top, vec3 origin, vec3 direction, float weight, uint kind,
                 uint leaves) {
   uint f = base + top;
-  precise vec3 throughput = stack[f].throughput * weight;
+  vec3 throughput = stack[f].throughput * weight;
   if (max_component(throughput) < params.min_weight) return false;
   if (top + 1u >= kStackFrames) {
     atomicAdd(counters.dropped, 1u);
@@ -166,7 +166,7 @@ void main() {
         float diffuse = diffuse_weight(m);
         stack[f].light = kLightCount;
         if (kLightCount > 0u && diffuse > 0.0) {
-          precise vec3 albedo = m.base_color * (diffuse * kInvPi);
+          vec3 albedo = m.base_color * (diffuse * kInvPi);
           stack[f].albedo = albedo;
           stack[f].position = sp.position;
           stack[f].geometric_normal = sp.geometric_normal;
@@ -214,7 +214,7 @@ void main() {
           if (kCache) stack[f].rays += 1u;
         }
         if (!occluded) {
-          precise vec3 r = stack[f].radiance + value;
+          vec3 r = stack[f].radiance + value;
           stack[f].radiance = r;
         }
       }
@@ -265,7 +265,7 @@ void main() {
         walk_top[local] = kWalkDone;
         return;
       }
-      precise vec3 r = stack[f - 1u].radiance + vec3(stack[f].weight) * stack[f].radiance;
+      vec3 r = stack[f - 1u].radiance + vec3(stack[f].weight) * stack[f].radiance;
       stack[f - 1u].radiance = r;
       if (kCache) {
         stack[f - 1u].seen |= stack[f].seen;

@@ -12,7 +12,7 @@ void main() {
   uint j = gl_GlobalInvocationID.x;
   if (j * pp.batch >= pp.path_count) return;
   uint pixel = pp.first_pixel + j;
-  precise vec3 sum = pp.first_sample == 0u ? vec3(0.0) : sums[pixel].xyz;
+  vec3 sum = pp.first_sample == 0u ? vec3(0.0) : sums[pixel].xyz;
   for (uint s = 0u; s < pp.batch; ++s) {
     vec3 r = paths[j * pp.batch + s].radiance;
     if (finite3(r)) sum = sum + r;
@@ -22,6 +22,6 @@ void main() {
     sums[pixel] = vec4(sum, 0.0);
     return;
   }
-  precise vec3 mean = sum * (1.0 / float(pp.spp));
+  vec3 mean = sum * (1.0 / float(pp.spp));
   image[pixel] = vec4(pp.spp == 1u ? sum : mean, 1.0);
 }

@@ -50,7 +50,7 @@ uint encode(float linear) {
 
 // specula::lerp_taps: a exactly at weight 0; no fused multiply-add, as on the host.
 vec3 lerp_taps(vec3 a, vec3 b, float w) {
-  precise vec3 r = (1.0 - w) * a + w * b;
+  vec3 r = (1.0 - w) * a + w * b;
   return w == 0.0 ? a : r;
 }
 

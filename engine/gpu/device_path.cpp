@@ -109,7 +109,8 @@ void DevicePath::ensure_pipelines(const Features& f) {
       f.mirrors ? 1u : 0u, f.shadow_mode ? 1u : 0u, f.sampling, f.grid ? 1u : 0u,
       f.top ? 1u : 0u, f.guides ? 1u : 0u};
   const auto make = [&](const char* name) {
-    return context_.make_pipeline({shader_spirv(name), kFramePoolBindings, sizeof(PathPush), spec, name});
+    return context_.make_pipeline({shader_spirv(name), kFramePoolBindings, sizeof(PathPush), spec,
+                                   name, GpuScene::texel_bindings()});
   };
   p->eye = make("path_eye");
   p->resolve = make("path_resolve");

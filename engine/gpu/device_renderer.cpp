@@ -125,8 +125,8 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
                                            f.lights, f.cache ? 1u : 0u, raster_ ? 1u : 0u,
                                            0u, 0u, 0u, 0u, f.grid ? 1u : 0u, f.top ? 1u : 0u};
   const auto make = [&](const char* name) {
-    return context_.make_pipeline(
-        {shader_spirv(name), kFramePoolBindings, sizeof(WavePush), spec, name});
+    return context_.make_pipeline({shader_spirv(name), kFramePoolBindings, sizeof(WavePush), spec,
+                                   name, GpuScene::texel_bindings()});
   };
   if (execution_ == Execution::wavefront) {
     p->args = make("frame_args");

@@ -37,8 +37,8 @@ template <class T> void append(std::vector<T>& to, std::span<const T> from) {
   to.insert(to.end(), from.begin(), from.end());
 }
 
-/// Mesh `mesh`'s triangles as the traversal reads them: each vertex's position (its float bits),
-/// three per triangle.
+/// Mesh `mesh`'s triangles as the traversal reads them: each vertex's position (its float bits)
+/// and a zero word, one RGBA32UI texel (binding 7 is a texel buffer), three per triangle.
 void append_triangles(std::vector<std::uint32_t>& to, const SceneTables& tables, std::uint32_t mesh) {
   const GpuMesh& m = tables.meshes[mesh];
   for (std::uint32_t t = 0; t < m.triangle_count; ++t) {
@@ -46,13 +46,13 @@ void append_triangles(std::vector<std::uint32_t>& to, const SceneTables& tables,
     for (int k = 0; k < 3; ++k) {
       const vec3& p = tables.positions[tri[k]];
       to.insert(to.end(), {std::bit_cast<std::uint32_t>(p.x), std::bit_cast<std::uint32_t>(p.y),
-                           std::bit_cast<std::uint32_t>(p.z)});
+                           std::bit_cast<std::uint32_t>(p.z), 0u});
     }
   }
 }
 
 /// Words of one traced triangle (binding 7).
-constexpr std::size_t kTracedWords = 9;
+constexpr std::size_t kTracedWords = 12;
 
 std::uint32_t size32(std::size_t n) { return std::uint32_t(n); }
 
@@ -66,18 +66,26 @@ GpuScene::GpuScene(Context& context, GpuStructure structure, float grid_density)
   }
 }
 
+std::vector<TexelBinding> GpuScene::texel_bindings() {
+  return {{kNodes, VK_FORMAT_R32G32B32A32_UINT}, {kTraced, VK_FORMAT_R32G32B32A32_UINT}};
+}
+
 void GpuScene::write(std::uint32_t binding, const void* data, std::size_t bytes, std::size_t offset) {
   if (bytes == 0) return;
   Buffer& b = buffers_[binding];
-  // A shader sees at most the device's storage buffer range of a binding (lavapipe: 128 MiB).
-  const VkDeviceSize range = context_.info().max_storage_buffer_range;
+  // A shader sees at most the device's storage buffer range of a storage buffer (lavapipe:
+  // 128 MiB), and maxTexelBufferElements texels of a texel buffer (lavapipe: 2 GiB of RGBA32UI).
+  const bool texels = binding == kNodes || binding == kTraced;
+  const VkDeviceSize range = texels ? VkDeviceSize(context_.info().max_texel_buffer_elements) * 16
+                                    : context_.info().max_storage_buffer_range;
   if (offset + bytes > range) {
     static constexpr const char* kNames[] = {"positions", "triangles",         "meshes",
                                              "instances", "header",            "nodes",
                                              "indices",   "traced triangles"};
     throw Error("vulkan: the scene's " + std::string(kNames[binding]) + " take " +
                 std::to_string((offset + bytes) >> 20) + " MiB, more than the device's " +
-                std::to_string(range >> 20) + " MiB storage buffer range");
+                std::to_string(range >> 20) + " MiB " +
+                (texels ? "texel buffer range" : "storage buffer range"));
   }
   if (b.size() < offset + bytes) {
     // Only whole-buffer writes grow a buffer (partial ones land in an array of unchanged size);

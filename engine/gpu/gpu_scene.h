@@ -56,6 +56,10 @@ public:
 
   /// The buffers of bindings [0, kSceneBindings), in binding order.
   [[nodiscard]] std::span<const Buffer* const> bindings() const { return bindings_; }
+  /// The scene's bindings that trace.glsl reads as texel buffers, for the PipelineDesc of every
+  /// kernel that binds the scene: the nodes (binding 5, two RGBA32UI texels each) and the traced
+  /// triangles (binding 7, one RGBA32UI texel per vertex).
+  [[nodiscard]] static std::vector<TexelBinding> texel_bindings();
   [[nodiscard]] GpuStructure structure() const { return structure_; }
   [[nodiscard]] Context& context() const { return context_; }
   /// Stack entries a ray's walk may need (at most kTraceStackSize).

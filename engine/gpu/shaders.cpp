@@ -23,4 +23,10 @@ std::span<const std::uint32_t> shader_spirv(std::string_view name) {
   throw Error("shaders", "no kernel named '" + std::string(name) + "' in this build");
 }
 
+std::vector<std::string_view> shader_names() {
+  std::vector<std::string_view> names;
+  for (const Entry& e : kShaders) names.push_back(e.name);
+  return names;
+}
+
 } // namespace specula::gpu

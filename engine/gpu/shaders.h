@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <span>
 #include <string_view>
+#include <vector>
 
 namespace specula::gpu {
 
@@ -12,5 +13,8 @@ namespace specula::gpu {
 /// or fragment shader: <name>_vert / <name>_frag); throws
 /// specula::Error for a name no build has.
 [[nodiscard]] std::span<const std::uint32_t> shader_spirv(std::string_view name);
+
+/// The names of every shader in this build.
+[[nodiscard]] std::vector<std::string_view> shader_names();
 
 } // namespace specula::gpu

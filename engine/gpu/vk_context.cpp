@@ -338,6 +338,7 @@ std::unique_ptr<Context> Context::create(const Options& options) {
   info.float64 = features.shaderFloat64 == VK_TRUE;
   info.subgroup_size = p11.subgroupSize;
   info.max_storage_buffer_range = props.properties.limits.maxStorageBufferRange;
+  info.max_texel_buffer_elements = props.properties.limits.maxTexelBufferElements;
   info.max_workgroup_count_x = props.properties.limits.maxComputeWorkGroupCount[0];
   info.graphics = (families[ctx->family_].queueFlags & VK_QUEUE_GRAPHICS_BIT) != 0 &&
                   f13.dynamicRendering == VK_TRUE;
@@ -404,8 +405,9 @@ Buffer Context::make_buffer(VkDeviceSize bytes, MemoryKind kind) {
   b.size_ = bytes;
   VkBufferCreateInfo bci{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
   bci.size = bytes;
-  bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
-              VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT;
+  bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT |
+              VK_BUFFER_USAGE_TRANSFER_SRC_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT |
+              VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT;
   bci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
   check(vkCreateBuffer(device_, &bci, nullptr, &b.buffer_), "vkCreateBuffer");
   VkMemoryRequirements req;
@@ -495,18 +497,35 @@ Buffer& Buffer::operator=(Buffer&& o) noexcept {
     memory_ = std::exchange(o.memory_, VK_NULL_HANDLE);
     size_ = std::exchange(o.size_, 0);
     mapped_ = std::exchange(o.mapped_, nullptr);
+    views_ = std::exchange(o.views_, {});
   }
   return *this;
 }
 void Buffer::release() noexcept {
   if (context_ == nullptr) return;
   VkDevice d = context_->device();
+  for (const auto& [format, view] : views_) vkDestroyBufferView(d, view, nullptr);
+  views_.clear();
   if (buffer_ != VK_NULL_HANDLE) vkDestroyBuffer(d, buffer_, nullptr);
   if (memory_ != VK_NULL_HANDLE) vkFreeMemory(d, memory_, nullptr); // unmaps too
   buffer_ = VK_NULL_HANDLE;
   memory_ = VK_NULL_HANDLE;
   mapped_ = nullptr;
   context_ = nullptr;
+}
+
+VkBufferView Buffer::view(VkFormat format) const {
+  for (const auto& [f, view] : views_)
+    if (f == format) return view;
+  VkBufferViewCreateInfo ci{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};
+  ci.buffer = buffer_;
+  ci.format = format;
+  ci.offset = 0;
+  ci.range = VK_WHOLE_SIZE;
+  VkBufferView view = VK_NULL_HANDLE;
+  check(vkCreateBufferView(context_->device(), &ci, nullptr, &view), "vkCreateBufferView");
+  views_.emplace_back(format, view);
+  return view;
 }
 
 void Buffer::upload(const void* data, VkDeviceSize bytes, VkDeviceSize offset) {
@@ -554,6 +573,7 @@ Pipeline& Pipeline::operator=(Pipeline&& o) noexcept {
     layout_ = std::exchange(o.layout_, VK_NULL_HANDLE);
     pipeline_ = std::exchange(o.pipeline_, VK_NULL_HANDLE);
     bindings_ = o.bindings_;
+    formats_ = std::move(o.formats_);
     push_bytes_ = o.push_bytes_;
     bind_point_ = o.bind_point_;
     stages_ = o.stages_;
@@ -588,8 +608,12 @@ VkShaderModule make_module(VkDevice device, std::span<const std::uint32_t> spirv
 void Context::make_layouts(VkDevice device, Pipeline& p, VkShaderStageFlags stages,
                   VkShaderStageFlags push_stages) {
   std::vector<VkDescriptorSetLayoutBinding> bindings(p.bindings_);
+  p.formats_.resize(p.bindings_, VK_FORMAT_UNDEFINED);
   for (std::uint32_t i = 0; i < p.bindings_; ++i)
-    bindings[i] = {i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, stages, nullptr};
+    bindings[i] = {i,
+                   p.formats_[i] == VK_FORMAT_UNDEFINED ? VK_DESCRIPTOR_TYPE_STORAGE_BUFFER
+                                                        : VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER,
+                   1, stages, nullptr};
   VkDescriptorSetLayoutCreateInfo dlci{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
   dlci.bindingCount = p.bindings_;
   dlci.pBindings = bindings.data();
@@ -762,6 +786,15 @@ Pipeline Context::make_pipeline(const PipelineDesc& desc) {
   Pipeline p;
   p.context_ = this;
   p.bindings_ = desc.storage_buffers;
+  p.formats_.assign(p.bindings_, VK_FORMAT_UNDEFINED);
+  for (const TexelBinding& t : desc.texel_buffers) {
+    if (t.binding >= p.bindings_)
+      throw GpuError(std::string(desc.debug_name) + ": texel buffer binding " +
+                         std::to_string(t.binding) + " past its " + std::to_string(p.bindings_) +
+                         " bindings",
+                     VK_ERROR_UNKNOWN);
+    p.formats_[t.binding] = t.format;
+  }
   p.push_bytes_ = desc.push_constant_bytes;
   p.module_ = make_module(device_, desc.spirv);
   make_layouts(device_, p, VK_SHADER_STAGE_COMPUTE_BIT, VK_SHADER_STAGE_COMPUTE_BIT);
@@ -789,11 +822,12 @@ Pipeline Context::make_pipeline(const PipelineDesc& desc) {
 
 namespace {
 VkDescriptorPool make_pool(VkDevice device) {
-  const VkDescriptorPoolSize size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1024};
+  const VkDescriptorPoolSize sizes[] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1024},
+                                        {VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, 256}};
   VkDescriptorPoolCreateInfo ci{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
   ci.maxSets = 128;
-  ci.poolSizeCount = 1;
-  ci.pPoolSizes = &size;
+  ci.poolSizeCount = 2;
+  ci.pPoolSizes = sizes;
   VkDescriptorPool pool;
   check(vkCreateDescriptorPool(device, &ci, nullptr, &pool), "vkCreateDescriptorPool");
   return pool;
@@ -864,20 +898,28 @@ VkDescriptorSet Commands::allocate_set(const Pipeline& pipeline) {
 }
 
 namespace {
-void bind(VkDevice device, VkCommandBuffer cmd, VkDescriptorSet set, VkPipeline pipeline,
-          VkPipelineLayout layout, std::span<const Buffer* const> buffers, const void* push,
-          std::uint32_t push_bytes, VkPipelineBindPoint bind_point = VK_PIPELINE_BIND_POINT_COMPUTE,
-          VkShaderStageFlags push_stages = VK_SHADER_STAGE_COMPUTE_BIT) {
+void bind_set(VkDevice device, VkCommandBuffer cmd, VkDescriptorSet set, VkPipeline pipeline,
+              VkPipelineLayout layout, std::span<const VkFormat> formats,
+              std::span<const Buffer* const> buffers, const void* push, std::uint32_t push_bytes,
+              VkPipelineBindPoint bind_point = VK_PIPELINE_BIND_POINT_COMPUTE,
+              VkShaderStageFlags push_stages = VK_SHADER_STAGE_COMPUTE_BIT) {
   std::vector<VkDescriptorBufferInfo> infos(buffers.size());
+  std::vector<VkBufferView> views(buffers.size());
   std::vector<VkWriteDescriptorSet> writes(buffers.size());
   for (std::size_t i = 0; i < buffers.size(); ++i) {
-    infos[i] = {buffers[i]->handle(), 0, VK_WHOLE_SIZE};
     writes[i] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
     writes[i].dstSet = set;
     writes[i].dstBinding = std::uint32_t(i);
     writes[i].descriptorCount = 1;
-    writes[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-    writes[i].pBufferInfo = &infos[i];
+    if (i < formats.size() && formats[i] != VK_FORMAT_UNDEFINED) {
+      views[i] = buffers[i]->view(formats[i]);
+      writes[i].descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
+      writes[i].pTexelBufferView = &views[i];
+    } else {
+      infos[i] = {buffers[i]->handle(), 0, VK_WHOLE_SIZE};
+      writes[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+      writes[i].pBufferInfo = &infos[i];
+    }
   }
   vkUpdateDescriptorSets(device, std::uint32_t(writes.size()), writes.data(), 0, nullptr);
   vkCmdBindPipeline(cmd, bind_point, pipeline);
@@ -903,8 +945,8 @@ void record_dispatch(VkCommandBuffer cmd, VkDescriptorSet set, const Pipeline& p
     throw GpuError("record_dispatch: " + std::to_string(buffers.size()) + " buffers for " +
                        std::to_string(pipeline.bindings_) + " bindings",
                    VK_ERROR_UNKNOWN);
-  bind(pipeline.context_->device(), cmd, set, pipeline.pipeline_, pipeline.layout_, buffers,
-       push_constants, pipeline.push_bytes_);
+  bind_set(pipeline.context_->device(), cmd, set, pipeline.pipeline_, pipeline.layout_,
+           pipeline.formats_, buffers, push_constants, pipeline.push_bytes_);
   if (groups_x > 0 && groups_y > 0 && groups_z > 0)
     vkCmdDispatch(cmd, groups_x, groups_y, groups_z);
 }
@@ -932,8 +974,8 @@ void Commands::dispatch(const Pipeline& pipeline, std::span<const Buffer* const>
                    VK_ERROR_UNKNOWN);
   begin_if_needed();
   const VkDescriptorSet set = allocate_set(pipeline);
-  bind(context_.device(), cmd_, set, pipeline.pipeline_, pipeline.layout_, buffers, push_constants,
-       pipeline.push_bytes_);
+  bind_set(context_.device(), cmd_, set, pipeline.pipeline_, pipeline.layout_, pipeline.formats_,
+           buffers, push_constants, pipeline.push_bytes_);
   if (gx > 0 && gy > 0 && gz > 0) vkCmdDispatch(cmd_, gx, gy, gz);
 }
 
@@ -944,8 +986,8 @@ void Commands::dispatch_indirect(const Pipeline& pipeline, std::span<const Buffe
     throw GpuError("dispatch_indirect: wrong buffer count", VK_ERROR_UNKNOWN);
   begin_if_needed();
   const VkDescriptorSet set = allocate_set(pipeline);
-  bind(context_.device(), cmd_, set, pipeline.pipeline_, pipeline.layout_, buffers, push_constants,
-       pipeline.push_bytes_);
+  bind_set(context_.device(), cmd_, set, pipeline.pipeline_, pipeline.layout_, pipeline.formats_,
+           buffers, push_constants, pipeline.push_bytes_);
   vkCmdDispatchIndirect(cmd_, args.handle(), offset);
 }
 
@@ -993,8 +1035,9 @@ void Commands::draw(const Pipeline& pipeline, std::span<const Buffer* const> buf
     throw GpuError("draw: not a graphics pipeline, or the wrong buffer count", VK_ERROR_UNKNOWN);
   begin_if_needed();
   const VkDescriptorSet set = allocate_set(pipeline);
-  bind(context_.device(), cmd_, set, pipeline.pipeline_, pipeline.layout_, buffers, push_constants,
-       pipeline.push_bytes_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline.stages_);
+  bind_set(context_.device(), cmd_, set, pipeline.pipeline_, pipeline.layout_, pipeline.formats_,
+           buffers, push_constants, pipeline.push_bytes_, VK_PIPELINE_BIND_POINT_GRAPHICS,
+           pipeline.stages_);
   for (const Draw& d : draws)
     if (d.vertex_count > 0) vkCmdDraw(cmd_, d.vertex_count, 1, 0, d.instance);
 }

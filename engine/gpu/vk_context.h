@@ -58,6 +58,7 @@ struct DeviceInfo {
   bool float64 = false;       ///< shaderFloat64 (the watertight test's double fallback)
   std::uint32_t subgroup_size = 0;
   std::uint64_t max_storage_buffer_range = 0;
+  std::uint32_t max_texel_buffer_elements = 0; ///< maxTexelBufferElements (TexelBinding)
   std::uint32_t max_workgroup_count_x = 0;
   /// The queue also draws (graphics bit) and dynamic rendering is on: graphics pipelines work.
   bool graphics = false;
@@ -99,6 +100,9 @@ public:
   template <class T> void download(std::span<T> data, VkDeviceSize offset = 0) const {
     download(data.data(), data.size_bytes(), offset);
   }
+  /// The whole buffer as texels of `format` (a TexelBinding's view), made on first use and kept
+  /// with the buffer.
+  [[nodiscard]] VkBufferView view(VkFormat format) const;
 
 private:
   friend class Context;
@@ -107,18 +111,30 @@ private:
   VkDeviceMemory memory_ = VK_NULL_HANDLE;
   VkDeviceSize size_ = 0;
   void* mapped_ = nullptr;
+  mutable std::vector<std::pair<VkFormat, VkBufferView>> views_;
   void release() noexcept;
 };
 
-/// A compute pipeline whose set 0 binds `storage_buffers` storage buffers at bindings
-/// 0..storage_buffers-1, with `push_constant_bytes` of push constants and the given
-/// specialization constants (constant_id i = values[i]).
+/// A binding of set 0 that the kernel reads as a uniform texel buffer of `format` (texelFetch
+/// on a [u]samplerBuffer) instead of a storage buffer; the buffer bound there is viewed as such
+/// (Buffer::view). On llvmpipe a texel fetch gathers a whole texel per lane without branching,
+/// where a storage-buffer load tests and loads every lane and component on its own.
+struct TexelBinding {
+  std::uint32_t binding = 0;
+  VkFormat format = VK_FORMAT_R32G32B32A32_UINT;
+};
+
+/// A compute pipeline whose set 0 binds `storage_buffers` buffers at bindings
+/// 0..storage_buffers-1 (storage buffers, or the texel buffers `texel_buffers` names), with
+/// `push_constant_bytes` of push constants and the given specialization constants
+/// (constant_id i = values[i]).
 struct PipelineDesc {
   std::span<const std::uint32_t> spirv;
   std::uint32_t storage_buffers = 0;
   std::uint32_t push_constant_bytes = 0;
   std::vector<std::uint32_t> specialization; ///< constant_id i → value (as 32-bit words)
   const char* debug_name = "compute";
+  std::vector<TexelBinding> texel_buffers = {};
 };
 
 class Pipeline {
@@ -149,6 +165,7 @@ private:
   VkPipelineLayout layout_ = VK_NULL_HANDLE;
   VkPipeline pipeline_ = VK_NULL_HANDLE;
   std::uint32_t bindings_ = 0;
+  std::vector<VkFormat> formats_; ///< per binding: VK_FORMAT_UNDEFINED for a storage buffer
   std::uint32_t push_bytes_ = 0;
   VkPipelineBindPoint bind_point_ = VK_PIPELINE_BIND_POINT_COMPUTE;
   VkShaderStageFlags stages_ = VK_SHADER_STAGE_COMPUTE_BIT;

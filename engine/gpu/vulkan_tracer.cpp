@@ -87,6 +87,7 @@ VulkanTracer::VulkanTracer(std::uint32_t packet_width, VulkanOptions options)
   desc.specialization = {options_.count_tests ? 1u : 0u,
                          options_.structure == GpuStructure::grid ? 1u : 0u, 1u};
   desc.debug_name = "trace_rays";
+  desc.texel_buffers = GpuScene::texel_bindings();
   kernels_->trace = context_->make_pipeline(desc);
   desc.specialization[2] = 0u;
   kernels_->trace_static = context_->make_pipeline(desc);

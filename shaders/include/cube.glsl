@@ -1,6 +1,6 @@
 // Ray-cache cube addressing and texels on the device, bit for bit as engine/cache/cube_map.h
 // (face by the major axis, ties to x then y; nearest texel) and ray_cache.cpp (half-float
-// texels). `precise` keeps a·b + c unfused, as the C++ build computes it.
+// texels). Nothing is fused, as in the C++ build (common.glsl).
 #ifndef SPECULA_CUBE_GLSL
 #define SPECULA_CUBE_GLSL
 
@@ -25,8 +25,8 @@ uint cube_coord(vec3 s, out float u, out float v) {
     sc = s.z >= 0.0 ? s.x : -s.x;
     tc = -s.y;
   }
-  precise float pu = 0.5 * (sc / ma + 1.0);
-  precise float pv = 0.5 * (tc / ma + 1.0);
+  float pu = 0.5 * (sc / ma + 1.0);
+  float pv = 0.5 * (tc / ma + 1.0);
   u = pu;
   v = pv;
   return face;
@@ -37,7 +37,7 @@ uint cube_texel(vec3 s, uint resolution) {
   float u, v;
   uint face = cube_coord(s, u, v);
   float r = float(resolution);
-  precise float ur = u * r, vr = v * r;
+  float ur = u * r, vr = v * r;
   uint x = min(resolution - 1u, uint(max(0.0, ur)));
   uint y = min(resolution - 1u, uint(max(0.0, vr)));
   return (face * resolution + y) * resolution + x;

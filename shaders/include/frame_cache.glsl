@@ -27,11 +27,11 @@ uint cache_leaves(uint slot, bool exits) {
 
 // within_tau (ray_cache.cpp): the cached hit centre + s·distance, seen from p, within τ of d.
 bool cache_within_tau(vec3 centre, vec3 s, float distance, vec3 p, vec3 d, float cos_tau) {
-  precise vec3 sd = s * distance;
-  precise vec3 hit = centre + sd;
-  precise vec3 v = hit - p;
+  vec3 sd = s * distance;
+  vec3 hit = centre + sd;
+  vec3 v = hit - p;
   float len = length3(v);
-  precise float bound = cos_tau * len;
+  float bound = cos_tau * len;
   return len > 0.0 && dot3(v, d) >= bound;
 }
 
@@ -52,21 +52,21 @@ bool cache_verify(GpuCube c, uint pixel, uint depth) {
 uint cache_march(GpuCube c, vec3 p, vec3 d, out uint texel) {
   texel = 0u;
   uint res = c.resolution;
-  precise vec3 pc = p - c.centre;
-  precise float texel_angle = 2.0 / float(res);
+  vec3 pc = p - c.centre;
+  float texel_angle = 2.0 / float(res);
   float scale = max(length3(pc), 1e-6);
-  precise float least = 1e-4 * scale;
+  float least = 1e-4 * scale;
   float t = 0.0;
   float t_inside = 0.0;
   for (uint step = 0u; step < kCubeMarchSteps; ++step) {
-    precise vec3 q = pc + t * d;
+    vec3 q = pc + t * d;
     float r = length3(q);
     uint ti = cube_texel(r > 0.0 ? q : d, res);
     uvec4 tx = texels[c.first_texel + ti];
     if (!texel_valid(tx)) return kAnswerTrace;
     float D = texel_distance(tx);
     if (isinf(D)) {
-      precise float bound = r * c.cos_half_texel;
+      float bound = r * c.cos_half_texel;
       if (r > 0.0 && dot3(q, d) >= bound) {
         uint td = cube_texel(d, res);
         uvec4 own = texels[c.first_texel + td];
@@ -79,8 +79,8 @@ uint cache_march(GpuCube c, vec3 p, vec3 d, out uint texel) {
       float lo = t_inside, hi = t;
       uint found = ti;
       for (uint k = 0u; k < kCubeRefineSteps; ++k) {
-        precise float mid = 0.5 * (lo + hi);
-        precise vec3 qm = pc + mid * d;
+        float mid = 0.5 * (lo + hi);
+        vec3 qm = pc + mid * d;
         float rm = length3(qm);
         uint tm = cube_texel(rm > 0.0 ? qm : d, res);
         uvec4 mx = texels[c.first_texel + tm];
@@ -93,9 +93,9 @@ uint cache_march(GpuCube c, vec3 p, vec3 d, out uint texel) {
           lo = mid;
         }
       }
-      precise vec3 q_hit = pc + hi * d;
+      vec3 q_hit = pc + hi * d;
       float r_hit = length3(q_hit);
-      precise vec3 s = r_hit > 0.0 ? q_hit / r_hit : d;
+      vec3 s = r_hit > 0.0 ? q_hit / r_hit : d;
       if (!cache_within_tau(c.centre, s, texel_distance(texels[c.first_texel + found]), p, d,
                             c.cos_tau))
         return kAnswerTrace;
@@ -105,13 +105,13 @@ uint cache_march(GpuCube c, vec3 p, vec3 d, out uint texel) {
     t_inside = t;
     // About one texel of angle as seen from the centre, never past the surface when the stored
     // distance does not change.
-    precise float perp = r > 0.0 ? length3(cross3(d, q)) / r : 0.0;
-    precise float dt = perp > 1e-12 ? texel_angle * r * r / perp : kInfinity;
+    float perp = r > 0.0 ? length3(cross3(d, q)) / r : 0.0;
+    float dt = perp > 1e-12 ? texel_angle * r * r / perp : kInfinity;
     if (!isinf(D)) {
-      precise float gap = max(D - r, 0.0) + least;
+      float gap = max(D - r, 0.0) + least;
       dt = min(dt, gap);
     }
-    precise float next = t + max(dt, least);
+    float next = t + max(dt, least);
     t = next;
     if (isinf(t) || isnan(t)) break;
   }

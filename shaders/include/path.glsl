@@ -69,35 +69,35 @@ uint find_emitter(uint instance, uint primitive) {
 float area_light_pdf(uint k, vec3 p, vec3 q) {
   GpuEmitter e = emitters[k];
   if (!(e.area > 0.0)) return 0.0;
-  precise vec3 d = q - p;
+  vec3 d = q - p;
   float dist2 = dot3(d, d);
   if (!(dist2 > 0.0)) return 0.0;
-  precise float cos_l = abs(dot3(e.normal, d)) / sqrt(dist2);
+  float cos_l = abs(dot3(e.normal, d)) / sqrt(dist2);
   if (!(cos_l > 0.0)) return 0.0;
-  precise float pdf = e.pick / e.area * dist2 / cos_l;
+  float pdf = e.pick / e.area * dist2 / cos_l;
   return pdf;
 }
 
 AreaLightSample sample_emitter_triangle(uint k, vec3 p, float u1, float u2) {
   AreaLightSample s;
   GpuEmitter e = emitters[k];
-  precise float r = sqrt(u1);
-  precise float b1 = 1.0 - r, b2 = u2 * r;
-  precise vec3 position = (e.p0 + b1 * e.e1) + b2 * e.e2;
+  float r = sqrt(u1);
+  float b1 = 1.0 - r, b2 = u2 * r;
+  vec3 position = (e.p0 + b1 * e.e1) + b2 * e.e2;
   s.position = position;
   s.emission = e.emission;
   s.to_light = vec3(0.0);
   s.distance = 0.0;
   s.pdf = 0.0;
-  precise vec3 d = s.position - p;
+  vec3 d = s.position - p;
   float dist = length3(d);
   if (!(dist > 0.0) || isinf(dist) || isnan(dist)) return s;
   s.distance = dist;
-  precise vec3 to_light = d / dist;
+  vec3 to_light = d / dist;
   s.to_light = to_light;
   float cos_l = abs(dot3(e.normal, s.to_light));
   if (!(cos_l > 0.0)) return s;
-  precise float pdf = e.pick / e.area * dist * dist / cos_l;
+  float pdf = e.pick / e.area * dist * dist / cos_l;
   s.pdf = isinf(pdf) || isnan(pdf) ? 0.0 : pdf;
   return s;
 }
@@ -108,8 +108,8 @@ float power_heuristic(float a, float b) {
   if (a == b) return 0.5;
   if (a == 0.0 || isinf(b)) return 0.0;
   if (b == 0.0 || isinf(a)) return 1.0;
-  precise float r = b / a;
-  precise float w = 1.0 / (1.0 + r * r);
+  float r = b / a;
+  float w = 1.0 / (1.0 + r * r);
   return w;
 }
 

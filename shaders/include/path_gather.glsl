@@ -9,7 +9,7 @@
 void gather_shadows(uint i) {
   uint count = paths[i].shadow_count;
   if (count == 0u) return;
-  precise vec3 radiance = paths[i].radiance;
+  vec3 radiance = paths[i].radiance;
   for (uint k = 0u; k < count; ++k) {
     GpuShadowRay s = shadows[i * pp.shadow_slots + k];
     if (s.status == kRayPending) atomicAdd(counters.cut, 1u);

@@ -17,39 +17,36 @@ const uint kSetBsdf = 0u, kSetLight = 1u, kSetRoulette = 2u;
 // path_integrator.cpp's orthonormal_basis and cosine_direction.
 void orthonormal_basis(vec3 n, out vec3 t, out vec3 b) {
   float sign = (floatBitsToUint(n.z) & 0x80000000u) != 0u ? -1.0 : 1.0; // copysign(1, n.z)
-  precise float a = -1.0 / (sign + n.z);
-  precise float c = n.x * n.y * a;
-  precise vec3 tt = vec3(1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x);
-  precise vec3 bb = vec3(c, sign + n.y * n.y * a, -n.y);
+  float a = -1.0 / (sign + n.z);
+  float c = n.x * n.y * a;
+  vec3 tt = vec3(1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x);
+  vec3 bb = vec3(c, sign + n.y * n.y * a, -n.y);
   t = tt;
   b = bb;
 }
 
 vec3 cosine_direction(vec3 n, float u1, float u2) {
-  precise float r = sqrt(u1);
-  precise float phi = (2.0 * kPi) * u2;
-  precise float x = r * cos(phi), y = r * sin(phi);
-  precise float z = sqrt(max(0.0, 1.0 - u1));
+  float r = sqrt(u1);
+  float phi = (2.0 * kPi) * u2;
+  float x = r * cos(phi), y = r * sin(phi);
+  float z = sqrt(max(0.0, 1.0 - u1));
   vec3 t, b;
   orthonormal_basis(n, t, b);
-  precise vec3 d = (x * t + y * b) + z * n;
+  vec3 d = (x * t + y * b) + z * n;
   return normalize3(d);
 }
 
-// r + a·b·w, unfused (the CPU's separate roundings). Products alone cannot be fused, so the rest
-// of main needs no `precise`, whose propagation through its chains of reassigned variables made
-// glslang run for minutes.
+// r + a·b·w, in the CPU's order (each operation rounded on its own: common.glsl).
 vec3 add_product(vec3 r, vec3 a, vec3 b, float w) {
-  precise vec3 x = r + a * b * w;
+  vec3 x = r + a * b * w;
   return x;
 }
 
 // shadow_integrator.cpp's area_light_point: the pick dimension u0 reused within the picked
-// emitter's interval [cdf - pick, cdf). A function of its own: `precise` on these two in the
-// sampling loop propagated back through the loop's sample sets and made glslang run for 100 s.
+// emitter's interval [cdf - pick, cdf).
 float reuse_pick(float u0, float cdf, float pick) {
-  precise float below = cdf - pick;
-  precise float reused = clamp((u0 - below) / pick, 0.0, uintBitsToFloat(0x3f7fffffu));
+  float below = cdf - pick;
+  float reused = clamp((u0 - below) / pick, 0.0, uintBitsToFloat(0x3f7fffffu));
   return reused;
 }
 
@@ -65,7 +62,7 @@ void shade_shadow_caster(uint i, GpuPath p, GpuHit hit, GpuMaterial m) {
   uint count = 0u;
   float diffuse = diffuse_weight(m);
   if (diffuse > 0.0) {
-    precise vec3 albedo = m.base_color * (diffuse * kInvPi);
+    vec3 albedo = m.base_color * (diffuse * kInvPi);
     vec3 origin = offset_ray_origin(sp.spawn_point, sp.spawn_error, sp.geometric_normal);
     for (uint l = 0u; l < kLightCount; ++l) {
       float tfar;
@@ -89,8 +86,8 @@ void shade_shadow_caster(uint i, GpuPath p, GpuHit hit, GpuMaterial m) {
         if (dot3(ls.to_light, sp.geometric_normal) <= 0.0) continue;
         float cos_theta = dot3(ls.to_light, sp.shading_normal);
         if (cos_theta <= 0.0) continue;
-        precise float tfar = ls.distance * (1.0 - 1e-5);
-        precise vec3 value = albedo * ls.emission * (cos_theta / ls.pdf * inv_samples);
+        float tfar = ls.distance * (1.0 - 1e-5);
+        vec3 value = albedo * ls.emission * (cos_theta / ls.pdf * inv_samples);
         add_shadow(i, count, origin, ls.to_light, tfar, value);
       }
     }
@@ -113,7 +110,7 @@ void shade_path(uint i, GpuPath p) {
     if (hit.instance != kNoIndex) {
       GpuMaterial gm = materials[instances[hit.instance].material];
       float diffuse = diffuse_weight(gm);
-      precise vec3 albedo = diffuse * gm.base_color + (1.0 - diffuse);
+      vec3 albedo = diffuse * gm.base_color + (1.0 - diffuse);
       g.albedo = albedo;
       g.depth = hit.t;
       g.normal = shading_point(hit, p.direction, false).shading_normal;

@@ -1,7 +1,7 @@
 // The ray and the triangle test of every traversal (trace.glsl), on their own so that a kernel can
 // test triangles without the scene's buffers (probe_triangle.comp against the CPU's test).
-// Mirrors engine/accel/common/ray_query.h with `precise` wherever the C++ build rounds each
-// operation on its own: results are bit-identical to it.
+// Mirrors engine/accel/common/ray_query.h operation for operation, each rounded on its own as in
+// the C++ build (common.glsl): results are bit-identical to it.
 #ifndef SPECULA_RAY_TRIANGLE_GLSL
 #define SPECULA_RAY_TRIANGLE_GLSL
 
@@ -45,7 +45,7 @@ PreparedRay prepare_ray(vec3 org, vec3 dir, float tnear, float tfar) {
   r.dir = dir;
   r.tnear = tnear;
   r.tfar = tfar;
-  precise vec3 inv = vec3(1.0) / dir;
+  vec3 inv = vec3(1.0) / dir;
   r.inv_dir = inv;
   r.neg = floatBitsToUint(dir) >> 31;
   vec3 ad = abs(dir);
@@ -58,9 +58,9 @@ PreparedRay prepare_ray(vec3 org, vec3 dir, float tnear, float tfar) {
     r.ky = k;
   }
   vec3 d = ray_frame(r, dir);
-  precise float sx = d.x / d.z;
-  precise float sy = d.y / d.z;
-  precise float sz = 1.0 / d.z;
+  float sx = d.x / d.z;
+  float sy = d.y / d.z;
+  float sz = 1.0 / d.z;
   r.sx = sx;
   r.sy = sy;
   r.sz = sz;
@@ -74,48 +74,48 @@ bool intersect_watertight(PreparedRay r, vec3 p0, vec3 p1, vec3 p2, float tmax, 
   t_out = 0.0;
   u_out = 0.0;
   v_out = 0.0;
-  precise vec3 a_world = p0 - r.org;
-  precise vec3 b_world = p1 - r.org;
-  precise vec3 c_world = p2 - r.org;
+  vec3 a_world = p0 - r.org;
+  vec3 b_world = p1 - r.org;
+  vec3 c_world = p2 - r.org;
   vec3 a = ray_frame(r, a_world);
   vec3 b = ray_frame(r, b_world);
   vec3 c = ray_frame(r, c_world);
-  precise float ax = a.x - r.sx * a.z;
-  precise float ay = a.y - r.sy * a.z;
-  precise float bx = b.x - r.sx * b.z;
-  precise float by = b.y - r.sy * b.z;
-  precise float cx = c.x - r.sx * c.z;
-  precise float cy = c.y - r.sy * c.z;
-  precise float U = cx * by - cy * bx;
-  precise float V = ax * cy - ay * cx;
-  precise float W = bx * ay - by * ax;
+  float ax = a.x - r.sx * a.z;
+  float ay = a.y - r.sy * a.z;
+  float bx = b.x - r.sx * b.z;
+  float by = b.y - r.sy * b.z;
+  float cx = c.x - r.sx * c.z;
+  float cy = c.y - r.sy * c.z;
+  float U = cx * by - cy * bx;
+  float V = ax * cy - ay * cx;
+  float W = bx * ay - by * ax;
   if (U == 0.0 || V == 0.0 || W == 0.0) {
     // An edge function rounded to exactly 0: all three again in double (the paper's §3.2).
-    precise double Ud = double(cx) * double(by) - double(cy) * double(bx);
-    precise double Vd = double(ax) * double(cy) - double(ay) * double(cx);
-    precise double Wd = double(bx) * double(ay) - double(by) * double(ax);
+    double Ud = double(cx) * double(by) - double(cy) * double(bx);
+    double Vd = double(ax) * double(cy) - double(ay) * double(cx);
+    double Wd = double(bx) * double(ay) - double(by) * double(ax);
     U = float(Ud);
     V = float(Vd);
     W = float(Wd);
   }
   if ((U < 0.0 || V < 0.0 || W < 0.0) && (U > 0.0 || V > 0.0 || W > 0.0)) return false;
-  precise float det = U + V + W;
+  float det = U + V + W;
   if (det == 0.0) return false;
-  precise float az = r.sz * a.z;
-  precise float bz = r.sz * b.z;
-  precise float cz = r.sz * c.z;
-  precise float T = U * az + V * bz + W * cz;
+  float az = r.sz * a.z;
+  float bz = r.sz * b.z;
+  float cz = r.sz * c.z;
+  float T = U * az + V * bz + W * cz;
   // t = T / det must lie in (tnear, tmax); compare without dividing, signs folded in.
-  precise float abs_det = abs(det);
-  precise float signed_t = (floatBitsToUint(det) >> 31) != 0u ? -T : T;
-  precise float lo = r.tnear * abs_det;
-  precise float hi = tmax * abs_det;
+  float abs_det = abs(det);
+  float signed_t = (floatBitsToUint(det) >> 31) != 0u ? -T : T;
+  float lo = r.tnear * abs_det;
+  float hi = tmax * abs_det;
   if (!(signed_t > lo) || !(signed_t < hi)) return false;
-  precise float inv_det = 1.0 / det;
-  precise float t = T * inv_det;
+  float inv_det = 1.0 / det;
+  float t = T * inv_det;
   if (!(t > r.tnear) || !(t < tmax)) return false; // rounding of the division at the interval ends
-  precise float u = V * inv_det;
-  precise float v = W * inv_det;
+  float u = V * inv_det;
+  float v = W * inv_det;
   t_out = t;
   u_out = u;
   v_out = v;

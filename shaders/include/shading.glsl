@@ -1,7 +1,6 @@
 // Shading on the device, mirroring engine/trace/shading.h, lights.h, optics.h and
-// geometry/ray_offset.h line by line (same operations in the same order; `precise` keeps the
-// compiler from fusing a·b + c, which the C++ build never does). Needs trace.glsl (the scene's
-// buffers) and frame_layout.h included first.
+// geometry/ray_offset.h line by line (same operations in the same order, none fused: common.glsl).
+// Needs trace.glsl (the scene's buffers) and frame_layout.h included first.
 #ifndef SPECULA_SHADING_GLSL
 #define SPECULA_SHADING_GLSL
 
@@ -25,33 +24,33 @@ const uint kKindRefraction = 3u;
 // ---- Small exact helpers (GLM's arithmetic) ------------------------------------------------------
 
 float dot3(vec3 a, vec3 b) {
-  precise float r = (a.x * b.x + a.y * b.y) + a.z * b.z;
+  float r = (a.x * b.x + a.y * b.y) + a.z * b.z;
   return r;
 }
 vec3 normalize3(vec3 v) {
-  precise float inv = 1.0 / sqrt(dot3(v, v));
-  precise vec3 r = v * inv;
+  float inv = 1.0 / sqrt(dot3(v, v));
+  vec3 r = v * inv;
   return r;
 }
 float length3(vec3 v) {
-  precise float r = sqrt(dot3(v, v));
+  float r = sqrt(dot3(v, v));
   return r;
 }
 float max_component(vec3 v) { return max(v.x, max(v.y, v.z)); }
 vec3 cross3(vec3 a, vec3 b) {
-  precise vec3 r = vec3(a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y);
+  vec3 r = vec3(a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y);
   return r;
 }
 vec3 mul_point(mat4 m, vec3 p) {
   // GLM's mat4 × vec4: columns scaled and summed in order.
-  precise vec4 r = m[0] * p.x + m[1] * p.y;
-  precise vec4 s = r + m[2] * p.z;
-  precise vec4 t = s + m[3];
+  vec4 r = m[0] * p.x + m[1] * p.y;
+  vec4 s = r + m[2] * p.z;
+  vec4 t = s + m[3];
   return t.xyz;
 }
 vec3 mul3(vec3 c0, vec3 c1, vec3 c2, vec3 v) {
-  precise vec3 r = c0 * v.x + c1 * v.y;
-  precise vec3 s = r + c2 * v.z;
+  vec3 r = c0 * v.x + c1 * v.y;
+  vec3 s = r + c2 * v.z;
   return s;
 }
 bool finite3(vec3 v) { return !any(isnan(v)) && !any(isinf(v)); }
@@ -69,15 +68,15 @@ float gamma_bound(int n) {
 vec3 barycentric_error(vec3 p0, vec3 p1, vec3 p2, float b0, float b1, float b2) {
   vec3 largest = max(abs(p0), max(abs(p1), abs(p2)));
   float magnitude = max(largest.x, max(largest.y, largest.z));
-  precise vec3 s = (abs(b0 * p0) + abs(b1 * p1)) + abs(b2 * p2);
-  precise vec3 r = gamma_bound(7) * s + vec3(gamma_bound(8) * magnitude);
+  vec3 s = (abs(b0 * p0) + abs(b1 * p1)) + abs(b2 * p2);
+  vec3 r = gamma_bound(7) * s + vec3(gamma_bound(8) * magnitude);
   return r;
 }
 
 vec3 transformed_error(mat4 m, vec3 p, vec3 p_error) {
   vec3 a0 = abs(m[0].xyz), a1 = abs(m[1].xyz), a2 = abs(m[2].xyz);
   vec3 abs_t = abs(m[3].xyz);
-  precise vec3 r = (gamma_bound(3) + 1.0) * mul3(a0, a1, a2, p_error) +
+  vec3 r = (gamma_bound(3) + 1.0) * mul3(a0, a1, a2, p_error) +
                    gamma_bound(3) * (mul3(a0, a1, a2, abs(p)) + abs_t);
   return r;
 }
@@ -92,14 +91,14 @@ vec3 inset_barycentrics(vec3 p0, vec3 p1, vec3 p2, float u, float v, float margi
     u /= sum;
     v /= sum;
   }
-  precise float w0 = 1.0 - u - v;
+  float w0 = 1.0 - u - v;
   vec3 b = vec3(max(0.0, w0), u, v);
-  precise vec3 e0 = p2 - p1, e1 = p0 - p2, e2 = p1 - p0;
+  vec3 e0 = p2 - p1, e1 = p0 - p2, e2 = p1 - p0;
   vec3 c = cross3(e2, p2 - p0);
   float c2 = dot3(c, c);
-  precise float m2 = margin * margin;
-  precise float t0 = b.x * b.x * c2, t1 = b.y * b.y * c2, t2 = b.z * b.z * c2;
-  precise float q0 = m2 * dot3(e0, e0), q1 = m2 * dot3(e1, e1), q2 = m2 * dot3(e2, e2);
+  float m2 = margin * margin;
+  float t0 = b.x * b.x * c2, t1 = b.y * b.y * c2, t2 = b.z * b.z * c2;
+  float q0 = m2 * dot3(e0, e0), q1 = m2 * dot3(e1, e1), q2 = m2 * dot3(e2, e2);
   if (c2 > 1e-30 && c2 < 1e30 && t0 >= q0 && t1 >= q1 && t2 >= q2) return b;
   // In double, as the CPU: the altitudes of a thin triangle far from the origin lose digits.
   dvec3 d0 = dvec3(p0), d1 = dvec3(p1), d2 = dvec3(p2);
@@ -140,8 +139,8 @@ float next_float_down(float x) {
 
 vec3 offset_ray_origin(vec3 p, vec3 p_error, vec3 n) {
   float d = dot3(abs(n), p_error);
-  precise vec3 offset = d * n;
-  precise vec3 po = p + offset;
+  vec3 offset = d * n;
+  vec3 po = p + offset;
   vec3 r = po;
   for (int i = 0; i < 3; ++i) {
     if (n[i] > 0.0) r[i] = next_float_up(r[i]);
@@ -162,7 +161,7 @@ struct ShadingPoint {
 };
 
 vec3 interpolate(float w, float u, float v, vec3 a, vec3 b, vec3 c) {
-  precise vec3 r = (w * a + u * b) + v * c;
+  vec3 r = (w * a + u * b) + v * c;
   return r;
 }
 
@@ -170,7 +169,7 @@ ShadingPoint shading_point(GpuHit hit, vec3 direction, bool with_error_bound) {
   GpuInstance inst = instances[hit.instance];
   GpuMesh mesh = meshes[inst.mesh];
   uvec3 tri = scene_triangle(mesh.first_triangle + hit.primitive);
-  precise float w = 1.0 - hit.u - hit.v;
+  float w = 1.0 - hit.u - hit.v;
   vec3 p0 = scene_position(mesh.first_vertex + tri.x);
   vec3 p1 = scene_position(mesh.first_vertex + tri.y);
   vec3 p2 = scene_position(mesh.first_vertex + tri.z);
@@ -180,7 +179,7 @@ ShadingPoint shading_point(GpuHit hit, vec3 direction, bool with_error_bound) {
   ShadingPoint sp;
   sp.position = identity ? p_object : mul_point(m, p_object);
   if (with_error_bound && identity) {
-    precise vec3 hit_error = (gamma_bound(3) + 1.0) * barycentric_error(p0, p1, p2, w, hit.u, hit.v) +
+    vec3 hit_error = (gamma_bound(3) + 1.0) * barycentric_error(p0, p1, p2, w, hit.u, hit.v) +
                              gamma_bound(3) * abs(p_object);
     vec3 b = inset_barycentrics(p0, p1, p2, hit.u, hit.v, kEdgeInset * length3(hit_error));
     if (b == vec3(w, hit.u, hit.v)) {
@@ -188,7 +187,7 @@ ShadingPoint shading_point(GpuHit hit, vec3 direction, bool with_error_bound) {
       sp.spawn_error = hit_error;
     } else {
       vec3 q = interpolate(b.x, b.y, b.z, p0, p1, p2);
-      precise vec3 q_error = (gamma_bound(3) + 1.0) * barycentric_error(p0, p1, p2, b.x, b.y, b.z) +
+      vec3 q_error = (gamma_bound(3) + 1.0) * barycentric_error(p0, p1, p2, b.x, b.y, b.z) +
                              gamma_bound(3) * abs(q);
       sp.spawn_point = q;
       sp.spawn_error = q_error;
@@ -249,7 +248,7 @@ LightSample sample_light(GpuLight light, vec3 p) {
     s.irradiance = light.intensity;
     return s;
   }
-  precise vec3 d = light.position - p;
+  vec3 d = light.position - p;
   double dist = sqrt(double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z);
   if (!(dist > 0.0LF)) return s;
   s.distance = float(dist);
@@ -274,7 +273,7 @@ LightSample sample_light(GpuLight light, vec3 p) {
 // ---- optics.h and split_specular -----------------------------------------------------------------
 
 vec3 reflect_direction(vec3 d, vec3 n) {
-  precise vec3 r = d - 2.0 * dot3(d, n) * n;
+  vec3 r = d - 2.0 * dot3(d, n) * n;
   return r;
 }
 
@@ -282,22 +281,22 @@ vec3 reflect_direction(vec3 d, vec3 n) {
 bool refract_direction(vec3 d, vec3 n, float eta, out vec3 t) {
   t = vec3(0.0);
   float cos_i = -dot3(d, n);
-  precise float sin2_t = eta * eta * max(0.0, 1.0 - cos_i * cos_i);
+  float sin2_t = eta * eta * max(0.0, 1.0 - cos_i * cos_i);
   if (sin2_t >= 1.0) return false;
-  precise float cos_t = sqrt(1.0 - sin2_t);
-  precise vec3 r = eta * d + (eta * cos_i - cos_t) * n;
+  float cos_t = sqrt(1.0 - sin2_t);
+  vec3 r = eta * d + (eta * cos_i - cos_t) * n;
   t = normalize3(r);
   return true;
 }
 
 float fresnel_dielectric(float cos_i, float eta) {
   cos_i = clamp(cos_i, 0.0, 1.0);
-  precise float sin2_t = eta * eta * (1.0 - cos_i * cos_i);
+  float sin2_t = eta * eta * (1.0 - cos_i * cos_i);
   if (sin2_t >= 1.0) return 1.0;
-  precise float cos_t = sqrt(1.0 - sin2_t);
-  precise float r_par = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
-  precise float r_perp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-  precise float f = 0.5 * (r_par * r_par + r_perp * r_perp);
+  float cos_t = sqrt(1.0 - sin2_t);
+  float r_par = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+  float r_perp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+  float f = 0.5 * (r_par * r_par + r_perp * r_perp);
   return f;
 }
 
@@ -325,8 +324,8 @@ SpecularSplit split_specular(GpuMaterial m, ShadingPoint sp, vec3 d, bool dielec
     }
     if (ok) {
       float f = fresnel_dielectric(cos_i, eta);
-      precise float rw = split.reflect_weight + m.transmission * f;
-      precise float tw = m.transmission * (1.0 - f);
+      float rw = split.reflect_weight + m.transmission * f;
+      float tw = m.transmission * (1.0 - f);
       split.reflect_weight = rw;
       split.refract_weight = tw;
       split.refract_direction = t;
@@ -362,7 +361,7 @@ bool punctual_shadow_ray(GpuLight light, vec3 position, vec3 geometric_normal, v
     tfar = float(sqrt(dot(dl, dl)) * (1.0LF - 1e-5LF));
   }
   to_light = ls.to_light;
-  precise vec3 v = albedo * ls.irradiance * cos_theta;
+  vec3 v = albedo * ls.irradiance * cos_theta;
   value = v;
   return true;
 }
@@ -372,7 +371,7 @@ bool punctual_shadow_ray(GpuLight light, vec3 position, vec3 geometric_normal, v
 vec3 cast_shading(GpuHit hit, vec3 direction, uint light_count) {
   GpuMaterial m = materials[instances[hit.instance].material];
   ShadingPoint sp = shading_point(hit, direction, false);
-  precise vec3 sum = vec3(0.0);
+  vec3 sum = vec3(0.0);
   for (uint l = 0u; l < light_count; ++l) {
     LightSample ls = sample_light(lights[l], sp.position);
     if (dot3(ls.to_light, sp.geometric_normal) <= 0.0) continue;
@@ -380,18 +379,18 @@ vec3 cast_shading(GpuHit hit, vec3 direction, uint light_count) {
     if (cos_theta <= 0.0 || max_component(ls.irradiance) <= 0.0) continue;
     sum = sum + ls.irradiance * cos_theta;
   }
-  precise vec3 albedo = m.base_color * kInvPi;
-  precise vec3 r = m.emission + albedo * sum;
+  vec3 albedo = m.base_color * kInvPi;
+  vec3 r = m.emission + albedo * sum;
   return r;
 }
 
 // The camera ray through pixel (x, y) (trace/camera_rays.h: normalize((forward + sx·right) +
 // sy·up)).
 vec3 camera_direction(uint x, uint y) {
-  precise float sx = 2.0 * (float(x) + 0.5) * params.inv_width - 1.0;
-  precise float sy = 1.0 - 2.0 * (float(y) + 0.5) * params.inv_height;
-  precise vec3 column = params.camera_forward + sx * params.camera_right;
-  precise vec3 d = column + sy * params.camera_up;
+  float sx = 2.0 * (float(x) + 0.5) * params.inv_width - 1.0;
+  float sy = 1.0 - 2.0 * (float(y) + 0.5) * params.inv_height;
+  vec3 column = params.camera_forward + sx * params.camera_right;
+  vec3 d = column + sy * params.camera_up;
   return normalize3(d);
 }
 

@@ -22,8 +22,8 @@
 //
 // The traversal mirrors the native backend step for step (engine/accel: PreparedRay::make, the
 // conservative slab test, Woop et al.'s watertight test with its double fallback, Bvh::traverse,
-// UniformGrid's 3D-DDA, NativeTracer's two levels), with `precise` wherever the C++ build rounds
-// each operation on its own, so hits are bit-identical to native-bvh / native-grid on the same
+// UniformGrid's 3D-DDA, NativeTracer's two levels), each operation rounded on its own as in the
+// C++ build (common.glsl), so hits are bit-identical to native-bvh / native-grid on the same
 // structures. Layout: shaders/shared/gpu_scene_layout.h. One loop iteration per step (a node
 // visited, a stack entry popped with the node it leads to, a triangle tested, a grid cell
 // entered; a BVH's in two inner loops, trace_run): the budget counts them all, and the state
@@ -45,9 +45,23 @@ layout(std430, set = 0, binding = 4) readonly buffer SceneHeader {
   GpuSceneHeader scene_header;
   GpuTopEntry scene_top[];
 };
-layout(std430, set = 0, binding = 5) readonly buffer SceneNodes { BvhNode scene_nodes[]; };
+// The nodes and the traced triangles are texel buffers (GpuScene::texel_bindings): llvmpipe
+// fetches a texel for all 8 lanes of a SIMD vector with one gather, where it loads a storage
+// buffer lane by lane and word by word, each behind its own branches.
+layout(set = 0, binding = 5) uniform usamplerBuffer scene_nodes_t;  // two texels per BvhNode
 layout(std430, set = 0, binding = 6) readonly buffer SceneWords { uint scene_words[]; };
-layout(std430, set = 0, binding = 7) readonly buffer SceneTraced { uint scene_traced[]; };
+layout(set = 0, binding = 7) uniform usamplerBuffer scene_traced_t; // one texel per vertex
+
+BvhNode scene_node(uint i) {
+  uvec4 a = texelFetch(scene_nodes_t, int(2u * i));
+  uvec4 b = texelFetch(scene_nodes_t, int(2u * i + 1u));
+  BvhNode n;
+  n.bounds_min = uintBitsToFloat(a.xyz);
+  n.index = a.w;
+  n.bounds_max = uintBitsToFloat(b.xyz);
+  n.count = b.w;
+  return n;
+}
 
 // The groundwork's name for the instance count (kernels written against it keep working).
 #define instance_count scene_header.instance_count
@@ -63,7 +77,35 @@ vec3 scene_position(uint i) { return vec3(positions[3 * i], positions[3 * i + 1]
 #ifndef TRACE_TOP_CODE
 #define TRACE_TOP_CODE true
 #endif
-bool trace_static_grid() { return TRACE_GRID_CODE && scene_header.static_kind == kStaticGrid; }
+// The header's fields the walk reads at every step, read once per walk (trace_begin, trace_resume):
+// llvmpipe loads buffer data lane by lane even where every lane reads the same word, and does
+// not hoist such a load out of the walk's loops.
+struct TraceHeader {
+  uint static_kind;
+  uint static_node_base;
+  uint static_index_base;
+  uint cell_start_base;
+  uint top_node_base;
+  uint top_index_base;
+  uint top_count;
+  float box_far_scale;
+  uvec3 grid_resolution;
+};
+TraceHeader th;
+
+void trace_load_header() {
+  th.static_kind = scene_header.static_kind;
+  th.static_node_base = scene_header.static_node_base;
+  th.static_index_base = scene_header.static_index_base;
+  th.cell_start_base = scene_header.cell_start_base;
+  th.top_node_base = scene_header.top_node_base;
+  th.top_index_base = scene_header.top_index_base;
+  th.top_count = scene_header.top_count;
+  th.box_far_scale = scene_header.box_far_scale;
+  if (TRACE_GRID_CODE) th.grid_resolution = scene_header.grid.resolution;
+}
+
+bool trace_static_grid() { return TRACE_GRID_CODE && th.static_kind == kStaticGrid; }
 
 const float kTraceInf = 1.0 / 0.0;
 const uint kStaticHit = 0xFFFFFFFEu;
@@ -75,14 +117,14 @@ const uint kPhaseDone = 3u;
 // ---- The conservative slab test (accel::intersect_box) -------------------------------------------
 
 void trace_slab(float lo, float hi, float o, float inv, uint neg, inout float t0, inout float t1) {
-  precise float tn = (lo - o) * inv;
-  precise float tf = (hi - o) * inv;
+  float tn = (lo - o) * inv;
+  float tf = (hi - o) * inv;
   if (neg != 0u) {
     float s = tn;
     tn = tf;
     tf = s;
   }
-  precise float tf_scaled = tf * scene_header.box_far_scale;
+  float tf_scaled = tf * th.box_far_scale;
   // NaN (0 · inf: origin on a slab plane of a parallel ray) keeps the current bound.
   t0 = tn > t0 ? tn : t0;
   t1 = tf_scaled < t1 ? tf_scaled : t1;
@@ -100,8 +142,7 @@ bool intersect_box(PreparedRay r, vec3 lo, vec3 hi, out float t_enter) {
 // Vertex k of traced triangle `tri` (binding 7 holds the positions themselves: no index to read
 // before them).
 vec3 traced_vertex(uint tri, uint k) {
-  uint b = 9u * tri + 3u * k;
-  return uintBitsToFloat(uvec3(scene_traced[b], scene_traced[b + 1u], scene_traced[b + 2u]));
+  return uintBitsToFloat(texelFetch(scene_traced_t, int(3u * tri + k)).xyz);
 }
 
 bool trace_triangle(PreparedRay r, uint tri, out float t, out float u, out float v) {
@@ -116,8 +157,8 @@ bool trace_triangle(PreparedRay r, uint tri, out float t, out float u, out float
 
 // glm's mat4 · vec4 is (c0·x + c1·y) + (c2·z + c3·w), and mat3 · vec3 (c0·x + c1·y) + c2·z.
 PreparedRay to_object(PreparedRay world, GpuTopEntry e) {
-  precise vec3 org = (e.c0 * world.org.x + e.c1 * world.org.y) + (e.c2 * world.org.z + e.c3);
-  precise vec3 dir = (e.c0 * world.dir.x + e.c1 * world.dir.y) + e.c2 * world.dir.z;
+  vec3 org = (e.c0 * world.org.x + e.c1 * world.org.y) + (e.c2 * world.org.z + e.c3);
+  vec3 dir = (e.c0 * world.dir.x + e.c1 * world.dir.y) + e.c2 * world.dir.z;
   return prepare_ray(org, dir, world.tnear, world.tfar);
 }
 
@@ -143,13 +184,13 @@ void trace_enter_cell(ivec3 cell, vec3 s_next) {
   tr.s_next_x = s_next.x;
   tr.s_next_y = s_next.y;
   tr.s_next_z = s_next.z;
-  uvec3 res = scene_header.grid.resolution;
+  uvec3 res = th.grid_resolution;
   uint c = uint(cell.x) + res.x * (uint(cell.y) + res.y * uint(cell.z));
 #ifdef TRACE_ON_CELL
   TRACE_ON_CELL(c); // probe_grid_cells.comp records the walk
 #endif
-  tr.leaf_cursor = scene_words[scene_header.cell_start_base + c];
-  tr.leaf_end = scene_words[scene_header.cell_start_base + c + 1u];
+  tr.leaf_cursor = scene_words[th.cell_start_base + c];
+  tr.leaf_end = scene_words[th.cell_start_base + c + 1u];
 }
 
 // Clip to the grid in double and set up the DDA (Amanatides & Woo) in grid units from the entry
@@ -157,19 +198,19 @@ void trace_enter_cell(ivec3 cell, vec3 s_next) {
 // saved state resumes (the constants do not depend on tfar).
 bool trace_grid_setup(bool fresh) {
   GridHeader g = scene_header.grid;
-  precise double t0 = double(tr_world.tnear);
-  precise double t1 = double(tr_world.tfar);
+  double t0 = double(tr_world.tnear);
+  double t1 = double(tr_world.tfar);
   for (int a = 0; a < 3; ++a) {
-    precise double o = double(tr_world.org[a]);
-    precise double lo = double(g.bounds_min[a]);
-    precise double hi = double(g.bounds_max[a]);
+    double o = double(tr_world.org[a]);
+    double lo = double(g.bounds_min[a]);
+    double hi = double(g.bounds_max[a]);
     if (tr_world.dir[a] == 0.0) {
       if (o < lo || o > hi) return false;
       continue;
     }
-    precise double inv = 1.0lf / double(tr_world.dir[a]);
-    precise double tn = (lo - o) * inv;
-    precise double tf = (hi - o) * inv;
+    double inv = 1.0lf / double(tr_world.dir[a]);
+    double tn = (lo - o) * inv;
+    double tf = (hi - o) * inv;
     if (tn > tf) {
       double s = tn;
       tn = tf;
@@ -183,24 +224,24 @@ bool trace_grid_setup(bool fresh) {
   ivec3 cell;
   vec3 s_next;
   for (int a = 0; a < 3; ++a) {
-    precise double p = double(tr_world.org[a]) + t0 * double(tr_world.dir[a]);
-    precise double qa = (p - double(g.bounds_min[a])) / double(g.cell_size);
+    double p = double(tr_world.org[a]) + t0 * double(tr_world.dir[a]);
+    double qa = (p - double(g.bounds_min[a])) / double(g.cell_size);
     int last = int(g.resolution[a]) - 1;
     double fq = floor(qa);
     cell[a] = int(fq < 0.0lf ? 0.0lf : (double(last) < fq ? double(last) : fq));
     tr_q[a] = float(qa);
-    precise double scale = double(g.cell_size) / double(tr_world.dir[a]);
+    double scale = double(g.cell_size) / double(tr_world.dir[a]);
     float scale_f = tr_world.dir[a] == 0.0 ? kTraceInf : float(scale);
     tr_scale[a] = scale_f;
     if (tr_world.dir[a] > 0.0 && trace_finite(scale_f)) {
       tr_dstep[a] = 1;
       tr_out[a] = last + 1;
-      precise float s = (float(cell[a] + 1) - tr_q[a]) * scale_f;
+      float s = (float(cell[a] + 1) - tr_q[a]) * scale_f;
       s_next[a] = s;
     } else if (tr_world.dir[a] < 0.0 && trace_finite(scale_f)) {
       tr_dstep[a] = -1;
       tr_out[a] = -1;
-      precise float s = (float(cell[a]) - tr_q[a]) * scale_f;
+      float s = (float(cell[a]) - tr_q[a]) * scale_f;
       s_next[a] = s;
     } else {
       tr_dstep[a] = 0;
@@ -218,12 +259,12 @@ bool trace_grid_setup(bool fresh) {
 
 void trace_start_top() {
   tr.phase = kPhaseDone;
-  if (!TRACE_TOP_CODE || scene_header.top_count == 0u) return;
-  BvhNode root = scene_nodes[scene_header.top_node_base];
+  if (!TRACE_TOP_CODE || th.top_count == 0u) return;
+  BvhNode root = scene_node(th.top_node_base);
   float t_enter;
   if (!intersect_box(tr_world, root.bounds_min, root.bounds_max, t_enter)) return;
   tr.phase = kPhaseTop;
-  tr.node = scene_header.top_node_base;
+  tr.node = th.top_node_base;
   tr.leaf_cursor = tr.leaf_end = 0u;
   tr.entry = kNoIndex;
   tr.floor = 0u;
@@ -235,11 +276,11 @@ void trace_start_static() {
   tr.node = kNoIndex;
   tr.leaf_cursor = tr.leaf_end = 0u;
   tr.sp = 0u;
-  if (scene_header.static_kind == kStaticBvh) {
-    BvhNode root = scene_nodes[scene_header.static_node_base];
+  if (th.static_kind == kStaticBvh) {
+    BvhNode root = scene_node(th.static_node_base);
     float t_enter;
     if (intersect_box(tr_world, root.bounds_min, root.bounds_max, t_enter)) {
-      tr.node = scene_header.static_node_base;
+      tr.node = th.static_node_base;
       return;
     }
   } else if (trace_static_grid()) {
@@ -273,7 +314,7 @@ void trace_enter_instance(uint box) {
   GpuTopEntry e = scene_top[box];
   tr_local = e.identity != 0u ? tr_world : to_object(tr_world, e);
   if (!ray_valid(tr_local)) return;
-  BvhNode root = scene_nodes[e.node_base];
+  BvhNode root = scene_node(e.node_base);
   float t_enter;
   if (!intersect_box(tr_local, root.bounds_min, root.bounds_max, t_enter)) return;
   tr.entry = box;
@@ -284,18 +325,15 @@ void trace_enter_instance(uint box) {
 // One step of a BVH walk (Bvh::traverse) inside a leaf: its next entry (a triangle, or an
 // instance of the top level). Only while tr.leaf_cursor < tr.leaf_end.
 void trace_bvh_leaf_step() {
-  // Not `TRACE_TOP_CODE && ...` in the initialiser, nor this prologue in a helper function
-  // shared by both steps: either way glslang's `precise` pass never finishes on path_trace.comp
-  // (minutes, gigabytes).
   bool in_instance = false;
   if (TRACE_TOP_CODE) in_instance = tr.entry != kNoIndex;
   uint index_base;
   if (tr.phase == kPhaseStatic)
-    index_base = scene_header.static_index_base;
+    index_base = th.static_index_base;
   else if (in_instance)
     index_base = scene_top[tr.entry].index_base;
   else
-    index_base = scene_header.top_index_base;
+    index_base = th.top_index_base;
   PreparedRay r = in_instance ? tr_local : tr_world;
   uint prim = scene_words[index_base + tr.leaf_cursor];
   ++tr.leaf_cursor;
@@ -316,15 +354,15 @@ void trace_bvh_leaf_step() {
 // One step of a BVH walk between leaves: a node, or a pop. Only while tr.leaf_cursor >=
 // tr.leaf_end.
 void trace_bvh_node_step() {
-  bool in_instance = false; // as in trace_bvh_leaf_step
+  bool in_instance = false;
   if (TRACE_TOP_CODE) in_instance = tr.entry != kNoIndex;
   uint node_base;
   if (tr.phase == kPhaseStatic)
-    node_base = scene_header.static_node_base;
+    node_base = th.static_node_base;
   else if (in_instance)
     node_base = scene_top[tr.entry].node_base;
   else
-    node_base = scene_header.top_node_base;
+    node_base = th.top_node_base;
   PreparedRay r = in_instance ? tr_local : tr_world;
 
   // Pop the nearest pending subtree the ray can still reach (its tfar may have shrunk), and
@@ -347,12 +385,12 @@ void trace_bvh_node_step() {
     tr.node = e.x;
   }
 
-  BvhNode n = scene_nodes[tr.node];
+  BvhNode n = scene_node(tr.node);
   tr.node = kNoIndex;
   if (n.count == 0u) {
     uint i0 = node_base + n.index;
-    BvhNode c0 = scene_nodes[i0];
-    BvhNode c1 = scene_nodes[i0 + 1u];
+    BvhNode c0 = scene_node(i0);
+    BvhNode c1 = scene_node(i0 + 1u);
     float e0, e1;
     bool hit0 = intersect_box(r, c0.bounds_min, c0.bounds_max, e0);
     bool hit1 = intersect_box(r, c1.bounds_min, c1.bounds_max, e1);
@@ -376,14 +414,14 @@ void trace_bvh_node_step() {
 // One step of the grid's walk: a triangle of the current cell, or the move to the next cell.
 void trace_grid_step() {
   if (tr.leaf_cursor < tr.leaf_end) {
-    uint prim = scene_words[scene_header.static_index_base + tr.leaf_cursor];
+    uint prim = scene_words[th.static_index_base + tr.leaf_cursor];
     ++tr.leaf_cursor;
     float t, u, v;
     if (trace_triangle(tr_world, prim, t, u, v)) trace_record(kStaticHit, prim, prim, t, u, v);
     return;
   }
   // The walk stops once the closest hit so far lies within the cells visited.
-  precise double s_tfar_d = double(tr_world.tfar) - tr_t0;
+  double s_tfar_d = double(tr_world.tfar) - tr_t0;
   float s_tfar = float(s_tfar_d);
   vec3 s_next = vec3(tr.s_next_x, tr.s_next_y, tr.s_next_z);
   int axis = s_next.x < s_next.y ? (s_next.x < s_next.z ? 0 : 2) : (s_next.y < s_next.z ? 1 : 2);
@@ -397,7 +435,7 @@ void trace_grid_step() {
     trace_start_top();
     return;
   }
-  precise float s = (float(cell[axis] + (tr_dstep[axis] > 0 ? 1 : 0)) - tr_q[axis]) *
+  float s = (float(cell[axis] + (tr_dstep[axis] > 0 ? 1 : 0)) - tr_q[axis]) *
                     tr_scale[axis];
   s_next[axis] = s;
   trace_enter_cell(cell, s_next);
@@ -405,6 +443,7 @@ void trace_grid_step() {
 
 // Starts a walk over (tnear, tfar).
 void trace_begin(vec3 org, vec3 dir, float tnear, float tfar, bool any_hit) {
+  trace_load_header();
   tr_any = any_hit;
   tr_occluded = false;
   tr_world = prepare_ray(org, dir, tnear, tfar);
@@ -460,11 +499,11 @@ uint trace_run(inout uint budget) {
 
 // The unnormalised geometric normal (e1 × e2) as the CPU backends compute it.
 void trace_set_normal(inout GpuHit hit, vec3 p0, vec3 p1, vec3 p2) {
-  precise vec3 e1 = p1 - p0;
-  precise vec3 e2 = p2 - p0;
-  precise float nx = e1.y * e2.z - e2.y * e1.z;
-  precise float ny = e1.z * e2.x - e2.z * e1.x;
-  precise float nz = e1.x * e2.y - e2.x * e1.y;
+  vec3 e1 = p1 - p0;
+  vec3 e2 = p2 - p0;
+  float nx = e1.y * e2.z - e2.y * e1.z;
+  float ny = e1.z * e2.x - e2.z * e1.x;
+  float nz = e1.x * e2.y - e2.x * e1.y;
   hit.ng_x = nx;
   hit.ng_y = ny;
   hit.ng_z = nz;
@@ -512,6 +551,7 @@ GpuHit trace_result() {
 // After trace_begin's fields were reloaded into `tr` and the stack: the rays and the DDA's
 // constants again.
 void trace_resume(vec3 org, vec3 dir, float tnear, bool any_hit) {
+  trace_load_header();
   tr_any = any_hit;
   tr_occluded = false;
   tr_world = prepare_ray(org, dir, tnear, tr.tfar);

@@ -4,13 +4,15 @@
 // Bindings 0–3 keep the scene layer's pools as they are (positions, triangles relative to their
 // mesh, meshes, instances), so shading kernels read them directly. The traversal adds:
 //   4: GpuSceneHeader, then one GpuTopEntry per box of the top level;
-//   5: BvhNode[]: the static BVH, each distinct per-mesh BVH, the top level (last);
+//   5: BvhNode[]: the static BVH, each distinct per-mesh BVH, the top level (last); read as a
+//      uniform texel buffer of RGBA32UI, two texels a node (GpuScene::texel_bindings);
 //   6: uint[]: the static structure's index array (BVH or grid), the grid's cell_start, the static
 //      set's first triangle and slot per instance, each per-mesh BVH's index array, the top
 //      level's (last);
-//   7: uint[]: the traced triangles, their three vertices' positions each (9 float bit patterns,
-//      copied from the positions pool, so that a triangle test reads no index first): the static
-//      set in its structure's order, then each per-mesh BVH's mesh.
+//   7: uint[]: the traced triangles, their three vertices' positions each (the float bit patterns
+//      and a zero word per vertex, copied from the positions pool, so that a triangle test reads
+//      no index first): the static set in its structure's order, then each per-mesh BVH's mesh;
+//      read as a uniform texel buffer of RGBA32UI, one texel a vertex.
 // A tree's node and entry indices are relative to its own bases (the arrays are copied as the CPU
 // builders lay them out).
 #ifndef SPECULA_SHARED_GPU_SCENE_LAYOUT_H

@@ -1,5 +1,5 @@
-// Kernel tests: one piece of the device traversal dispatched alone on small inputs and compared with
-// the CPU function it mirrors.
+// Kernel tests: one piece of the device traversal dispatched alone on small inputs and compared
+// with the CPU function it mirrors.
 //   - probe_grid_cells.comp: the cells trace.glsl's 3D-DDA enters, ray by ray, against the cells
 //     UniformGrid::traverse visits (GridTraceInfo::cells): identical sequences, on seeded random
 //     rays and on the DDA's hard cases (rays along axes, through cell faces, edges and corners,
@@ -7,6 +7,8 @@
 //   - probe_triangle.comp: ray_triangle.glsl's watertight test against accel::intersect_watertight
 //     on hits at edges and vertices, shared edges, degenerate and sliver triangles, huge and tiny
 //     coordinates, rays in the triangle's plane: the same hit/miss and bit-identical t, u, v.
+//   - the build's SPIR-V (no device): every floating-point operation of every shader is decorated
+//     NoContraction (shaders/tools/spv_exact.cpp), the premise of the two above.
 #include "scene_builder.h"
 
 #include "specula/accel/grid/grid.h"
@@ -16,6 +18,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
@@ -112,6 +115,43 @@ std::vector<Ray> grid_rays(const GridHeader& g, std::uint32_t seed) {
   return rays;
 }
 
+// Result ids of float arithmetic, and the ids decorated NoContraction, in a SPIR-V module.
+struct FloatOps {
+  std::vector<std::uint32_t> results;
+  std::vector<std::uint32_t> exact;
+};
+
+FloatOps float_ops(std::span<const std::uint32_t> words) {
+  FloatOps ops;
+  for (std::size_t i = 5; i < words.size();) {
+    const std::uint32_t count = words[i] >> 16, op = words[i] & 0xFFFFu;
+    if (count == 0 || i + count > words.size()) throw Error("spirv", "truncated module");
+    // OpFNegate, OpFAdd, OpFSub, OpFMul, OpFDiv, OpFRem, OpFMod, OpVectorTimesScalar ... OpDot.
+    const bool arithmetic =
+        op == 127 || op == 129 || op == 131 || op == 133 || op == 136 || (op >= 140 && op <= 148);
+    if (arithmetic) ops.results.push_back(words[i + 2]);
+    if (op == 71 && count >= 3 && words[i + 2] == 42)
+      ops.exact.push_back(words[i + 1]); // OpDecorate
+    i += count;
+  }
+  return ops;
+}
+
+TEST(GpuKernels, EveryFloatingPointOperationOfEveryShaderRoundsOnItsOwn) {
+  std::size_t checked = 0;
+  for (const std::string_view name : shader_names()) {
+    const FloatOps ops = float_ops(shader_spirv(name));
+    for (const std::uint32_t id : ops.results) {
+      EXPECT_NE(std::find(ops.exact.begin(), ops.exact.end(), id), ops.exact.end())
+          << name << ": float operation %" << id << " may be fused (no NoContraction)";
+      ++checked;
+    }
+  }
+  // The traversal's own kernel has the watertight test's arithmetic, at least.
+  EXPECT_GE(float_ops(shader_spirv("trace_rays")).results.size(), 50u);
+  EXPECT_GT(checked, 1000u);
+}
+
 TEST(GpuKernels, TheGridDdaEntersTheSameCellsAsTheCpuDda) {
   VulkanOptions o;
   o.structure = GpuStructure::grid;
@@ -140,8 +180,12 @@ TEST(GpuKernels, TheGridDdaEntersTheSameCellsAsTheCpuDda) {
   Buffer cell_buf = ctx.make_buffer(std::size_t(n) * max_cells * 4);
   Buffer walk_buf = ctx.make_buffer(std::size_t(n) * 8);
   ray_buf.upload(rays.data(), rays.size() * sizeof(Ray));
-  const Pipeline probe = ctx.make_pipeline(
-      {shader_spirv("probe_grid_cells"), kSceneBindings + 3, 12, {}, "probe_grid_cells"});
+  const Pipeline probe = ctx.make_pipeline({shader_spirv("probe_grid_cells"),
+                                            kSceneBindings + 3,
+                                            12,
+                                            {},
+                                            "probe_grid_cells",
+                                            GpuScene::texel_bindings()});
   struct {
     std::uint32_t ray_count, budget, max_cells;
   } push{n, 2048, max_cells}; // 8 rays × 2048 steps stay under lavapipe's shared loop cap
