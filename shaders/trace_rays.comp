@@ -8,6 +8,8 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 #include "include/common.glsl"
+#extension GL_KHR_shader_subgroup_arithmetic : require
+#extension GL_KHR_shader_subgroup_basic : require
 
 // Counting each ray's triangle tests (the grid resolution sweep's intersection work) costs a
 // register and an atomic per ray, so only a pipeline specialised for it does.
@@ -33,7 +35,7 @@ layout(push_constant) uniform Push {
   uint stack_stride; // saved stack entries per ray
 } pc;
 
-layout(std430, set = 0, binding = 8) readonly buffer Rays { GpuRay rays[]; };
+layout(set = 0, binding = 8) uniform usamplerBuffer rays_t; // two RGBA32UI texels per GpuRay
 layout(std430, set = 0, binding = 9) writeonly buffer Hits { GpuHit hits[]; };
 layout(std430, set = 0, binding = 10) writeonly buffer Occluded { uint occluded_words[]; };
 layout(std430, set = 0, binding = 11) readonly buffer StatusIn { uint status_in[]; };
@@ -45,7 +47,13 @@ layout(std430, set = 0, binding = 15) buffer Counters { TraceCounters counters; 
 void main() {
   uint i = gl_GlobalInvocationID.x;
   if (i >= pc.ray_count) return;
-  GpuRay ray = rays[i];
+  uvec4 ray_a = texelFetch(rays_t, int(2u * i));
+  uvec4 ray_b = texelFetch(rays_t, int(2u * i + 1u));
+  GpuRay ray;
+  ray.origin = uintBitsToFloat(ray_a.xyz);
+  ray.tnear = uintBitsToFloat(ray_a.w);
+  ray.direction = uintBitsToFloat(ray_b.xyz);
+  ray.tfar = uintBitsToFloat(ray_b.w);
   bool any_hit = pc.any_hit != 0u;
 
   // ---- Start or resume ---------------------------------------------------------------------------
@@ -71,8 +79,14 @@ void main() {
   // ---- Walk --------------------------------------------------------------------------------------
   uint budget = pc.budget;
   uint status = trace_run(budget);
-  atomicAdd(counters.steps, pc.budget - budget);
-  if (kCountTests) atomicAdd(counters.tests, g_tests);
+  // One atomic per subgroup: on llvmpipe each lane's atomic is a locked add on the one cache line
+  // the worker threads share.
+  uint steps = subgroupAdd(pc.budget - budget);
+  uint tests = kCountTests ? subgroupAdd(g_tests) : 0u;
+  if (subgroupElect()) {
+    atomicAdd(counters.steps, steps);
+    if (kCountTests) atomicAdd(counters.tests, tests);
+  }
 
   // ---- Exits -------------------------------------------------------------------------------------
   if (status == kRayPending) return; // cut off by the driver: left pending, counted by the host
@@ -89,6 +103,5 @@ void main() {
     occluded_words[i] = tr_occluded ? 1u : 0u;
   else
     hits[i] = trace_result();
-  atomicAdd(counters.rays, 1u);
   status_out[i] = kRayDone;
 }

@@ -37,6 +37,12 @@ template <class T> void append(std::vector<T>& to, std::span<const T> from) {
   to.insert(to.end(), from.begin(), from.end());
 }
 
+/// BVH nodes in binding 5's layout.
+void append_nodes(std::vector<GpuNode>& to, std::span<const BvhNode> from) {
+  for (const BvhNode& n : from)
+    to.push_back({n.bounds_min, n.bounds_max.x, n.bounds_max.y, n.bounds_max.z, n.index, n.count});
+}
+
 /// Mesh `mesh`'s triangles as the traversal reads them: each vertex's position (its float bits)
 /// and a zero word, one RGBA32UI texel (binding 7 is a texel buffer), three per triangle.
 void append_triangles(std::vector<std::uint32_t>& to, const SceneTables& tables, std::uint32_t mesh) {
@@ -124,7 +130,7 @@ void GpuScene::flatten(const SceneTables& tables) {
     header_.static_kind = kStaticBvh;
     header_.static_node_base = size32(nodes_.size());
     header_.static_index_base = size32(words_.size());
-    append(nodes_, bvh.nodes());
+    append_nodes(nodes_, bvh.nodes());
     append(words_, bvh.indices());
     static_depth = bvh.stats().max_depth;
   } else if (native_.has_static() && !native_.grid().empty()) {
@@ -150,7 +156,7 @@ void GpuScene::flatten(const SceneTables& tables) {
     e.blas->expand_all();
     blas_[e.blas] = {size32(nodes_.size()), size32(words_.size()),
                      size32(traced_.size() / kTracedWords)};
-    append(nodes_, e.blas->nodes());
+    append_nodes(nodes_, e.blas->nodes());
     append(words_, e.blas->indices());
     append_triangles(traced_, tables, tables.instances[e.slot].mesh);
     blas_depth = std::max(blas_depth, e.blas->stats().max_depth);
@@ -162,7 +168,7 @@ void GpuScene::flatten(const SceneTables& tables) {
   if (!top_.entries.empty()) {
     header_.top_node_base = size32(nodes_.size());
     header_.top_index_base = size32(words_.size());
-    append<BvhNode>(nodes_, top_.nodes);
+    append<GpuNode>(nodes_, top_.nodes);
     append<std::uint32_t>(words_, top_.indices);
   }
   const std::uint32_t top_depth = top_.entries.empty() ? 0 : native_.top_level().stats().max_depth;
@@ -195,7 +201,7 @@ GpuScene::TopLayout GpuScene::flatten_top() const {
   }
   if (count > 0) {
     const accel::Bvh& bvh = native_.top_level();
-    top.nodes.assign(bvh.nodes().begin(), bvh.nodes().end());
+    append_nodes(top.nodes, bvh.nodes());
     top.indices.assign(bvh.indices().begin(), bvh.indices().end());
   }
   return top;
@@ -235,8 +241,8 @@ bool GpuScene::upload_top() {
   top_ = std::move(top);
   write(kHeader, top_.entries.data(), top_.entries.size() * sizeof(GpuTopEntry),
         sizeof(GpuSceneHeader));
-  write(kNodes, top_.nodes.data(), top_.nodes.size() * sizeof(BvhNode),
-        std::size_t(header_.top_node_base) * sizeof(BvhNode));
+  write(kNodes, top_.nodes.data(), top_.nodes.size() * sizeof(GpuNode),
+        std::size_t(header_.top_node_base) * sizeof(GpuNode));
   write(kWords, top_.indices.data(), top_.indices.size() * sizeof(std::uint32_t),
         std::size_t(header_.top_index_base) * sizeof(std::uint32_t));
   return true;

@@ -76,7 +76,7 @@ private:
   /// The top level's part of the arrays (rewritten alone when only instances moved).
   struct TopLayout {
     std::vector<GpuTopEntry> entries;
-    std::vector<BvhNode> nodes;
+    std::vector<GpuNode> nodes;
     std::vector<std::uint32_t> indices;
   };
   void flatten(const SceneTables& tables);
@@ -102,7 +102,7 @@ private:
   std::uint32_t stack_depth_ = 0;
   // The flattened arrays as last uploaded (bindings 4–7) and where the top level lies in them.
   GpuSceneHeader header_{};
-  std::vector<BvhNode> nodes_;
+  std::vector<GpuNode> nodes_;
   std::vector<std::uint32_t> words_;
   std::vector<std::uint32_t> traced_;
   struct BlasPlace {

@@ -88,6 +88,7 @@ VulkanTracer::VulkanTracer(std::uint32_t packet_width, VulkanOptions options)
                          options_.structure == GpuStructure::grid ? 1u : 0u, 1u};
   desc.debug_name = "trace_rays";
   desc.texel_buffers = GpuScene::texel_bindings();
+  desc.texel_buffers.push_back({kSceneBindings, VK_FORMAT_R32G32B32A32_UINT}); // the rays
   kernels_->trace = context_->make_pipeline(desc);
   desc.specialization[2] = 0u;
   kernels_->trace_static = context_->make_pipeline(desc);

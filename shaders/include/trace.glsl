@@ -48,17 +48,18 @@ layout(std430, set = 0, binding = 4) readonly buffer SceneHeader {
 // The nodes and the traced triangles are texel buffers (GpuScene::texel_bindings): llvmpipe
 // fetches a texel for all 8 lanes of a SIMD vector with one gather, where it loads a storage
 // buffer lane by lane and word by word, each behind its own branches.
-layout(set = 0, binding = 5) uniform usamplerBuffer scene_nodes_t;  // two texels per BvhNode
+layout(set = 0, binding = 5) uniform usamplerBuffer scene_nodes_t;  // two texels per GpuNode
 layout(std430, set = 0, binding = 6) readonly buffer SceneWords { uint scene_words[]; };
 layout(set = 0, binding = 7) uniform usamplerBuffer scene_traced_t; // one texel per vertex
 
+// Node i (a step that uses only its index and count fetches one texel: the other is dead code).
 BvhNode scene_node(uint i) {
   uvec4 a = texelFetch(scene_nodes_t, int(2u * i));
   uvec4 b = texelFetch(scene_nodes_t, int(2u * i + 1u));
   BvhNode n;
   n.bounds_min = uintBitsToFloat(a.xyz);
-  n.index = a.w;
-  n.bounds_max = uintBitsToFloat(b.xyz);
+  n.bounds_max = uintBitsToFloat(uvec3(a.w, b.xy));
+  n.index = b.z;
   n.count = b.w;
   return n;
 }
@@ -473,7 +474,91 @@ bool trace_bvh_walk() {
   return tr.phase == kPhaseTop || (tr.phase == kPhaseStatic && !trace_static_grid());
 }
 
+// trace_run for a scene whose static set is a BVH and that has no top level, in a kernel with
+// the grid's and the top level's code compiled out: the same steps in the same order, counted
+// the same, with the walk's state in locals and without the phases' bookkeeping (llvmpipe pays
+// for every instruction of a loop body at every step, taken or not).
+uint trace_run_static_bvh(inout uint budget) {
+  if (tr.phase == kPhaseDone) return kRayDone;
+  if (budget == 0u) return kRayBudget;
+  if (tr.phase == kPhaseStart) {
+    --budget;
+    trace_start_static(); // the root's box: kPhaseStatic, or kPhaseDone (no top level)
+  }
+  bool done = tr.phase == kPhaseDone;
+  uint node = tr.node, cursor = tr.leaf_cursor, end = tr.leaf_end, sp = tr.sp;
+  uint node_base = th.static_node_base, index_base = th.static_index_base;
+  PreparedRay r = tr_world;
+  for (;;) {
+    if (done || budget == 0u) {
+      tr.node = node;
+      tr.leaf_cursor = cursor;
+      tr.leaf_end = end;
+      tr.sp = sp;
+      tr_world.tfar = r.tfar;
+      if (done) tr.phase = kPhaseDone;
+      return done ? kRayDone : kRayBudget;
+    }
+    // Nodes and pops up to the next leaf (trace_bvh_node_step).
+    while (budget != 0u && cursor >= end && !done) {
+      --budget;
+      if (node == kNoIndex) {
+        if (sp == 0u) {
+          done = true; // trace_start_top: no top level
+          continue;
+        }
+        uvec2 e = tr_stack[--sp];
+        if (!(uintBitsToFloat(e.y) <= r.tfar)) continue;
+        node = e.x;
+      }
+      BvhNode n = scene_node(node);
+      node = kNoIndex;
+      if (n.count == 0u) {
+        uint i0 = node_base + n.index;
+        BvhNode c0 = scene_node(i0);
+        BvhNode c1 = scene_node(i0 + 1u);
+        float e0, e1;
+        bool hit0 = intersect_box(r, c0.bounds_min, c0.bounds_max, e0);
+        bool hit1 = intersect_box(r, c1.bounds_min, c1.bounds_max, e1);
+        if (hit0 && hit1) {
+          bool second = e1 < e0;
+          tr_stack[sp++] = second ? uvec2(i0, floatBitsToUint(e0)) : uvec2(i0 + 1u, floatBitsToUint(e1));
+          node = second ? i0 + 1u : i0;
+        } else if (hit0 || hit1) {
+          node = hit0 ? i0 : i0 + 1u;
+        }
+      } else {
+        cursor = n.index;
+        end = n.index + n.count;
+      }
+    }
+    // That leaf's triangles (trace_bvh_leaf_step).
+    while (budget != 0u && cursor < end && !done) {
+      --budget;
+      uint prim = scene_words[index_base + cursor];
+      ++cursor;
+      float t, u, v;
+      if (trace_triangle(r, prim, t, u, v)) {
+        if (tr_any) {
+          tr_occluded = true;
+          done = true;
+        } else {
+          tr.hit_t = t;
+          tr.hit_u = u;
+          tr.hit_v = v;
+          tr.hit_instance = kStaticHit;
+          tr.hit_tri = prim;
+          tr.hit_prim = prim;
+          r.tfar = t;
+        }
+      }
+    }
+  }
+  return kRayPending; // the driver cut the loop off
+}
+
 uint trace_run(inout uint budget) {
+  if (!TRACE_GRID_CODE && !TRACE_TOP_CODE) return trace_run_static_bvh(budget);
   for (;;) {
     if (tr.phase == kPhaseDone) return kRayDone;
     if (budget == 0u) return kRayBudget;

@@ -60,6 +60,17 @@ struct GpuSceneHeader {
   GridHeader grid;          ///< the static grid (kStaticGrid)
 };
 
+/// A BvhNode as binding 5 holds it: the same fields, the link (index, count) in the second of its
+/// two RGBA32UI texels, so that a walk step that needs only the link fetches one texel.
+struct GpuNode {
+  vec3 bounds_min;
+  float max_x;
+  float max_y;
+  float max_z;
+  uint index; ///< BvhNode::index
+  uint count; ///< BvhNode::count
+};
+
 /// One box of the top level: the instance it holds and where its per-mesh BVH lies.
 /// object_from_world's columns c0..c3 (as glm stores them; the fourth row is 0 0 0 1).
 struct GpuTopEntry {
@@ -112,6 +123,7 @@ static_assert(sizeof(GpuTopEntry) == 80 && offsetof(GpuTopEntry, c1) == 16 &&
               offsetof(GpuTopEntry, c3) == 48 && offsetof(GpuTopEntry, identity) == 64);
 static_assert(sizeof(GpuTraceState) == 96 && offsetof(GpuTraceState, cell_x) == 32 &&
               offsetof(GpuTraceState, s_next_x) == 48 && offsetof(GpuTraceState, hit_u) == 64);
+static_assert(sizeof(GpuNode) == 32 && offsetof(GpuNode, index) == 24);
 } // namespace specula::gpu
 #endif
 

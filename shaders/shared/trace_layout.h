@@ -54,7 +54,6 @@ SPECULA_CONST uint kRayBudget = 2u;
 
 /// Per-dispatch counters (atomics).
 struct TraceCounters {
-  uint rays;      ///< rays the kernel finished
   uint budget;    ///< rays that used up their budget (resumed)
   uint cut;       ///< rays found still pending after a dispatch: the driver cut a loop (must be 0)
   uint steps;     ///< traversal steps (node or cell visits), summed
@@ -66,7 +65,7 @@ static_assert(sizeof(GpuRay) == 32 && offsetof(GpuRay, direction) == 16 &&
               offsetof(GpuRay, tfar) == 28);
 static_assert(sizeof(GpuHit) == 32 && offsetof(GpuHit, instance) == 12 &&
               offsetof(GpuHit, ng_x) == 20);
-static_assert(sizeof(TraceCounters) == 20);
+static_assert(sizeof(TraceCounters) == 16);
 } // namespace specula::gpu
 #endif
 

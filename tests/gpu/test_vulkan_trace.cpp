@@ -205,6 +205,38 @@ TEST_P(VulkanTrace, AStaticOnlySceneTracedWithoutTheTopLevelsCodeHitsBitIdentica
   EXPECT_EQ(gpu->counters().cut, 0u);
 }
 
+TEST_P(VulkanTrace, AStaticOnlySceneOnATinyBudgetResumesEveryRayAndChangesNoHit) {
+  // The static set's own walk (trace_run_static_bvh for a BVH) saved and resumed every 3 steps.
+  VulkanOptions o = options();
+  o.traversal_budget = 3;
+  SPECULA_NEED_VULKAN(gpu, o);
+  ecs::Registry reg;
+  add(reg, bunny(), test::at(vec3(0.0f)), Kinematics::Type::Static);
+  update_world_transforms(reg, 1);
+  SceneLayer layer;
+  layer.sync(reg);
+  NativeTracer native(8, native_like(o));
+  gpu->update(layer);
+  native.update(layer);
+  EXPECT_FALSE(gpu->scene().has_top_level());
+  Aabb b;
+  for (const vec3& p : bunny()->positions) b.grow(p);
+  const std::vector<Ray> rays =
+      random_rays(2000, b.center(), 0.5f * b.extent(), 2.0f * glm::length(b.extent()), 17);
+  const Agreement a = compare(*gpu, native, rays);
+  const GpuTraceCounters c = gpu->counters();
+  EXPECT_GT(a.hits, a.rays / 5);
+  EXPECT_EQ(a.identical, a.rays) << a.first_difference;
+  EXPECT_GT(c.resumed, rays.size());
+  EXPECT_EQ(c.cut, 0u);
+  std::vector<std::uint8_t> oa(rays.size()), ob(rays.size());
+  gpu->occluded(rays, oa);
+  native.occluded(rays, ob);
+  EXPECT_EQ(oa, ob);
+  EXPECT_GT(gpu->counters().resumed, 0u);
+  EXPECT_EQ(gpu->counters().cut, 0u);
+}
+
 TEST_P(VulkanTrace, ATinyBudgetResumesEveryRayAndChangesNoHit) {
   VulkanOptions o = options();
   o.traversal_budget = 3;
