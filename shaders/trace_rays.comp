@@ -79,12 +79,11 @@ void main() {
   // ---- Walk --------------------------------------------------------------------------------------
   uint budget = pc.budget;
   uint status = trace_run(budget);
-  // One atomic per subgroup: on llvmpipe each lane's atomic is a locked add on the one cache line
-  // the worker threads share.
+  // One atomic per subgroup, into its workgroup's step slot (TraceCounters).
   uint steps = subgroupAdd(pc.budget - budget);
   uint tests = kCountTests ? subgroupAdd(g_tests) : 0u;
   if (subgroupElect()) {
-    atomicAdd(counters.steps, steps);
+    atomicAdd(counters.steps[(gl_WorkGroupID.x % kStepSlots) * kStepSlotStride], steps);
     if (kCountTests) atomicAdd(counters.tests, tests);
   }
 

@@ -151,7 +151,7 @@ void VulkanTracer::trace_locked(std::span<const Ray> rays, Hit* hits,
       std::memcpy(&c, k.counters.mapped(), sizeof c);
       total.resumed += c.budget;
       total.cut += c.cut;
-      total.steps += c.steps;
+      for (std::uint32_t s = 0; s < kStepSlots; ++s) total.steps += c.steps[s * kStepSlotStride];
       total.tests += c.tests;
       in = out;
       if (c.budget == 0) break;

@@ -52,12 +52,20 @@ SPECULA_CONST uint kRayDone = 1u;
 /// The ray used up its traversal budget in this dispatch; it is resumed in a later one.
 SPECULA_CONST uint kRayBudget = 2u;
 
+/// trace_rays.comp sums its steps into kStepSlots counters, each on a 64-byte line of its own
+/// (kStepSlotStride words apart), by workgroup: on llvmpipe an atomic is a locked add, and one
+/// counter for all would bounce its cache line between the worker threads at every subgroup.
+SPECULA_CONST uint kStepSlots = 32u;
+SPECULA_CONST uint kStepSlotStride = 16u;
+
 /// Per-dispatch counters (atomics).
 struct TraceCounters {
   uint budget;    ///< rays that used up their budget (resumed)
   uint cut;       ///< rays found still pending after a dispatch: the driver cut a loop (must be 0)
-  uint steps;     ///< traversal steps (node or cell visits), summed
   uint tests;     ///< ray/triangle tests, summed (trace_rays.comp's kCountTests; 0 without it)
+  uint _pad0;
+  /// Traversal steps (node or cell visits): the sum of steps[k · kStepSlotStride], k < kStepSlots.
+  uint steps[kStepSlots * kStepSlotStride];
 };
 
 #ifdef __cplusplus
@@ -65,7 +73,7 @@ static_assert(sizeof(GpuRay) == 32 && offsetof(GpuRay, direction) == 16 &&
               offsetof(GpuRay, tfar) == 28);
 static_assert(sizeof(GpuHit) == 32 && offsetof(GpuHit, instance) == 12 &&
               offsetof(GpuHit, ng_x) == 20);
-static_assert(sizeof(TraceCounters) == 16);
+static_assert(sizeof(TraceCounters) == 16 + 4 * kStepSlots * kStepSlotStride);
 } // namespace specula::gpu
 #endif
 
