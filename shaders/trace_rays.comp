@@ -12,7 +12,7 @@
 #extension GL_KHR_shader_subgroup_basic : require
 
 // Counting each ray's triangle tests (the grid resolution sweep's intersection work) costs a
-// register and an atomic per ray, so only a pipeline specialised for it does.
+// register per ray and a sum per subgroup, so only a pipeline specialised for it does.
 layout(constant_id = 0) const bool kCountTests = false;
 uint g_tests = 0u;
 #define TRACE_ON_TRIANGLE() if (kCountTests) ++g_tests

@@ -352,6 +352,25 @@ void trace_bvh_leaf_step() {
   }
 }
 
+// Node i0's two children (the BvhNode pair at index, index + 1) against the ray, as
+// Bvh::traverse takes them: the nearer is the next node (kNoIndex when the ray misses both), the
+// farther pushed with its entry distance.
+void trace_children(PreparedRay r, uint i0, out uint node, inout uint sp) {
+  BvhNode c0 = scene_node(i0);
+  BvhNode c1 = scene_node(i0 + 1u);
+  float e0, e1;
+  bool hit0 = intersect_box(r, c0.bounds_min, c0.bounds_max, e0);
+  bool hit1 = intersect_box(r, c1.bounds_min, c1.bounds_max, e1);
+  node = kNoIndex;
+  if (hit0 && hit1) {
+    bool second = e1 < e0;
+    tr_stack[sp++] = second ? uvec2(i0, floatBitsToUint(e0)) : uvec2(i0 + 1u, floatBitsToUint(e1));
+    node = second ? i0 + 1u : i0;
+  } else if (hit0 || hit1) {
+    node = hit0 ? i0 : i0 + 1u;
+  }
+}
+
 // One step of a BVH walk between leaves: a node, or a pop. Only while tr.leaf_cursor >=
 // tr.leaf_end.
 void trace_bvh_node_step() {
@@ -389,23 +408,7 @@ void trace_bvh_node_step() {
   BvhNode n = scene_node(tr.node);
   tr.node = kNoIndex;
   if (n.count == 0u) {
-    uint i0 = node_base + n.index;
-    BvhNode c0 = scene_node(i0);
-    BvhNode c1 = scene_node(i0 + 1u);
-    float e0, e1;
-    bool hit0 = intersect_box(r, c0.bounds_min, c0.bounds_max, e0);
-    bool hit1 = intersect_box(r, c1.bounds_min, c1.bounds_max, e1);
-    if (hit0 && hit1) {
-      if (e1 < e0) {
-        tr_stack[tr.sp++] = uvec2(i0, floatBitsToUint(e0));
-        tr.node = i0 + 1u;
-      } else {
-        tr_stack[tr.sp++] = uvec2(i0 + 1u, floatBitsToUint(e1));
-        tr.node = i0;
-      }
-    } else if (hit0 || hit1) {
-      tr.node = hit0 ? i0 : i0 + 1u;
-    }
+    trace_children(r, node_base + n.index, tr.node, tr.sp);
   } else {
     tr.leaf_cursor = n.index;
     tr.leaf_end = n.index + n.count;
@@ -514,19 +517,7 @@ uint trace_run_static_bvh(inout uint budget) {
       BvhNode n = scene_node(node);
       node = kNoIndex;
       if (n.count == 0u) {
-        uint i0 = node_base + n.index;
-        BvhNode c0 = scene_node(i0);
-        BvhNode c1 = scene_node(i0 + 1u);
-        float e0, e1;
-        bool hit0 = intersect_box(r, c0.bounds_min, c0.bounds_max, e0);
-        bool hit1 = intersect_box(r, c1.bounds_min, c1.bounds_max, e1);
-        if (hit0 && hit1) {
-          bool second = e1 < e0;
-          tr_stack[sp++] = second ? uvec2(i0, floatBitsToUint(e0)) : uvec2(i0 + 1u, floatBitsToUint(e1));
-          node = second ? i0 + 1u : i0;
-        } else if (hit0 || hit1) {
-          node = hit0 ? i0 : i0 + 1u;
-        }
+        trace_children(r, node_base + n.index, node, sp);
       } else {
         cursor = n.index;
         end = n.index + n.count;
