@@ -515,6 +515,7 @@ void Buffer::release() noexcept {
 }
 
 VkBufferView Buffer::view(VkFormat format) const {
+  const std::lock_guard lock(context_->views_mutex_);
   for (const auto& [f, view] : views_)
     if (f == format) return view;
   VkBufferViewCreateInfo ci{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};

@@ -101,7 +101,7 @@ public:
     download(data.data(), data.size_bytes(), offset);
   }
   /// The whole buffer as texels of `format` (a TexelBinding's view), made on first use and kept
-  /// with the buffer.
+  /// with the buffer. Thread-safe.
   [[nodiscard]] VkBufferView view(VkFormat format) const;
 
 private:
@@ -386,6 +386,9 @@ private:
   bool validation_ = false;
   bool lost_ = false;
   std::mutex queue_mutex_;
+  /// Guards every Buffer's cache of views (Buffer::view runs wherever a dispatch is recorded).
+  std::mutex views_mutex_;
+  friend class Buffer;
   /// Set 0 of p's storage buffers visible to `stages`; push constants to `push_stages`.
   static void make_layouts(VkDevice device, Pipeline& p, VkShaderStageFlags stages,
                            VkShaderStageFlags push_stages);
