@@ -529,6 +529,8 @@ uint trace_run_static_bvh(inout uint budget) {
       uint prim = scene_words[index_base + cursor];
       ++cursor;
       float t, u, v;
+      // trace_record's work, on the walk's locals: calling it (it also writes tr_local.tfar and
+      // tr.phase, masked, at every test) cost 2-3% of device time on lavapipe.
       if (trace_triangle(r, prim, t, u, v)) {
         if (tr_any) {
           tr_occluded = true;
