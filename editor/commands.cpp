@@ -103,6 +103,7 @@ cache::CacheSettings parse_cache(const RenderOptions& o) {
   }
   c.fill_budget = o.cache_fill;
   c.prefill = o.cache_prefill;
+  c.fill_ahead = o.cache_fill_ahead;
   if (o.cache_samples < 1 || o.cache_samples > 65536)
     throw Error("--cache-samples", "must lie in 1 … 65536, got " + std::to_string(o.cache_samples));
   c.path_samples = o.cache_samples;
@@ -263,6 +264,10 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   if (cache_settings.prefill && *mode == TraceMode::Path)
     throw Error("--cache-prefill", "path mode's cubes average path samples; prefill traces "
                                    "Whitted radiance from the centre and cannot fill them");
+  if (cache_settings.fill_ahead != 0 && *mode == TraceMode::Path)
+    throw Error("--cache-fill-ahead", "path mode's cubes average path samples; fill ahead "
+                                      "traces Whitted radiance from the centre and cannot fill "
+                                      "them");
   if (options.spp < 1 || options.spp > kMaxSpp)
     throw Error("--spp", "expected a whole number in [1 - " + std::to_string(kMaxSpp) + "], got " +
                              std::to_string(options.spp));
@@ -374,6 +379,7 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   stats.settings.cache_tau_deg = cache_settings.tau_deg;
   stats.settings.cache_fill_budget = cache_settings.fill_budget;
   stats.settings.cache_prefill = cache_settings.prefill;
+  stats.settings.cache_fill_ahead = cache_settings.fill_ahead;
   stats.settings.cache_samples = cache_settings.path_samples;
   stats.settings.cache_refresh = cache_settings.path_refresh;
   stats.settings.max_error_db = cache_settings.max_error_db;

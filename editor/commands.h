@@ -50,6 +50,7 @@ struct RenderOptions {
   std::uint32_t cache_resolution = 0; ///< 0: each entity's own (or the one --cache gave)
   std::uint32_t cache_fill = 0;       ///< texels written per frame, 0: no limit
   bool cache_prefill = false;
+  std::uint32_t cache_fill_ahead = 0; ///< texels traced from the centre ahead of the view
   std::uint32_t cache_samples = 4; ///< path mode: sample weight a texel needs before it serves
   std::uint32_t cache_refresh = 2; ///< path mode: lookups a serving texel traces a frame
   double max_error_db = 40.0;

@@ -242,6 +242,12 @@ int main(int argc, char** argv) {
   render_cmd->add_flag("--cache-prefill", render.cache_prefill,
                        "Trace every outdated texel from its cube's centre before each frame");
   render_cmd
+      ->add_option("--cache-fill-ahead", render.cache_fill_ahead,
+                   "Before each frame, trace up to this many outdated texels from their cube's "
+                   "centre, nearest the directions the last frame looked up first (0: off)")
+      ->transform(whole_number(0, UINT32_MAX))
+      ->capture_default_str();
+  render_cmd
       ->add_option("--max-error-db", render.max_error_db,
                    "--cache auto: the PSNR against uncached tracing it must keep")
       ->check(number())

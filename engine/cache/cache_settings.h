@@ -29,6 +29,9 @@ struct CacheSettings {
   std::uint32_t resolution = 0;   ///< face resolution for every cube (0: each entity's own)
   std::uint32_t fill_budget = 0;  ///< at most this many texels written per frame (0: no limit)
   bool prefill = false;           ///< trace every outdated texel from the cube centre each frame
+  /// Before each frame, trace up to this many outdated texels from the cube centre, those nearest
+  /// (in tiles) to the directions the frame before looked up first (0: off). Whitted frames only.
+  std::uint32_t fill_ahead = 0;
   double max_error_db = 40.0;     ///< Auto: the PSNR against uncached tracing it must keep
   std::uint32_t verify_every = 32; ///< Auto: one accepted lookup in this many is traced to check
   /// Path mode: the (moving-average) sample weight a texel needs before it serves lookups.

@@ -14,12 +14,13 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <numbers>
 #include <limits>
 #include <map>
+#include <numbers>
 
 namespace specula::cache {
 
@@ -118,6 +119,20 @@ std::uint32_t mix_hash(std::uint64_t x) {
   return std::uint32_t(x);
 }
 
+/// Fill ahead's tiles (RayCacheStore::fill_ahead): `side`² a face, each `size`² texels.
+struct TileGrid {
+  std::uint32_t side, size;
+  explicit TileGrid(std::uint32_t resolution)
+      : side(std::min(resolution, RayCacheStore::kFillAheadTiles)),
+        size(std::max(1u, resolution / side)) {}
+  [[nodiscard]] std::uint32_t count() const { return kFaceCount * side * side; }
+  [[nodiscard]] std::uint32_t of_texel(std::uint32_t texel, std::uint32_t resolution) const {
+    const std::uint32_t per_face = resolution * resolution;
+    const std::uint32_t face = texel / per_face, within = texel % per_face;
+    return (face * side + (within / resolution) / size) * side + (within % resolution) / size;
+  }
+};
+
 /// The ladder auto walks down when the error bound is not kept: fastest first.
 struct Rung {
   LookupMode mode;
@@ -178,6 +193,9 @@ struct RayCacheStore::Cube {
   float radius = 0.0f; ///< the owner's bounding sphere: where leaving rays start
   std::vector<Texel> texels;
   std::vector<ProbeTexel> probe; ///< path mode (sized on its first sample)
+  /// Fill ahead: a bit per tile (TileGrid) that lookups addressed since the last fill_ahead,
+  /// set from the lookup threads through atomic_ref.
+  std::vector<std::uint32_t> addressed;
   std::uint64_t generation = next_generation();
   std::vector<std::uint32_t> edges; ///< by entity index: valid texels whose first hit it is
   std::uint64_t valid = 0;
@@ -382,6 +400,7 @@ InvalidationStats RayCacheStore::invalidate(ecs::Registry& registry, const Scene
       cube->owner = e;
       cube->resolution = resolution;
       cube->texels.assign(std::size_t(kFaceCount) * resolution * resolution, Texel{});
+      cube->addressed.assign((TileGrid(resolution).count() + 31) / 32, 0u);
       if (settings_.policy == CachePolicy::Auto) {
         start_auto(*cube);
       } else {
@@ -580,6 +599,59 @@ InvalidationStats RayCacheStore::invalidate(ecs::Registry& registry, const Scene
 // ---------------------------------------------------------------------------------------------
 // Prefill
 
+namespace {
+
+/// The point of the sphere (centre c, radius r) that reflects direction s towards the eye: its
+/// normal bisects s and the direction to the eye (a few fixed-point steps, from the direction to
+/// the eye seen from the centre). The centre when the eye is inside or s points back at the eye.
+vec3 reflection_point(const vec3& c, float r, const vec3& s, const vec3& eye) {
+  const vec3 to_eye = eye - c;
+  if (glm::dot(to_eye, to_eye) <= r * r) return c;
+  vec3 v = glm::normalize(to_eye);
+  vec3 p = c;
+  for (int k = 0; k < 4; ++k) {
+    const vec3 h = s + v;
+    const float len = glm::length(h);
+    if (!(len > 1e-4f)) return c;
+    p = c + (r / len) * h;
+    v = glm::normalize(eye - p);
+  }
+  return p;
+}
+
+} // namespace
+
+std::uint64_t RayCacheStore::trace_texels(Cube& c, std::span<const std::uint32_t> todo,
+                                          const Tracer& tracer, const SceneLayer& layer,
+                                          const TraceSettings& trace,
+                                          const std::optional<vec3>& eye) {
+  if (todo.empty()) return 0;
+  std::vector<Ray> rays(todo.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size(), 1024),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t k = range.begin(); k < range.end(); ++k) {
+                        const vec3 s = texel_direction(todo[k], c.resolution);
+                        rays[k] =
+                            Ray{eye ? reflection_point(c.centre, c.radius, s, *eye) : c.centre,
+                                0.0f, s, std::numeric_limits<float>::infinity()};
+                      }
+                    });
+  std::vector<RadianceSample> out(todo.size());
+  (void)trace_radiance(tracer, layer, trace, rays, 1, c.instance, out);
+  for (std::size_t k = 0; k < todo.size(); ++k) {
+    // Texels keep the distance from the centre to what the ray hit (the tau and march tests).
+    const float distance =
+        std::isinf(out[k].t)
+            ? out[k].t
+            : glm::length(rays[k].origin + rays[k].direction * out[k].t - c.centre);
+    Texel t = make_texel(out[k].radiance, distance, out[k].entity, out[k].seen, out[k].rays);
+    t.state |= kTexelPrefilled;
+    c.store(todo[k], t);
+  }
+  pending_prefilled_ += todo.size();
+  return todo.size();
+}
+
 std::uint64_t RayCacheStore::prefill(const Tracer& tracer, const SceneLayer& layer,
                                      const TraceSettings& trace) {
   std::uint64_t filled = 0;
@@ -591,21 +663,99 @@ std::uint64_t RayCacheStore::prefill(const Tracer& tracer, const SceneLayer& lay
     std::vector<std::uint32_t> todo;
     for (std::uint32_t i = 0; i < c.texels.size(); ++i)
       if (!c.texels[i].valid()) todo.push_back(i);
-    if (todo.empty()) continue;
-    std::vector<Ray> rays(todo.size());
-    for (std::size_t k = 0; k < todo.size(); ++k)
-      rays[k] = Ray{c.centre, 0.0f, texel_direction(todo[k], c.resolution),
-                    std::numeric_limits<float>::infinity()};
-    std::vector<RadianceSample> out(todo.size());
-    (void)trace_radiance(tracer, layer, trace, rays, 1, c.instance, out);
-    for (std::size_t k = 0; k < todo.size(); ++k) {
-      Texel t = make_texel(out[k].radiance, out[k].t, out[k].entity, out[k].seen, out[k].rays);
-      t.state |= kTexelPrefilled;
-      c.store(todo[k], t);
-    }
-    filled += todo.size();
+    filled += trace_texels(c, todo, tracer, layer, trace, std::nullopt);
   }
-  pending_prefilled_ += filled;
+  return filled;
+}
+
+std::uint64_t RayCacheStore::fill_ahead(const Tracer& tracer, const SceneLayer& layer,
+                                        const TraceSettings& trace,
+                                        const std::optional<vec3>& eye) {
+  const std::uint32_t budget = settings_.fill_ahead;
+  const bool on = budget != 0 && trace.mode != TraceMode::Path && !averaging_;
+  // Each cube's walk over its tiles: the tiles reached so far and the latest ring.
+  struct Walk {
+    TileGrid grid{1};
+    std::vector<std::uint8_t> reached;
+    std::vector<std::uint32_t> frontier;
+    std::vector<std::uint32_t> todo; ///< texels picked
+  };
+  std::vector<Walk> walks(cubes_.size());
+  for (std::size_t ci = 0; ci < cubes_.size(); ++ci) {
+    Cube& c = *cubes_[ci];
+    Walk& w = walks[ci];
+    w.grid = TileGrid(c.resolution);
+    if (on && c.enabled)
+      for (std::uint32_t t = 0; t < w.grid.count(); ++t)
+        if ((c.addressed[t >> 5] >> (t & 31u)) & 1u) w.frontier.push_back(t);
+    std::fill(c.addressed.begin(), c.addressed.end(), 0u);
+    w.reached.assign(w.frontier.empty() ? 0 : w.grid.count(), 0);
+    for (const std::uint32_t t : w.frontier) w.reached[t] = 1;
+  }
+  // Ring by ring over every cube, nearest first; within a ring, tile by tile in an order spread
+  // by a hash, until the budget is spent.
+  std::uint64_t picked = 0;
+  struct Ranked {
+    std::uint32_t hash, cube, tile;
+  };
+  std::vector<Ranked> ring_tiles;
+  for (std::uint32_t ring = 0; ring <= kFillAheadRings && picked < budget; ++ring) {
+    ring_tiles.clear();
+    for (std::uint32_t ci = 0; ci < walks.size(); ++ci)
+      for (const std::uint32_t t : walks[ci].frontier)
+        ring_tiles.push_back(
+            Ranked{mix_hash((std::uint64_t(ci) << 32 | t) ^ (frame_ << 40)), ci, t});
+    if (ring_tiles.empty()) break;
+    std::sort(ring_tiles.begin(), ring_tiles.end(), [](const Ranked& a, const Ranked& b) {
+      return a.hash != b.hash ? a.hash < b.hash
+                              : (a.cube != b.cube ? a.cube < b.cube : a.tile < b.tile);
+    });
+    for (const Ranked& r : ring_tiles) {
+      const Cube& c = *cubes_[r.cube];
+      Walk& w = walks[r.cube];
+      const std::uint32_t face = r.tile / (w.grid.side * w.grid.side);
+      const std::uint32_t ty = (r.tile / w.grid.side) % w.grid.side, tx = r.tile % w.grid.side;
+      const std::uint32_t base = face * c.resolution * c.resolution;
+      for (std::uint32_t y = ty * w.grid.size; y < (ty + 1) * w.grid.size && picked < budget; ++y)
+        for (std::uint32_t x = tx * w.grid.size; x < (tx + 1) * w.grid.size && picked < budget;
+             ++x) {
+          const std::uint32_t i = base + y * c.resolution + x;
+          if (c.texels[i].valid()) continue;
+          w.todo.push_back(i);
+          ++picked;
+        }
+      if (picked >= budget) break;
+    }
+    if (picked >= budget || ring == kFillAheadRings) break;
+    // The next ring: the 8 neighbours of each tile, across face edges (the neighbour's centre
+    // on the face's plane, addressed as a direction).
+    for (Walk& w : walks) {
+      std::vector<std::uint32_t> next;
+      const float inv = 1.0f / float(w.grid.side);
+      for (const std::uint32_t t : w.frontier) {
+        const std::uint32_t face = t / (w.grid.side * w.grid.side);
+        const int ty = int((t / w.grid.side) % w.grid.side), tx = int(t % w.grid.side);
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            if (dx == 0 && dy == 0) continue;
+            const CubeCoord n = cube_coord(
+                cube_direction(face, (float(tx + dx) + 0.5f) * inv, (float(ty + dy) + 0.5f) * inv));
+            const std::uint32_t nt =
+                (n.face * w.grid.side +
+                 std::min(w.grid.side - 1, std::uint32_t(n.v * float(w.grid.side)))) *
+                    w.grid.side +
+                std::min(w.grid.side - 1, std::uint32_t(n.u * float(w.grid.side)));
+            if (w.reached[nt]) continue;
+            w.reached[nt] = 1;
+            next.push_back(nt);
+          }
+      }
+      w.frontier = std::move(next);
+    }
+  }
+  std::uint64_t filled = 0;
+  for (std::size_t ci = 0; ci < walks.size(); ++ci)
+    filled += trace_texels(*cubes_[ci], walks[ci].todo, tracer, layer, trace, eye);
   return filled;
 }
 
@@ -781,6 +931,16 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
     if (!c.enabled) continue;
     Local& l = local[std::size_t(ci)];
     ++l.lookups;
+    if (settings_.fill_ahead != 0 && !averaging_) {
+      // Fill ahead starts from the tiles the lookups addressed (a set: the same whatever the
+      // threads' order).
+      const std::uint32_t tile =
+          TileGrid(c.resolution).of_texel(texel_of(q.direction, c.resolution), c.resolution);
+      std::atomic_ref<std::uint32_t> word(cubes_[std::size_t(ci)]->addressed[tile >> 5]);
+      const std::uint32_t bit = 1u << (tile & 31u);
+      if ((word.load(std::memory_order_relaxed) & bit) == 0)
+        word.fetch_or(bit, std::memory_order_relaxed);
+    }
     if (averaging_) {
       // Path mode asks once the leaving ray is traced: the texel of its direction serves if
       // its probe belongs to the surface the ray hit (which stands in for the parallax tests),

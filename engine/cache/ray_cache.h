@@ -26,6 +26,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -164,6 +165,22 @@ public:
   std::uint64_t prefill(const Tracer& tracer, const SceneLayer& layer,
                         const TraceSettings& trace);
 
+  /// Fill ahead of the view (--cache-fill-ahead K): traces up to K outdated texels and stores
+  /// them, choosing by rings of tiles around the tiles the lookups since the last call addressed
+  /// (ring 0: those tiles; ring r + 1: their neighbours, across face edges), nearest ring first,
+  /// spread by a hash within a ring, at most kFillAheadRings rings out. A texel's ray leaves from
+  /// where the view will look it up: the point of the owner's bounding sphere that reflects its
+  /// direction towards `eye` (from the centre without an eye). A panning view then finds the
+  /// texels it turns to already valid. Nothing in path mode, with no lookups since the last call,
+  /// or with K = 0.
+  std::uint64_t fill_ahead(const Tracer& tracer, const SceneLayer& layer,
+                           const TraceSettings& trace, const std::optional<vec3>& eye);
+  /// Fill ahead's tiles: a face has min(resolution, kFillAheadTiles)² of them.
+  static constexpr std::uint32_t kFillAheadTiles = 64;
+  /// How far fill ahead looks: rings of tiles around the addressed ones (8 tiles of 64 a face:
+  /// about 11° at a face's centre).
+  static constexpr std::uint32_t kFillAheadRings = 8;
+
   // RadianceHook
   /// A frame in a different estimator than the last (Whitted's exact radiance, path mode's
   /// one-sample estimates, which include indirect light) starts every cube afresh.
@@ -202,6 +219,11 @@ private:
   /// Auto: verify_chosen's period for cube `c` (shorter while a mode is being evaluated).
   [[nodiscard]] std::uint32_t verify_period(const Cube& c) const;
   std::uint64_t apply_writes();
+  /// Traces texels `todo` of cube c and stores them, flagged prefilled: from the centre, or with
+  /// an eye from the point of the bounding sphere that reflects each towards it.
+  std::uint64_t trace_texels(Cube& c, std::span<const std::uint32_t> todo, const Tracer& tracer,
+                             const SceneLayer& layer, const TraceSettings& trace,
+                             const std::optional<vec3>& eye);
   void decide(Cube& c, double ns_per_ray, double frame_rays);
   /// Auto: where a cube starts (its ladder's first rung; in path mode, off).
   void start_auto(Cube& c) const;

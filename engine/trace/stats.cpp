@@ -106,6 +106,7 @@ std::string stats_to_json(const RunStats& stats) {
                                                             {"resolution", s.cache_resolution},
                                                             {"fill_budget", s.cache_fill_budget},
                                                             {"prefill", s.cache_prefill},
+                                                            {"fill_ahead", s.cache_fill_ahead},
                                                             {"samples", s.cache_samples},
                                                             {"refresh", s.cache_refresh},
                                                             {"max_error_db", s.max_error_db}}},
@@ -231,6 +232,7 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
     s.cache_resolution = read<std::uint32_t>(cache, "resolution", name, at);
     s.cache_fill_budget = read<std::uint32_t>(cache, "fill_budget", name, at);
     s.cache_prefill = read<bool>(cache, "prefill", name, at);
+    read_optional(cache, "fill_ahead", s.cache_fill_ahead, name, at); // arrived later
     read_optional(cache, "samples", s.cache_samples, name, at);
     read_optional(cache, "refresh", s.cache_refresh, name, at);
     s.max_error_db = read<double>(cache, "max_error_db", name, at);

@@ -52,7 +52,7 @@ struct CacheCounts {
   std::uint64_t rejected = 0;    ///< valid texel, refused by the tau/march test or a blocked confirm
   std::uint64_t verified = 0;    ///< accepted, but traced to measure the error (auto)
   std::uint64_t written = 0;     ///< texels written at frame end from the frame's rays
-  std::uint64_t prefilled = 0;   ///< texels traced from the cube centre (--cache-prefill)
+  std::uint64_t prefilled = 0;   ///< traced from the cube centre (prefill, fill ahead)
   std::uint64_t texels = 0;      ///< in every cube
   std::uint64_t valid = 0;       ///< valid at frame end
   std::uint64_t invalidated = 0; ///< outdated by this frame's invalidation
@@ -143,6 +143,7 @@ struct RunSettings {
   float cache_tau_deg = 0.5f;
   std::uint32_t cache_fill_budget = 0;
   bool cache_prefill = false;
+  std::uint32_t cache_fill_ahead = 0; ///< --cache-fill-ahead (0: off)
   std::uint32_t cache_samples = 4; ///< path mode: sample weight a texel needs before it serves
   std::uint32_t cache_refresh = 2; ///< path mode: lookups a serving texel traces a frame
   double max_error_db = 40.0;

@@ -424,6 +424,95 @@ TEST(RayCache, TheFillBudgetBoundsTexelsWrittenPerFrame) {
   EXPECT_EQ(valid, 400u);
 }
 
+/// Fill ahead's tile of texel i on a cube of `res` (RayCacheStore::kFillAheadTiles a face side).
+std::uint32_t fill_tile(std::uint32_t i, std::uint32_t res) {
+  const std::uint32_t side = std::min(res, RayCacheStore::kFillAheadTiles), size = res / side;
+  const std::uint32_t face = i / (res * res), within = i % (res * res);
+  return (face * side + (within / res) / size) * side + (within % res) / size;
+}
+
+TEST(RayCache, FillAheadTracesItsBudgetInTheTilesTheLookupsAddressedFirst) {
+  constexpr std::uint32_t kRes = 512, kBudget = 300;
+  CacheSettings s = on(LookupMode::Direction);
+  s.fill_ahead = kBudget;
+  World w;
+  make_world(w, s, kRes, distant_surroundings);
+  (void)frame(w);
+  // Before the first frame nothing was looked up: nothing is filled ahead. Every lookup found
+  // an outdated texel and wrote it, so the tiles addressed are those of the valid texels.
+  EXPECT_EQ(store_of(w.reg).counts().prefilled, 0u);
+  std::vector<std::uint8_t> addressed(6u * 64u * 64u, 0);
+  std::uint64_t written = 0;
+  {
+    const auto texels = store_of(w.reg).cube(0).texels;
+    for (std::uint32_t i = 0; i < texels.size(); ++i)
+      if (texels[i].valid()) {
+        addressed[fill_tile(i, kRes)] = 1;
+        ++written;
+      }
+  }
+  ASSERT_GT(written, 0u);
+  (void)frame(w);
+  // Before the second: the budget, all of it in those tiles (each has 64 texels, the lookups
+  // of a 96² image wrote only a few of them), traced from the centre.
+  EXPECT_EQ(store_of(w.reg).counts().prefilled, kBudget);
+  const auto texels = store_of(w.reg).cube(0).texels;
+  std::uint64_t ahead = 0;
+  for (std::uint32_t i = 0; i < texels.size(); ++i) {
+    if (!texels[i].valid() || (texels[i].state & cache::kTexelPrefilled) == 0) continue;
+    ++ahead;
+    EXPECT_TRUE(addressed[fill_tile(i, kRes)]) << "texel " << i << " is in a tile not looked up";
+  }
+  EXPECT_EQ(ahead, kBudget);
+}
+
+TEST(RayCache, FillAheadLetsAPanningViewFindTheDirectionsItTurnsToValid) {
+  // The camera orbits 3° a frame (about four texels of 128² faces): without fill ahead most
+  // lookups of the next frame find outdated texels; with it (rings of tiles around the last
+  // frame's lookups, half the cube a frame), almost none do.
+  auto outdated_share = [](std::uint32_t ahead) {
+    CacheSettings s = on(LookupMode::Direction);
+    s.fill_ahead = ahead;
+    World w;
+    make_world(w, s, 128, distant_surroundings);
+    double share = 0.0;
+    for (int k = 0; k < 4; ++k) {
+      (void)frame(w);
+      const CacheCounts& c = store_of(w.reg).counts();
+      // Direction mode serves every valid texel: what it did not serve was outdated.
+      share = double(c.lookups - c.hits) / double(std::max<std::uint64_t>(1, c.lookups));
+      orbit(w, 3.0f);
+    }
+    return share;
+  };
+  const double without = outdated_share(0);
+  const double with = outdated_share(6u * 128u * 128u / 2u);
+  EXPECT_GT(without, 0.3);
+  EXPECT_LT(with, 0.02);
+}
+
+TEST(RayCache, FillAheadIsTheSameWhateverTheThreadCount) {
+  CacheSettings s = on(LookupMode::Direction);
+  s.fill_ahead = 5000;
+  World one, two;
+  make_world(one, s, 128, distant_surroundings, 64, vec3(0.0f, 0.3f, 4.0f), 1);
+  make_world(two, s, 128, distant_surroundings, 64, vec3(0.0f, 0.3f, 4.0f), 2);
+  one.reg.resource<RenderJob>().settings.tile_size = 8;
+  for (int k = 0; k < 3; ++k) {
+    const Framebuffer a = frame(one);
+    const Framebuffer b = frame(two);
+    ASSERT_EQ(rmse(a, b), 0.0) << "frame " << k;
+    EXPECT_EQ(store_of(one.reg).counts().prefilled, store_of(two.reg).counts().prefilled);
+    orbit(one, 2.0f);
+    orbit(two, 2.0f);
+  }
+  EXPECT_GT(store_of(one.reg).counts().prefilled, 0u);
+  const auto ta = store_of(one.reg).cube(0).texels;
+  const auto tb = store_of(two.reg).cube(0).texels;
+  ASSERT_EQ(ta.size(), tb.size());
+  EXPECT_EQ(std::memcmp(ta.data(), tb.data(), ta.size_bytes()), 0);
+}
+
 TEST(RayCachePolicy, AutoKeepsCachingWhereItPaysWithinTheBound) {
   CacheSettings s;
   s.policy = CachePolicy::Auto;

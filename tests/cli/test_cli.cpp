@@ -787,6 +787,22 @@ TEST(CliContract, EveryParseErrorHasTheHousePrefix) {
   EXPECT_EQ(run({"render", "--help"}).code, 0);
 }
 
+TEST(CliContract, PathModeRefusesTheCentreFillsAndSaysWhy) {
+  // Path mode's cubes average path samples: the fills that trace Whitted radiance from the
+  // centre cannot fill them.
+  for (const std::vector<std::string>& fill :
+       {std::vector<std::string>{"--cache-prefill"},
+        std::vector<std::string>{"--cache-fill-ahead", "1000"}}) {
+    std::vector<std::string> args = {"render", cornell_box(), "--mode", "path", "--cache", "on"};
+    args.insert(args.end(), fill.begin(), fill.end());
+    const Result r = run(args);
+    expect_bad_input(r, fill.front());
+    EXPECT_NE(r.err.find(fill.front() + ": path mode's cubes average path samples"),
+              std::string::npos)
+        << r.err;
+  }
+}
+
 TEST(CliContract, ANonNumberIsNotCalledOutOfRange) {
   for (const auto& [option, value] :
        std::vector<std::pair<std::string, std::string>>{{"--width", "abc"},
@@ -796,6 +812,7 @@ TEST(CliContract, ANonNumberIsNotCalledOutOfRange) {
                                                         {"--cache-tau", "abc"},
                                                         {"--max-error-db", "40dB"},
                                                         {"--cache-fill", "many"},
+                                                        {"--cache-fill-ahead", "lots"},
                                                         {"--cache-resolution", "big"}}) {
     const Result r = run({"render", cornell_box(), option, value});
     expect_bad_input(r, option + " " + value);
