@@ -220,6 +220,8 @@ struct RayCacheStore::Cube {
   bool retrying = false;
   int return_rung = -1;
   double saved_ms = 0.0;
+  /// Rays fill ahead traced for this cube since the last decide: a cost its savings must cover.
+  std::uint64_t fill_rays = 0;
   // This frame, from lookups (several threads).
   std::atomic<std::uint64_t> lookups{0}, outdated{0}, rejected{0}, march_steps{0};
   std::atomic<std::uint64_t> offered_rays{0}; ///< what the served texels cost when traced
@@ -624,7 +626,7 @@ vec3 reflection_point(const vec3& c, float r, const vec3& s, const vec3& eye) {
 std::uint64_t RayCacheStore::trace_texels(Cube& c, std::span<const std::uint32_t> todo,
                                           const Tracer& tracer, const SceneLayer& layer,
                                           const TraceSettings& trace,
-                                          const std::optional<vec3>& eye) {
+                                          const std::optional<vec3>& eye, bool ahead) {
   if (todo.empty()) return 0;
   std::vector<Ray> rays(todo.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size(), 1024),
@@ -637,7 +639,8 @@ std::uint64_t RayCacheStore::trace_texels(Cube& c, std::span<const std::uint32_t
                       }
                     });
   std::vector<RadianceSample> out(todo.size());
-  (void)trace_radiance(tracer, layer, trace, rays, 1, c.instance, out);
+  const RayCounts traced = trace_radiance(tracer, layer, trace, rays, 1, c.instance, out);
+  if (ahead) c.fill_rays += traced.total(); // prefill is the ideal bound: not charged
   for (std::size_t k = 0; k < todo.size(); ++k) {
     // Texels keep the distance from the centre to what the ray hit (the tau and march tests).
     const float distance =
@@ -663,7 +666,7 @@ std::uint64_t RayCacheStore::prefill(const Tracer& tracer, const SceneLayer& lay
     std::vector<std::uint32_t> todo;
     for (std::uint32_t i = 0; i < c.texels.size(); ++i)
       if (!c.texels[i].valid()) todo.push_back(i);
-    filled += trace_texels(c, todo, tracer, layer, trace, std::nullopt);
+    filled += trace_texels(c, todo, tracer, layer, trace, std::nullopt, false);
   }
   return filled;
 }
@@ -755,7 +758,7 @@ std::uint64_t RayCacheStore::fill_ahead(const Tracer& tracer, const SceneLayer& 
   }
   std::uint64_t filled = 0;
   for (std::size_t ci = 0; ci < walks.size(); ++ci)
-    filled += trace_texels(*cubes_[ci], walks[ci].todo, tracer, layer, trace, eye);
+    filled += trace_texels(*cubes_[ci], walks[ci].todo, tracer, layer, trace, eye, true);
   return filled;
 }
 
@@ -1198,10 +1201,12 @@ void RayCacheStore::start_auto(Cube& c) const {
 void RayCacheStore::decide(Cube& c, double ns_per_ray, double frame_rays) {
   const std::uint64_t lookups = c.lookups.load();
   // What the cube saved, in rays: the subtrees it did not trace (what they cost when they were
-  // traced into the texels), less the confirming rays and what the lookups cost.
+  // traced into the texels), less the confirming rays, what the lookups cost and the rays fill
+  // ahead traced for it before the frame.
   const double saved_rays = double(c.offered_rays.load()) - double(c.used_rays) -
                             double(lookups) * kLookupRayCost -
-                            double(c.march_steps.load()) * kMarchStepRayCost;
+                            double(c.march_steps.load()) * kMarchStepRayCost - double(c.fill_rays);
+  c.fill_rays = 0;
   c.saved_ms = saved_rays * ns_per_ray * 1e-6;
   if (settings_.policy != CachePolicy::Auto || averaging_) return;
   if (c.retry_rung >= 0 && !c.retrying && (!c.enabled || c.rung > c.retry_rung) &&

@@ -220,10 +220,11 @@ private:
   [[nodiscard]] std::uint32_t verify_period(const Cube& c) const;
   std::uint64_t apply_writes();
   /// Traces texels `todo` of cube c and stores them, flagged prefilled: from the centre, or with
-  /// an eye from the point of the bounding sphere that reflects each towards it.
+  /// an eye from the point of the bounding sphere that reflects each towards it. `ahead`: fill
+  /// ahead's, whose rays the cube's savings must cover (prefill, the ideal bound, is free).
   std::uint64_t trace_texels(Cube& c, std::span<const std::uint32_t> todo, const Tracer& tracer,
                              const SceneLayer& layer, const TraceSettings& trace,
-                             const std::optional<vec3>& eye);
+                             const std::optional<vec3>& eye, bool ahead);
   void decide(Cube& c, double ns_per_ray, double frame_rays);
   /// Auto: where a cube starts (its ladder's first rung; in path mode, off).
   void start_auto(Cube& c) const;

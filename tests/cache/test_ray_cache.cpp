@@ -491,6 +491,26 @@ TEST(RayCache, FillAheadLetsAPanningViewFindTheDirectionsItTurnsToValid) {
   EXPECT_LT(with, 0.02);
 }
 
+TEST(RayCache, FillAheadsRaysAreChargedAgainstWhatTheCubeSaves) {
+  // A still camera looks up the same directions every frame: from the second frame on it is
+  // served whole, with or without fill ahead (which fills texels it does not look up). The
+  // rays fill ahead traces come off what the cube is said to save.
+  auto saved_ms = [](std::uint32_t ahead) {
+    CacheSettings s = on(LookupMode::Direction);
+    s.fill_ahead = ahead;
+    World w;
+    make_world(w, s, 128, distant_surroundings);
+    (void)frame(w);
+    (void)frame(w);
+    const CacheCounts& c = store_of(w.reg).counts();
+    EXPECT_EQ(c.hits, c.lookups);
+    EXPECT_EQ(c.prefilled, ahead);
+    return c.cubes.at(0).saved_ms;
+  };
+  EXPECT_GT(saved_ms(0), 0.0);
+  EXPECT_LT(saved_ms(50000), 0.0);
+}
+
 TEST(RayCache, FillAheadIsTheSameWhateverTheThreadCount) {
   CacheSettings s = on(LookupMode::Direction);
   s.fill_ahead = 5000;
