@@ -1,5 +1,6 @@
 // specula-editor SCENE [--headless] [--script FILE] [--backend B] [--mode M] [--size WxH]
-//   [--depth N] [--cache off|on] [--frames N] [--screenshot PNG] [--screenshot-ui PNG]
+//   [--depth N] [--cache off|on] [--cache-fill-ahead K] [--frames N] [--screenshot PNG]
+//   [--screenshot-ui PNG]
 // Windowed by default (editor_window.cpp, when this build has specula::present); --headless runs
 // the same session and panels without a window. Windowed, --frames N closes the window after N
 // frames and --screenshot writes the last one (--screenshot-ui: with the panels over it, as drawn;
@@ -45,6 +46,7 @@ int main(int argc, char** argv) {
   bool headless = false;
   std::optional<std::uint32_t> depth;
   std::optional<std::uint32_t> frames;
+  std::uint32_t fill_ahead = 0;
   double target_fps = 30.0;
   app.add_option("scene", scene, "Scene file")->required();
   app.add_flag("--headless", headless, "No window: run the script (or --frames) and exit");
@@ -54,6 +56,10 @@ int main(int argc, char** argv) {
   app.add_option("--size", size, "Viewport size WxH");
   app.add_option("--depth", depth, "Longest secondary ray chain (default: the scene's)");
   app.add_option("--cache", caches, "Ray-cache cubes: off, on or auto");
+  app.add_option("--cache-fill-ahead", fill_ahead,
+                 "Ray-cache cubes: texels traced before each frame around the directions the "
+                 "last frame looked up, so an orbiting view finds them filled (0: off)")
+      ->check(CLI::Range(0u, 0xffffffffu));
   app.add_option("--frames", frames, "Frames to render (headless, no script) or to show before closing (windowed)")
       ->check(CLI::Range(1u, 1000000u));
   app.add_option("--screenshot", screenshot, "Write the last frame to this PNG");
@@ -78,6 +84,7 @@ int main(int argc, char** argv) {
     const std::optional<cache::CachePolicy> policy = cache::parse_cache_policy(caches);
     if (!policy) throw Error("--cache", "expected off, on or auto, got '" + caches + "'");
     view.cache.policy = *policy;
+    view.cache.fill_ahead = fill_ahead;
     editor::EditorSession session(scene, view);
     session.tick(); // a first frame, so that clicks have something to pick in
     if (!headless) {

@@ -799,6 +799,34 @@ int soak_frames() {
 #endif
 }
 
+TEST(EditorSession, FillAheadLetsAnOrbitingViewFindItsTexelsFilled) {
+  // The editor's view orbits the scene a little each frame: with fill ahead the cubes trace
+  // texels around what the last frame looked up, and the next frame finds more of its own.
+  auto served = [](std::uint32_t ahead) {
+    ViewSettings v = small_view(96, 72);
+    v.cache.policy = cache::CachePolicy::On;
+    v.cache.resolution = 128;
+    v.cache.fill_ahead = ahead;
+    EditorSession s(kScenes / "mirror_spheres_8.json", v);
+    std::uint64_t hits = 0, lookups = 0, filled = 0;
+    for (int f = 0; f < 5; ++f) {
+      s.tick();
+      const CacheCounts& c = s.registry().resource<cache::RayCaches>().store->counts();
+      if (f > 0) {
+        hits += c.hits;
+        lookups += c.lookups;
+      }
+      filled += c.prefilled;
+      s.set_camera(orbit(s.camera(), 20.0, 0.0));
+    }
+    EXPECT_EQ(filled > 0, ahead > 0);
+    return double(hits) / double(std::max<std::uint64_t>(1, lookups));
+  };
+  const double without = served(0);
+  const double with = served(6u * 128u * 128u / 2u);
+  EXPECT_GT(with, without + 0.2) << "without " << without << ", with " << with;
+}
+
 TEST(EditorSoak, RandomEditsWithCachesMatchUncachedRendersAtCheckpoints) {
   ViewSettings v = small_view(64, 36);
   v.cache.policy = cache::CachePolicy::On;
