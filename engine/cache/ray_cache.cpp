@@ -627,29 +627,37 @@ std::uint64_t RayCacheStore::trace_texels(Cube& c, std::span<const std::uint32_t
                                           const Tracer& tracer, const SceneLayer& layer,
                                           const TraceSettings& trace,
                                           const std::optional<vec3>& eye, bool ahead) {
-  if (todo.empty()) return 0;
-  std::vector<Ray> rays(todo.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size(), 1024),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      for (std::size_t k = range.begin(); k < range.end(); ++k) {
-                        const vec3 s = texel_direction(todo[k], c.resolution);
-                        rays[k] =
-                            Ray{eye ? reflection_point(c.centre, c.radius, s, *eye) : c.centre,
-                                0.0f, s, std::numeric_limits<float>::infinity()};
-                      }
-                    });
-  std::vector<RadianceSample> out(todo.size());
-  const RayCounts traced = trace_radiance(tracer, layer, trace, rays, 1, c.instance, out);
-  if (ahead) c.fill_rays += traced.total(); // prefill is the ideal bound: not charged
-  for (std::size_t k = 0; k < todo.size(); ++k) {
-    // Texels keep the distance from the centre to what the ray hit (the tau and march tests).
-    const float distance =
-        std::isinf(out[k].t)
-            ? out[k].t
-            : glm::length(rays[k].origin + rays[k].direction * out[k].t - c.centre);
-    Texel t = make_texel(out[k].radiance, distance, out[k].entity, out[k].seen, out[k].rays);
-    t.state |= kTexelPrefilled;
-    c.store(todo[k], t);
+  // In chunks: the rays and their samples stay a few MiB whatever the cube's size (4096² faces
+  // hold 100 million texels).
+  constexpr std::size_t kChunk = std::size_t(1) << 16;
+  std::vector<Ray> rays;
+  std::vector<RadianceSample> out;
+  for (std::size_t first = 0; first < todo.size(); first += kChunk) {
+    const std::span<const std::uint32_t> part =
+        todo.subspan(first, std::min(kChunk, todo.size() - first));
+    rays.resize(part.size());
+    out.resize(part.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, part.size(), 1024),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                        for (std::size_t k = range.begin(); k < range.end(); ++k) {
+                          const vec3 s = texel_direction(part[k], c.resolution);
+                          rays[k] =
+                              Ray{eye ? reflection_point(c.centre, c.radius, s, *eye) : c.centre,
+                                  0.0f, s, std::numeric_limits<float>::infinity()};
+                        }
+                      });
+    const RayCounts traced = trace_radiance(tracer, layer, trace, rays, 1, c.instance, out);
+    if (ahead) c.fill_rays += traced.total(); // prefill is the ideal bound: not charged
+    for (std::size_t k = 0; k < part.size(); ++k) {
+      // Texels keep the distance from the centre to what the ray hit (the tau and march tests).
+      const float distance =
+          std::isinf(out[k].t)
+              ? out[k].t
+              : glm::length(rays[k].origin + rays[k].direction * out[k].t - c.centre);
+      Texel t = make_texel(out[k].radiance, distance, out[k].entity, out[k].seen, out[k].rays);
+      t.state |= kTexelPrefilled;
+      c.store(part[k], t);
+    }
   }
   pending_prefilled_ += todo.size();
   return todo.size();
@@ -660,13 +668,18 @@ std::uint64_t RayCacheStore::prefill(const Tracer& tracer, const SceneLayer& lay
   std::uint64_t filled = 0;
   // Prefill traces Whitted radiance from the centre; path mode's probes fill from path samples.
   if (trace.mode == TraceMode::Path) return 0;
+  constexpr std::size_t kBatch = std::size_t(1) << 16;
+  std::vector<std::uint32_t> todo;
   for (auto& cp : cubes_) {
     Cube& c = *cp;
     if (!c.enabled) continue;
-    std::vector<std::uint32_t> todo;
-    for (std::uint32_t i = 0; i < c.texels.size(); ++i)
+    for (std::uint32_t i = 0; i < c.texels.size(); ++i) {
       if (!c.texels[i].valid()) todo.push_back(i);
-    filled += trace_texels(c, todo, tracer, layer, trace, std::nullopt, false);
+      if (todo.size() == kBatch || (i + 1 == c.texels.size() && !todo.empty())) {
+        filled += trace_texels(c, todo, tracer, layer, trace, std::nullopt, false);
+        todo.clear();
+      }
+    }
   }
   return filled;
 }

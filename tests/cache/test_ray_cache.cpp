@@ -511,6 +511,19 @@ TEST(RayCache, FillAheadsRaysAreChargedAgainstWhatTheCubeSaves) {
   EXPECT_LT(saved_ms(50000), 0.0);
 }
 
+TEST(RayCache, PrefillFillsEveryTexelOfACubeLargerThanOneBatch) {
+  // 6·128² = 98 304 texels: traced in batches of 65 536, every one filled once.
+  World w;
+  make_world(w, on(LookupMode::Direction, true), 128, distant_surroundings);
+  (void)frame(w);
+  const CacheCounts& c = store_of(w.reg).counts();
+  EXPECT_EQ(c.prefilled, 6u * 128u * 128u);
+  EXPECT_EQ(c.valid, 6u * 128u * 128u);
+  const auto texels = store_of(w.reg).cube(0).texels;
+  for (std::size_t i = 0; i < texels.size(); ++i)
+    ASSERT_NE(texels[i].state & cache::kTexelPrefilled, 0) << "texel " << i;
+}
+
 TEST(RayCache, FillAheadIsTheSameWhateverTheThreadCount) {
   CacheSettings s = on(LookupMode::Direction);
   s.fill_ahead = 5000;
