@@ -637,6 +637,7 @@ void path_error(const Options& o) {
 struct CacheRun {
   std::string label;
   std::uint32_t resolution = 0, samples = 0;
+  bool serve = false; ///< texels served lookups
   std::vector<double> ms, flip, rmse, frame_ms;
   /// Per frame: mean FLIP over the cached object's pixels and over the others.
   std::vector<double> flip_cached, flip_rest;
@@ -757,11 +758,16 @@ void path_cache(const Options& o) {
       path_width(o), path_width(o), o.threads);
   out("Uncached MIS path tracing accumulates 1-spp frames for %.0f ms of wall time (tracing and "
       "accumulation); its mean FLIP against the %u-spp reference after %.0f ms is the target. "
-      "Each cached contender starts with empty cubes (path mode: a leaving ray is traced to its "
-      "first hit, whose emission it takes; a texel whose probe belongs to the surface hit — a "
-      "moving average of the radiance scattered from it, weight at least *samples* — gives "
-      "the rest and the path ends there; about *refresh* of a texel's lookups a frame are traced "
-      "on anyway, for the probe alone) and accumulates until it reaches that FLIP (or %.0f ms). "
+      "Each cached contender starts with empty cubes and accumulates until it reaches that FLIP "
+      "(or %.0f ms). *texels serve* (`--cache-serve on`): a leaving ray is traced to its first "
+      "hit, whose emission it takes; a texel whose probe belongs to the surface hit — a moving "
+      "average of the radiance scattered from it, weight at least *samples* — gives the rest and "
+      "the path ends there; about *refresh* of a texel's lookups a frame are traced on anyway, "
+      "for the probe alone. *irradiance* (`--cache-irradiance on`, the default): every traced "
+      "leaving ray's light also goes to a coarse probe of the light arriving at the object "
+      "(*cells*² a face, a moving average per cell), whose order-2 spherical-harmonic "
+      "irradiance lights the object's own diffuse lobe (no bounce sampled for it, no area-light "
+      "sample). "
       "*equal-error time*: when it got there (log-log interpolated between frames); "
       "*speed-up*: %.0f ms over it. *on the mirror / elsewhere*: the mean FLIP over the pixels "
       "whose camera ray meets the cached object, and over the others, at the frame that "
@@ -782,26 +788,37 @@ void path_cache(const Options& o) {
     const double target = flip_at(off, budget);
     runs.push_back(off);
     // Path mode's lookups test the surface hit instead of the parallax (tau and march behave as
-    // direction there): what varies is the texel size and the refresh rate.
+    // direction there): what varies is the texel size and the refresh rate, and whether the
+    // irradiance probe lights the object's diffuse lobe (its cells: min(faces, 16)² a face).
     struct Setting {
+      bool serve, irradiance;
       std::uint32_t resolution, samples, refresh;
     };
-    const Setting settings[] = {{16, 4, 2}, {32, 4, 2}, {32, 4, 8},
-                                {64, 4, 2}, {64, 4, 8}, {128, 4, 2}};
+    const Setting settings[] = {{false, true, 16, 4, 2}, {false, true, 8, 4, 2},
+                                {true, false, 16, 4, 2}, {true, false, 32, 4, 2},
+                                {true, false, 64, 4, 8}, {true, false, 128, 4, 2},
+                                {true, true, 128, 4, 2}};
     for (const Setting& st : settings) {
       if (st.resolution > o.cache_max_resolution) continue;
       cache::CacheSettings cs;
       cs.policy = cache::CachePolicy::On;
       cs.resolution = st.resolution;
+      cs.path_serve = st.serve;
+      cs.path_irradiance = st.irradiance;
       cs.path_samples = st.samples;
       cs.path_refresh = st.refresh;
       CacheRun r = accumulate(scene, ref, cs, mask, 3.0 * budget, target);
-      char label[96];
-      std::snprintf(label, sizeof label, "faces %u, samples %u, refresh %u", st.resolution,
-                    st.samples, st.refresh);
+      char label[128];
+      if (!st.serve)
+        std::snprintf(label, sizeof label, "irradiance only, %u² cells",
+                      std::min(st.resolution, cache::kIncomingCells));
+      else
+        std::snprintf(label, sizeof label, "texels serve: faces %u, samples %u, refresh %u%s",
+                      st.resolution, st.samples, st.refresh, st.irradiance ? " + irradiance" : "");
       r.label = label;
       r.resolution = st.resolution;
       r.samples = st.samples;
+      r.serve = st.serve;
       runs.push_back(r);
     }
     CacheRun again = accumulate(scene, ref, cache::CacheSettings{}, mask, 3.0 * budget);
@@ -829,9 +846,10 @@ void path_cache(const Options& o) {
           r.flip_rest[at], r.rmse[at],
           std::isnan(t) ? ("not in " + fixed(r.ms.back(), 0)).c_str() : fixed(t, 0).c_str(),
           std::isnan(t) ? "—" : (fixed(budget / t, 2) + "×").c_str(),
-          cached ? (fixed(100.0 * r.served, 1) + "%").c_str() : "—",
-          cached ? (std::to_string(r.last.valid) + " / " + std::to_string(r.last.texels)).c_str()
-                 : "—",
+          cached && r.serve ? (fixed(100.0 * r.served, 1) + "%").c_str() : "—",
+          cached && r.serve
+              ? (std::to_string(r.last.valid) + " / " + std::to_string(r.last.texels)).c_str()
+              : "—",
           cached ? (fixed(double(r.last.memory_bytes) / 1024.0, 0) + " KiB").c_str() : "—");
       out("%s", row);
     }

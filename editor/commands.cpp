@@ -110,6 +110,13 @@ cache::CacheSettings parse_cache(const RenderOptions& o) {
   if (o.cache_refresh < 1 || o.cache_refresh > 65536)
     throw Error("--cache-refresh", "must lie in 1 … 65536, got " + std::to_string(o.cache_refresh));
   c.path_refresh = o.cache_refresh;
+  if (o.cache_irradiance != "on" && o.cache_irradiance != "off")
+    throw Error("--cache-irradiance",
+                "expected on or off, got '" + printable(o.cache_irradiance) + "'");
+  c.path_irradiance = o.cache_irradiance == "on";
+  if (o.cache_serve != "on" && o.cache_serve != "off")
+    throw Error("--cache-serve", "expected on or off, got '" + printable(o.cache_serve) + "'");
+  c.path_serve = o.cache_serve == "on";
   if (!(o.max_error_db > 0.0 && o.max_error_db < 200.0))
     throw Error("--max-error-db", "must lie in (0, 200)");
   c.max_error_db = o.max_error_db;
@@ -382,6 +389,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
   stats.settings.cache_fill_ahead = cache_settings.fill_ahead;
   stats.settings.cache_samples = cache_settings.path_samples;
   stats.settings.cache_refresh = cache_settings.path_refresh;
+  stats.settings.cache_irradiance = cache_settings.path_irradiance;
+  stats.settings.cache_serve = cache_settings.path_serve;
   stats.settings.max_error_db = cache_settings.max_error_db;
   stats.settings.spp = options.spp;
   stats.settings.shadow_samples = options.shadow_samples;

@@ -53,6 +53,8 @@ struct RenderOptions {
   std::uint32_t cache_fill_ahead = 0; ///< texels traced from the centre ahead of the view
   std::uint32_t cache_samples = 4; ///< path mode: sample weight a texel needs before it serves
   std::uint32_t cache_refresh = 2; ///< path mode: lookups a serving texel traces a frame
+  std::string cache_irradiance = "on"; ///< path mode: the incoming-light probe lights the lobe
+  std::string cache_serve = "off";     ///< path mode: the texels' probes serve leaving rays
   double max_error_db = 40.0;
   std::uint32_t spp = 1;            ///< path: samples per pixel per frame
   std::uint32_t shadow_samples = 1; ///< shadow: area-light samples per pixel per frame

@@ -234,6 +234,16 @@ int main(int argc, char** argv) {
       ->transform(whole_number(1, 65536))
       ->capture_default_str();
   render_cmd
+      ->add_option("--cache-serve", render.cache_serve,
+                   "Path mode: the texels' per-surface probes serve leaving rays (on) or only "
+                   "gather (off)")
+      ->capture_default_str();
+  render_cmd
+      ->add_option("--cache-irradiance", render.cache_irradiance,
+                   "Path mode: each cube's probe of the light arriving at its object lights the "
+                   "object's diffuse lobe (on) or the lobe is sampled (off)")
+      ->capture_default_str();
+  render_cmd
       ->add_option("--cache-refresh", render.cache_refresh,
                    "Path mode: about this many lookups of a serving texel are traced a frame, "
                    "for its probe alone (the pixels take its mean)")

@@ -34,11 +34,17 @@ struct CacheSettings {
   std::uint32_t fill_ahead = 0;
   double max_error_db = 40.0;     ///< Auto: the PSNR against uncached tracing it must keep
   std::uint32_t verify_every = 32; ///< Auto: one accepted lookup in this many is traced to check
+  /// Path mode: whether texels serve leaving rays (the per-surface probes; measured to reach a
+  /// given error later than uncached path tracing, so off unless asked for).
+  bool path_serve = false;
   /// Path mode: the (moving-average) sample weight a texel needs before it serves lookups.
   std::uint32_t path_samples = 4;
   /// Path mode: while a texel serves, about this many of its lookups a frame are traced anyway
   /// (for the probe alone: the pixels take the texel's mean), so it keeps fresh samples.
   std::uint32_t path_refresh = 2;
+  /// Path mode: each cube also keeps a coarse probe of the light arriving at its object from
+  /// every direction, which lights the object's own diffuse lobe (no sampled bounce for it).
+  bool path_irradiance = true;
   friend bool operator==(const CacheSettings&, const CacheSettings&) = default;
 };
 

@@ -88,6 +88,76 @@ vec3 texel_radiance(const Texel& t) {
 float texel_distance(const Texel& t) { return glm::unpackHalf1x16(t.distance); }
 
 // ---------------------------------------------------------------------------------------------
+// Irradiance from the incoming-light probe (Ramamoorthi & Hanrahan 2001: the real spherical
+// harmonics to order 2, the cosine lobe's coefficients π, 2π/3, π/4 folded in)
+
+namespace {
+
+void sh_basis(const vec3& n, float (&y)[9]) {
+  y[0] = 0.282095f;
+  y[1] = 0.488603f * n.y;
+  y[2] = 0.488603f * n.z;
+  y[3] = 0.488603f * n.x;
+  y[4] = 1.092548f * n.x * n.y;
+  y[5] = 1.092548f * n.y * n.z;
+  y[6] = 0.315392f * (3.0f * n.z * n.z - 1.0f);
+  y[7] = 1.092548f * n.x * n.z;
+  y[8] = 0.546274f * (n.x * n.x - n.y * n.y);
+}
+
+} // namespace
+
+vec3 IrradianceSH::evaluate(const vec3& n) const {
+  float y[9];
+  sh_basis(n, y);
+  vec3 e(0.0f);
+  for (int i = 0; i < 9; ++i) e += c[i] * y[i];
+  return glm::max(e, vec3(0.0f));
+}
+
+IrradianceSH project_irradiance(std::span<const IncomingCell> cells, std::uint32_t side,
+                                float& coverage) {
+  // Each cell weighs its solid angle, (2/side)² / (1 + s² + t²)^{3/2} at its centre (s, t on the
+  // face in [-1, 1]); the unsampled ones take the mean radiance of the sampled.
+  double sh[9][3] = {};
+  double missing[9] = {};
+  double sampled = 0.0, total = 0.0;
+  vec3 mean_sum(0.0f);
+  const float texel = 2.0f / float(side);
+  for (std::uint32_t face = 0; face < kFaceCount; ++face)
+    for (std::uint32_t y = 0; y < side; ++y)
+      for (std::uint32_t x = 0; x < side; ++x) {
+        const IncomingCell& cell = cells[(face * side + y) * side + x];
+        const float u = (float(x) + 0.5f) / float(side), v = (float(y) + 0.5f) / float(side);
+        const float s = 2.0f * u - 1.0f, t = 2.0f * v - 1.0f;
+        const float d = 1.0f + s * s + t * t;
+        const double omega = double(texel * texel / (d * std::sqrt(d)));
+        float b[9];
+        sh_basis(glm::normalize(cube_direction(face, u, v)), b);
+        total += omega;
+        if (cell.weight > 0.0f) {
+          const vec3 L = vec3(cell.sum[0], cell.sum[1], cell.sum[2]) / cell.weight;
+          for (int i = 0; i < 9; ++i)
+            for (int ch = 0; ch < 3; ++ch) sh[i][ch] += double(L[ch]) * b[i] * omega;
+          mean_sum += L * float(omega);
+          sampled += omega;
+        } else {
+          for (int i = 0; i < 9; ++i) missing[i] += b[i] * omega;
+        }
+      }
+  coverage = total > 0.0 ? float(sampled / total) : 0.0f;
+  const vec3 mean = sampled > 0.0 ? mean_sum / float(sampled) : vec3(0.0f);
+  constexpr double kPi = std::numbers::pi;
+  const double band[9] = {kPi,     2 * kPi / 3, 2 * kPi / 3, 2 * kPi / 3, kPi / 4,
+                          kPi / 4, kPi / 4,     kPi / 4,     kPi / 4};
+  IrradianceSH out;
+  for (int i = 0; i < 9; ++i)
+    for (int ch = 0; ch < 3; ++ch)
+      out.c[i][ch] = float((sh[i][ch] + double(mean[ch]) * missing[i]) * band[i] / kPi);
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
 // Cubes
 
 namespace {
@@ -101,6 +171,10 @@ constexpr double kMarchStepRayCost = 0.02; // one step of the distance march
 constexpr std::uint32_t kMaxMarchSteps = gpu::kCubeMarchSteps; // the device marches alike
 constexpr std::uint32_t kRefineSteps = gpu::kCubeRefineSteps;
 constexpr std::uint64_t kMinErrorSamples = 64;
+/// Fixed point of the incoming-light samples (2^20 a unit of radiance; a sample is clamped to
+/// [0, 10^6], so a frame's sums stay far inside 64 bits).
+constexpr double kIncomingScale = 1048576.0;
+constexpr float kIncomingMax = 1e6f;
 /// The auto policy's error estimate: each frame's verified errors weigh this much of the next
 /// frame's (about the last two frames count).
 constexpr double kErrorDecay = 0.5;
@@ -193,6 +267,26 @@ struct RayCacheStore::Cube {
   float radius = 0.0f; ///< the owner's bounding sphere: where leaving rays start
   std::vector<Texel> texels;
   std::vector<ProbeTexel> probe; ///< path mode (sized on its first sample)
+  /// Path mode: the incoming-light probe (sized on its first sample), its irradiance and whether
+  /// it lights the diffuse lobe yet.
+  std::vector<IncomingCell> incoming;
+  IrradianceSH irradiance;
+  bool irradiance_ready = false;
+  [[nodiscard]] std::uint32_t incoming_side() const { return std::min(resolution, kIncomingCells); }
+  [[nodiscard]] std::uint32_t incoming_cell(std::uint32_t texel) const {
+    const std::uint32_t side = incoming_side(), per = resolution / side;
+    const std::uint32_t face = texel / (resolution * resolution);
+    const std::uint32_t within = texel % (resolution * resolution);
+    return (face * side + (within / resolution) / per) * side + (within % resolution) / per;
+  }
+  /// The frame's samples for `incoming`, per cell: red, green, blue in fixed point
+  /// (kIncomingScale) and the count — integer sums, the same in whatever order the tiles
+  /// deliver them.
+  std::vector<std::int64_t> incoming_batch;
+  void clear_incoming() {
+    std::fill(incoming.begin(), incoming.end(), IncomingCell{});
+    irradiance_ready = false;
+  }
   /// Fill ahead: a bit per tile (TileGrid) that lookups addressed since the last fill_ahead,
   /// set from the lookup threads through atomic_ref.
   std::vector<std::uint32_t> addressed;
@@ -314,6 +408,7 @@ struct RayCacheStore::Cube {
   }
   std::uint64_t flush() {
     const std::uint64_t was = valid;
+    clear_incoming();
     if (!probe.empty()) std::fill(probe.begin(), probe.end(), ProbeTexel{});
     for (Texel& t : texels) t.state &= std::uint8_t(~kValid);
     std::fill(edges.begin(), edges.end(), 0u);
@@ -349,9 +444,20 @@ std::uint32_t RayCacheStore::verify_period(const Cube& c) const {
 
 CubeView RayCacheStore::cube(std::size_t i) const {
   const Cube& c = *cubes_.at(i);
-  return CubeView{c.owner,   c.instance, c.resolution, c.centre,     c.texels,
-                  c.probe,   c.mode,     c.enabled,    c.cos_tau,    c.generation,
-                  settings_.policy == CachePolicy::Auto ? verify_period(c) : 0u};
+  return CubeView{c.owner,
+                  c.instance,
+                  c.resolution,
+                  c.centre,
+                  c.texels,
+                  c.probe,
+                  c.mode,
+                  c.enabled,
+                  c.cos_tau,
+                  c.generation,
+                  settings_.policy == CachePolicy::Auto ? verify_period(c) : 0u,
+                  c.incoming,
+                  c.incoming_side(),
+                  c.irradiance_ready && c.enabled};
 }
 
 std::optional<std::size_t> RayCacheStore::cube_of(ecs::Entity owner) const {
@@ -483,6 +589,8 @@ InvalidationStats RayCacheStore::invalidate(ecs::Registry& registry, const Scene
       }
 
   // 3. Apply to every cube.
+  std::vector<std::uint64_t> generations;
+  for (const auto& cp : cubes_) generations.push_back(cp->generation);
   for (auto& cp : cubes_) {
     Cube& c = *cp;
     const Sphere own = instance_sphere(tables, c.instance);
@@ -594,6 +702,10 @@ InvalidationStats RayCacheStore::invalidate(ecs::Registry& registry, const Scene
       }
     });
   }
+  // Path mode's incoming-light probe sums what arrives from every direction: whatever outdated a
+  // texel of the cube may have changed it, and it starts again.
+  for (std::size_t i = 0; i < cubes_.size(); ++i)
+    if (cubes_[i]->generation != generations[i]) cubes_[i]->clear_incoming();
   last_invalidation_ = stats;
   return stats;
 }
@@ -808,9 +920,15 @@ void RayCacheStore::begin_frame(std::uint32_t width, std::uint32_t height, Trace
   candidates_.clear();
 }
 
-bool RayCacheStore::wants_lookups() const { return lookups_; }
+bool RayCacheStore::wants_lookups() const {
+  // Path mode asks only where texels may serve.
+  return lookups_ && (!averaging_ || settings_.path_serve);
+}
 
-bool RayCacheStore::wants_leaving() const { return lookups_; }
+bool RayCacheStore::wants_leaving() const {
+  // Path mode's leaving samples feed the texels' probes, or the incoming-light probes.
+  return lookups_ && (!averaging_ || settings_.path_serve || settings_.path_irradiance);
+}
 
 namespace {
 
@@ -1047,6 +1165,17 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
   }
 }
 
+bool RayCacheStore::irradiance(std::uint32_t instance, const vec3& n, vec3& out) const {
+  if (!averaging_ || !settings_.path_irradiance || instance >= cube_of_instance_.size())
+    return false;
+  const std::int32_t ci = cube_of_instance_[instance];
+  if (ci < 0) return false;
+  const Cube& c = *cubes_[std::size_t(ci)];
+  if (!c.enabled || !c.irradiance_ready) return false;
+  out = c.irradiance.evaluate(n);
+  return true;
+}
+
 void RayCacheStore::leaving(std::span<const LeavingRadiance> rays) {
   const std::lock_guard lock(mutex_);
   for (const LeavingRadiance& r : rays) {
@@ -1083,6 +1212,20 @@ void RayCacheStore::leaving(std::span<const LeavingRadiance> rays) {
       c.traced_rays += r.rays;
       break;
     }
+    if (averaging_ && sample && settings_.path_irradiance) {
+      // The incoming-light probe takes every traced sample, whatever it hit: all the light
+      // that arrived along it.
+      const std::uint32_t side = c.incoming_side();
+      if (c.incoming_batch.empty())
+        c.incoming_batch.assign(std::size_t(kFaceCount) * side * side * 4, 0);
+      std::int64_t* cell = &c.incoming_batch[std::size_t(texel_of(r.direction, side)) * 4];
+      const vec3 light = r.radiance + r.emitted;
+      for (int ch = 0; ch < 3; ++ch)
+        cell[ch] +=
+            std::llround(double(std::clamp(light[ch], 0.0f, kIncomingMax)) * kIncomingScale);
+      ++cell[3];
+    }
+    if (averaging_ && !settings_.path_serve) continue; // no texel serves: nothing to write
     const std::uint32_t ti = texel_of(r.direction, c.resolution);
     // Only outdated texels are written (the paper); path mode's average every sample.
     if (!averaging_ && c.texels[ti].valid()) continue;
@@ -1321,7 +1464,34 @@ void RayCacheStore::decide(Cube& c, double ns_per_ray, double frame_rays) {
   }
 }
 
+void RayCacheStore::fold_incoming() {
+  // Each sampled cell joins its moving average (α = kProbeDecay, as the probes' texels); the
+  // irradiance follows.
+  for (auto& cp : cubes_) {
+    Cube& c = *cp;
+    if (c.incoming_batch.empty()) continue;
+    const std::size_t cells = c.incoming_batch.size() / 4;
+    if (c.incoming.size() != cells) c.incoming.assign(cells, IncomingCell{});
+    bool any = false;
+    for (std::size_t i = 0; i < cells; ++i) {
+      const std::int64_t* b = &c.incoming_batch[i * 4];
+      if (b[3] == 0) continue;
+      any = true;
+      IncomingCell& cell = c.incoming[i];
+      for (int ch = 0; ch < 3; ++ch)
+        cell.sum[ch] = cell.sum[ch] * (1.0f - kProbeDecay) + float(double(b[ch]) / kIncomingScale);
+      cell.weight = cell.weight * (1.0f - kProbeDecay) + float(b[3]);
+    }
+    std::fill(c.incoming_batch.begin(), c.incoming_batch.end(), 0);
+    if (!any) continue;
+    float coverage = 0.0f;
+    c.irradiance = project_irradiance(c.incoming, c.incoming_side(), coverage);
+    c.irradiance_ready = coverage >= kIncomingCoverage;
+  }
+}
+
 void RayCacheStore::end_frame(double trace_ms, std::uint64_t rays) {
+  fold_incoming();
   const std::uint64_t written = apply_writes();
   const double ns_per_ray = rays > 0 ? trace_ms * 1e6 / double(rays) : 0.0;
   CacheCounts& n = counts_;
@@ -1341,6 +1511,7 @@ void RayCacheStore::end_frame(double trace_ms, std::uint64_t rays) {
     n.texels += c.texels.size();
     n.valid += c.valid;
     n.memory_bytes += c.texels.size() * sizeof(Texel) + c.probe.size() * sizeof(ProbeTexel) +
+                      c.incoming.size() * sizeof(IncomingCell) +
                       c.edges.size() * sizeof(std::uint32_t);
     CubeReport r;
     r.entity = c.owner.index;

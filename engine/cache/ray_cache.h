@@ -79,6 +79,34 @@ static_assert(sizeof(ProbeTexel) == 32);
 /// α of the probes' moving average: a batch's weight halves in about five frames.
 inline constexpr float kProbeDecay = 0.125f;
 
+/// Path mode's probe of the light arriving at a cube's object (RayCacheStore::irradiance): the
+/// directions cut into min(resolution, kIncomingCells)² cells a face, each a moving average (as
+/// ProbeTexel's) of the whole radiance traced leaving rays brought back through it — emission at
+/// their first hit included. From it, nine spherical-harmonic coefficients of the irradiance
+/// (Ramamoorthi & Hanrahan 2001) light the object's own diffuse lobe.
+struct IncomingCell {
+  float sum[3] = {0.0f, 0.0f, 0.0f};
+  float weight = 0.0f;
+};
+inline constexpr std::uint32_t kIncomingCells = 16;
+/// The incoming-light probe lights diffuse lobes once its sampled cells cover this share of
+/// the sphere of directions (the rest take the mean of those sampled). Leaving rays are
+/// reflections of what the camera sees: the directions straight behind the object, which only
+/// its silhouette reflects, get few samples or none (a sphere half the height of a 48² image
+/// covers 57% of 16² cells).
+inline constexpr float kIncomingCoverage = 0.5f;
+
+/// Nine coefficients of an irradiance: E(n) = Σ c_i · Y_i(n), the cosine convolution folded in.
+struct IrradianceSH {
+  vec3 c[9] = {};
+  /// (1/π)∫ L(s) max(0, n·s) ds for unit n, not below 0.
+  [[nodiscard]] vec3 evaluate(const vec3& n) const;
+};
+/// The coefficients from `cells` (6·side² IncomingCells, unsampled ones taking the mean of the
+/// sampled); `coverage` gets the sampled share of the sphere.
+[[nodiscard]] IrradianceSH project_irradiance(std::span<const IncomingCell> cells,
+                                              std::uint32_t side, float& coverage);
+
 /// A world-space bounding sphere.
 struct Sphere {
   vec3 centre{0.0f};
@@ -102,6 +130,10 @@ struct CubeView {
   /// Auto, Whitted frames: one accepted lookup in this many is traced anyway to measure the
   /// error (verify_chosen); 0: none (policy on).
   std::uint32_t verify_every;
+  /// Path mode: the incoming-light probe (6·incoming_side² cells; empty in other modes or off)
+  std::span<const IncomingCell> incoming;
+  std::uint32_t incoming_side;
+  bool lights_diffuse; ///< path mode: its incoming light lights its object's diffuse lobe
 };
 
 /// Which accepted Whitted lookups auto traces anyway (CacheAnswer::Verify): one in `every`, by a
@@ -195,6 +227,9 @@ public:
   [[nodiscard]] std::uint32_t verify_frame() const { return std::uint32_t(frame_); }
   /// True unless every cube is off.
   [[nodiscard]] bool wants_leaving() const override;
+  /// Path mode, with path_irradiance: the cube's incoming-light probe, once it covers
+  /// kIncomingCoverage of the sphere, lights its object's diffuse lobe (IrradianceSH).
+  [[nodiscard]] bool irradiance(std::uint32_t instance, const vec3& n, vec3& out) const override;
   void lookup(std::span<const LeavingQuery> queries,
               std::span<CachedRadiance> answers) const override;
   void leaving(std::span<const LeavingRadiance> rays) override;
@@ -219,6 +254,8 @@ private:
   /// Auto: verify_chosen's period for cube `c` (shorter while a mode is being evaluated).
   [[nodiscard]] std::uint32_t verify_period(const Cube& c) const;
   std::uint64_t apply_writes();
+  /// Path mode: the frame's samples into each cube's incoming-light probe, and its irradiance.
+  void fold_incoming();
   /// Traces texels `todo` of cube c and stores them, flagged prefilled: from the centre, or with
   /// an eye from the point of the bounding sphere that reflects each towards it. `ahead`: fill
   /// ahead's, whose rays the cube's savings must cover (prefill, the ideal bound, is free).

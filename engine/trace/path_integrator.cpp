@@ -362,6 +362,13 @@ private:
     const float specular =
         (kMirror ? m.reflectivity : 0.0f) + (kDielectric ? m.transmission : 0.0f);
     const float total = diffuse + specular;
+    // A cached object's own probe of incoming light may light its diffuse lobe (ray-cache
+    // cubes in path mode: RadianceHook::irradiance): then that lobe is neither light-sampled
+    // nor continued, and the path goes on by its specular lobe alone.
+    vec3 probe(0.0f);
+    const bool probe_lit = (kMirror || kDielectric) && hook_ != nullptr && diffuse > 0.0f &&
+                           specular > 0.0f &&
+                           hook_->irradiance(v.instance, sp.shading_normal, probe);
     // Probability of the diffuse lobe: with it, the mixture's density of a direction.
     const float p_diffuse = total > 0.0f ? diffuse / total : 0.0f;
     const bool last = depth >= settings_.max_depth;
@@ -387,10 +394,11 @@ private:
             punctual_shadow_ray(light, sp, origin, f, emit);
         }
       }
+      if (probe_lit) contribute(p.slot, p.leaving, p.throughput * m.base_color * (diffuse * probe));
       // Area lights are sampled towards the next vertex, which the last one does not have (the
       // BSDF strategy would need a ray beyond the depth limit).
       if constexpr (kArea) {
-        if (!last && settings_.sampling != LightSampling::Bsdf) {
+        if (!last && !probe_lit && settings_.sampling != LightSampling::Bsdf) {
           // The light sample (sample_area_light), drawn for the whole wave.
           const VertexStarts& ls = w_.starts;
           const std::size_t k = v.start;
@@ -422,7 +430,7 @@ private:
     vec3 ray_origin = origin, direction;
     RayKind kind = RayKind::Reflection;
     bool exits = false; // a specular ray leaving the object outwards
-    if (!(kMirror || kDielectric) || u.bsdf[0] * total < diffuse) {
+    if (!(kMirror || kDielectric) || (!probe_lit && u.bsdf[0] * total < diffuse)) {
       direction = cosine_direction(sp.shading_normal, u.bsdf[2], u.bsdf[3]);
       const float cos_theta = glm::dot(direction, sp.shading_normal);
       if (glm::dot(direction, sp.geometric_normal) <= 0.0f || !(cos_theta > 0.0f)) return;
@@ -430,7 +438,9 @@ private:
       throughput *= m.base_color * total;
       bsdf_pdf = p_diffuse * cos_theta * kInvPi;
     } else {
-      throughput *= total;
+      // The specular lobe, picked with probability specular / total (or 1 when the probe lit
+      // the diffuse one).
+      throughput *= probe_lit ? specular : total;
       bool reflect = true;
       if constexpr (kDielectric) {
         const SpecularSplit split = split_specular(m, sp, d);
@@ -590,9 +600,13 @@ private:
         l.radiance = l.cached;
       } else {
         const vec3 scattered = rec.sum - rec.emitted;
-        for (int c = 0; c < 3; ++c)
+        for (int c = 0; c < 3; ++c) {
           l.radiance[c] = l.throughput[c] > 0.0f ? scattered[c] / l.throughput[c] : 0.0f;
-        if (!std::isfinite(l.radiance.x + l.radiance.y + l.radiance.z)) continue;
+          l.emitted[c] = l.throughput[c] > 0.0f ? rec.emitted[c] / l.throughput[c] : 0.0f;
+        }
+        if (!std::isfinite(l.radiance.x + l.radiance.y + l.radiance.z + l.emitted.x + l.emitted.y +
+                           l.emitted.z))
+          continue;
       }
       w_.delivered.push_back(l);
     }

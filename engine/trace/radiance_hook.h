@@ -83,6 +83,9 @@ struct LeavingRadiance {
   vec3 weight;     ///< relative to the ray it was spawned by (its share of that ray's radiance)
   vec3 throughput; ///< relative to the pixel (product of weights along the path)
   vec3 radiance;   ///< what the ray brought back (path mode: without its first hit's emission)
+  /// Path mode: the emission its first hit gave it, per unit of throughput (radiance + emitted
+  /// is all the light that arrived along it); zero for a served ray.
+  vec3 emitted{0.0f};
   vec3 cached;     ///< Verify: the cached value the hook offered
   float hit_t;     ///< distance to its first hit (+inf: it left the scene)
   std::uint32_t hit_entity; ///< entity index of its first hit (kNoInstance: none)
@@ -113,6 +116,17 @@ public:
                       std::span<CachedRadiance> answers) const {
     for (CachedRadiance& a : answers) a = CachedRadiance{};
     (void)queries;
+  }
+  /// Path mode: the light a diffuse surface of `instance` with unit normal n receives, from its
+  /// cache's record of what arrives at the object from every direction (a probe of the incoming
+  /// radiance): (1/π)∫ L(s) max(0, n·s) ds, so the diffuse lobe reflects albedo × that. False
+  /// when the hook has no such probe for the instance (the integrator samples the lobe as
+  /// usual). The probe holds every light that rays reach (emitters included, delta lights not):
+  /// a vertex lit this way takes no area-light sample for its diffuse lobe and does not continue
+  /// it. Called from worker threads; reads only what was there at frame start.
+  [[nodiscard]] virtual bool irradiance(std::uint32_t /*instance*/, const vec3& /*n*/,
+                                        vec3& /*out*/) const {
+    return false;
   }
   /// Receives one tile's leaving rays once the tile's last wave is done, in a deterministic order
   /// (wave by wave, then trace order). Called from worker threads, several tiles at once:

@@ -109,6 +109,8 @@ std::string stats_to_json(const RunStats& stats) {
                                                             {"fill_ahead", s.cache_fill_ahead},
                                                             {"samples", s.cache_samples},
                                                             {"refresh", s.cache_refresh},
+                                                            {"irradiance", s.cache_irradiance},
+                                                            {"serve", s.cache_serve},
                                                             {"max_error_db", s.max_error_db}}},
                    {"spp", s.spp},
                    {"shadow_samples", s.shadow_samples},
@@ -235,6 +237,8 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
     read_optional(cache, "fill_ahead", s.cache_fill_ahead, name, at); // arrived later
     read_optional(cache, "samples", s.cache_samples, name, at);
     read_optional(cache, "refresh", s.cache_refresh, name, at);
+    read_optional(cache, "irradiance", s.cache_irradiance, name, at); // these two arrived
+    read_optional(cache, "serve", s.cache_serve, name, at);           // later
     s.max_error_db = read<double>(cache, "max_error_db", name, at);
   } else if (!cache.is_string()) {
     // Files from before the cubes landed gave a bare resolution.

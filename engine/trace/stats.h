@@ -146,6 +146,8 @@ struct RunSettings {
   std::uint32_t cache_fill_ahead = 0; ///< --cache-fill-ahead (0: off)
   std::uint32_t cache_samples = 4; ///< path mode: sample weight a texel needs before it serves
   std::uint32_t cache_refresh = 2; ///< path mode: lookups a serving texel traces a frame
+  bool cache_irradiance = true;    ///< path mode: the incoming-light probe lights diffuse lobes
+  bool cache_serve = false;        ///< path mode: the texels' probes serve leaving rays
   double max_error_db = 40.0;
   // The stochastic modes (files from before them have none: readers take these defaults).
   std::uint32_t spp = 1;

@@ -745,8 +745,13 @@ void path_mode(World& w, std::uint32_t seed = 0) {
   job.settings.seed = seed;
 }
 
-CacheSettings path_cache(std::uint32_t samples, std::uint32_t refresh = 2) {
+/// Path mode with the texels' probes serving (--cache-serve on) and, unless asked, without the
+/// incoming-light probe (so that a pixel is its own part plus what the texels gave).
+CacheSettings path_cache(std::uint32_t samples, std::uint32_t refresh = 2,
+                         bool irradiance = false) {
   CacheSettings s = on(LookupMode::Direction);
+  s.path_serve = true;
+  s.path_irradiance = irradiance;
   s.path_samples = samples;
   s.path_refresh = refresh;
   return s;
@@ -754,6 +759,112 @@ CacheSettings path_cache(std::uint32_t samples, std::uint32_t refresh = 2) {
 
 bool served(const LeavingRadiance& r) {
   return r.answer == CacheAnswer::Use || r.answer == CacheAnswer::Refresh;
+}
+
+TEST(RayCachePathMode, TheIrradianceOfTheIncomingProbeIsExactForLightOfOrderOne) {
+  // Light arriving from above only (L = 1 where s.y > 0): the irradiance (1/π)∫ L max(0, n·s)
+  // is (1 + n.y) / 2, linear in n, which nine spherical harmonics hold exactly (up to the cells'
+  // quadrature). A uniform sphere of light gives its radiance in every direction.
+  constexpr std::uint32_t side = 16;
+  std::vector<cache::IncomingCell> above(6 * side * side), uniform(6 * side * side);
+  for (std::uint32_t i = 0; i < above.size(); ++i) {
+    const vec3 s = cache::texel_direction(i, side);
+    const float l = s.y > 0.0f ? 1.0f : 0.0f;
+    above[i] = cache::IncomingCell{{l, 2.0f * l, 0.5f * l}, 1.0f};
+    uniform[i] = cache::IncomingCell{{0.6f, 1.2f, 1.8f}, 2.0f}; // radiance (0.3, 0.6, 0.9)
+  }
+  float coverage = 0.0f;
+  const cache::IrradianceSH sky = cache::project_irradiance(above, side, coverage);
+  EXPECT_NEAR(coverage, 1.0f, 1e-5f);
+  for (const vec3 n : {vec3(0, 1, 0), vec3(0, -1, 0), vec3(1, 0, 0), glm::normalize(vec3(1, 1, 0)),
+                       glm::normalize(vec3(-1, -2, 3))}) {
+    const vec3 e = sky.evaluate(n);
+    const float want = 0.5f * (1.0f + n.y);
+    EXPECT_NEAR(e.x, want, 0.02f) << n.x << " " << n.y << " " << n.z;
+    EXPECT_NEAR(e.y, 2.0f * want, 0.04f);
+    EXPECT_NEAR(e.z, 0.5f * want, 0.01f);
+  }
+  const cache::IrradianceSH all = cache::project_irradiance(uniform, side, coverage);
+  for (const vec3 n : {vec3(0, 0, 1), glm::normalize(vec3(2, -1, 0.5f))}) {
+    const vec3 e = all.evaluate(n);
+    EXPECT_NEAR(e.x, 0.3f, 0.003f);
+    EXPECT_NEAR(e.y, 0.6f, 0.006f);
+    EXPECT_NEAR(e.z, 0.9f, 0.009f);
+  }
+  // Unsampled cells take the mean of the sampled ones, and say how much was sampled.
+  for (std::uint32_t i = 0; i < uniform.size(); ++i)
+    if (cache::texel_direction(i, side).x > 0.5f) uniform[i] = cache::IncomingCell{};
+  const cache::IrradianceSH part = cache::project_irradiance(uniform, side, coverage);
+  EXPECT_GT(coverage, 0.6f);
+  EXPECT_LT(coverage, 0.95f);
+  EXPECT_NEAR(part.evaluate(vec3(1, 0, 0)).y, 0.6f, 0.006f);
+}
+
+TEST(RayCachePathMode, TheIncomingProbeLightsTheDiffuseLobeWithLessErrorAndNoBias) {
+  // A half-diffuse mirror (reflectivity 0.5) far from everything: with the incoming-light probe
+  // its diffuse lobe takes the probe's irradiance instead of a sampled bounce. Against a
+  // reference of many uncached frames, 16 frames have less error on the mirror with it than
+  // without, and the image's mean stays that of uncached tracing (no bias beyond the probe's
+  // coarse cells).
+  LitSurroundings lit;
+  const auto build = [&](ecs::Registry& r) { lit(r); };
+  const Material half = mirror_material(0.5f);
+  CacheSettings probe = on(LookupMode::Direction); // path mode's defaults: irradiance, no serving
+  World cached, uncached, reference;
+  make_world(cached, probe, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, half);
+  make_world(uncached, CacheSettings{}, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, half);
+  make_world(reference, CacheSettings{}, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, half);
+  path_mode(cached);
+  path_mode(uncached);
+  path_mode(reference, 11);
+  Framebuffer a{1, 1}, b{1, 1}, ref{1, 1};
+  for (int k = 0; k < 16; ++k) {
+    a = frame(cached);
+    b = frame(uncached);
+  }
+  for (int k = 0; k < 512; ++k) ref = frame(reference);
+  EXPECT_FALSE(store_of(cached.reg).wants_lookups()); // nothing is served from the texels
+  EXPECT_TRUE(store_of(cached.reg).cube(0).lights_diffuse);
+  // On the mirror (the middle 40% of the image, all sphere), against the reference.
+  const auto mirror_rmse = [&](const Framebuffer& x) {
+    double sum = 0.0;
+    std::size_t n = 0;
+    for (std::uint32_t y = 29 * 48 / 100; y < 69 * 48 / 100; ++y)
+      for (std::uint32_t x0 = 29 * 48 / 100; x0 < 69 * 48 / 100; ++x0) {
+        const vec3 d = x.pixels()[y * 48 + x0] - ref.pixels()[y * 48 + x0];
+        sum += double(glm::dot(d, d));
+        ++n;
+      }
+    return std::sqrt(sum / double(3 * n));
+  };
+  EXPECT_LT(mirror_rmse(a), 0.9 * mirror_rmse(b))
+      << "cached " << mirror_rmse(a) << ", uncached " << mirror_rmse(b);
+  double mean_a = 0.0, mean_ref = 0.0;
+  for (std::size_t i = 0; i < a.pixel_count(); ++i) {
+    mean_a += double(a.pixels()[i].x + a.pixels()[i].y + a.pixels()[i].z);
+    mean_ref += double(ref.pixels()[i].x + ref.pixels()[i].y + ref.pixels()[i].z);
+  }
+  EXPECT_NEAR(mean_a / mean_ref, 1.0, 0.02);
+}
+
+TEST(RayCachePathMode, TheIncomingProbeIsTheSameWhateverTheThreadCount) {
+  LitSurroundings l1, l2;
+  World one, two;
+  const Material half = mirror_material(0.5f);
+  make_world(
+      one, on(LookupMode::Direction), 16, [&](ecs::Registry& r) { l1(r); }, 48,
+      vec3(0.0f, 0.3f, 4.0f), 1, half);
+  make_world(
+      two, on(LookupMode::Direction), 16, [&](ecs::Registry& r) { l2(r); }, 48,
+      vec3(0.0f, 0.3f, 4.0f), 2, half);
+  one.reg.resource<RenderJob>().settings.tile_size = 8;
+  path_mode(one);
+  path_mode(two);
+  for (int k = 0; k < 3; ++k) ASSERT_EQ(rmse(frame(one), frame(two)), 0.0) << "frame " << k;
+  const auto a = store_of(one.reg).cube(0).incoming, b = store_of(two.reg).cube(0).incoming;
+  ASSERT_FALSE(a.empty());
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size_bytes()), 0);
 }
 
 TEST(RayCachePathMode, ProbesAverageTheSamplesOfOneSurfaceBatchByBatch) {

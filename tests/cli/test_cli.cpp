@@ -803,6 +803,16 @@ TEST(CliContract, PathModeRefusesTheCentreFillsAndSaysWhy) {
   }
 }
 
+TEST(CliContract, PathModesCacheSwitchesTakeOnOrOff) {
+  for (const char* option : {"--cache-irradiance", "--cache-serve"}) {
+    const Result r = run({"render", cornell_box(), option, "maybe"});
+    expect_bad_input(r, option);
+    EXPECT_NE(r.err.find(std::string(option) + ": expected on or off, got 'maybe'"),
+              std::string::npos)
+        << r.err;
+  }
+}
+
 TEST(CliContract, ANonNumberIsNotCalledOutOfRange) {
   for (const auto& [option, value] :
        std::vector<std::pair<std::string, std::string>>{{"--width", "abc"},
