@@ -607,7 +607,7 @@ void path_error(const Options& o) {
           by_spp.emplace_back(double(c.spp), c.rmse);
         }
       const std::uint32_t over = bias_takes_over(r);
-      char row[512];
+      char row[768];
       std::snprintf(row, sizeof row, "| %s | %s | %.1f | %.1f | %.3f | %.3f | %s | %s |\n",
                     name.c_str(), sampling_label(r.sampling), median(r.frame_ms),
                     1000.0 / median(r.frame_ms), log_log_slope(by_time), log_log_slope(by_spp),
@@ -650,7 +650,7 @@ struct CacheRun {
 /// camera ray meets a cached object).
 CacheRun accumulate(PathScene& scene, const Framebuffer& ref, const cache::CacheSettings& settings,
                     const std::vector<std::uint8_t>& mask, double until_ms,
-                    double target_flip = -1.0) {
+                    double target_flip = -1.0, double target_rmse = -1.0) {
   CacheRun run;
   TraceSettings s = scene.settings(LightSampling::Mis, kMeasureSeed);
   std::shared_ptr<cache::RayCacheStore> store;
@@ -688,7 +688,10 @@ CacheRun accumulate(PathScene& scene, const Framebuffer& ref, const cache::Cache
     run.flip_rest.push_back(n_in < mask.size() ? out / double(mask.size() - n_in) : 0.0);
     run.rmse.push_back(rmse(ref, mean));
     if (elapsed >= until_ms) break;
-    if (target_flip > 0.0 && run.flip.back() <= target_flip) break;
+    // With targets: until both errors have reached theirs (at least once).
+    if (target_flip > 0.0 && std::ranges::min(run.flip) <= target_flip &&
+        std::ranges::min(run.rmse) <= target_rmse)
+      break;
   }
   run.served = lookups > 0 ? double(hits) / double(lookups) : 0.0;
   return run;
@@ -696,28 +699,31 @@ CacheRun accumulate(PathScene& scene, const Framebuffer& ref, const cache::Cache
 
 /// Where a run's FLIP (log-log interpolated between frames) first reaches `target`; NaN if it
 /// never does.
-double time_to_flip(const CacheRun& r, double target) {
-  for (std::size_t k = 0; k < r.flip.size(); ++k) {
-    if (r.flip[k] > target) continue;
+/// When the error `series` (per frame, FLIP or RMSE) first reached `target` (log-log
+/// interpolated between frames); NaN if it never did.
+double time_to(const CacheRun& r, const std::vector<double>& series, double target) {
+  for (std::size_t k = 0; k < series.size(); ++k) {
+    if (series[k] > target) continue;
     if (k == 0) return r.ms[0];
     const double x0 = std::log(r.ms[k - 1]), x1 = std::log(r.ms[k]);
-    const double y0 = std::log(r.flip[k - 1]), y1 = std::log(r.flip[k]), y = std::log(target);
+    const double y0 = std::log(series[k - 1]), y1 = std::log(series[k]), y = std::log(target);
     return std::exp(y1 == y0 ? x1 : x0 + (x1 - x0) * (y - y0) / (y1 - y0));
   }
   return std::numeric_limits<double>::quiet_NaN();
 }
 
-/// The FLIP at `ms` (log-log interpolated; the last frame's when the run is shorter).
-double flip_at(const CacheRun& r, double ms) {
+/// The error `series` at `ms` (log-log interpolated; the last frame's when the run is shorter).
+double value_at(const CacheRun& r, const std::vector<double>& series, double ms) {
   for (std::size_t k = 0; k < r.ms.size(); ++k) {
     if (r.ms[k] < ms) continue;
-    if (k == 0) return r.flip[0];
+    if (k == 0) return series[0];
     const double x0 = std::log(r.ms[k - 1]), x1 = std::log(r.ms[k]), x = std::log(ms);
-    const double y0 = std::log(r.flip[k - 1]), y1 = std::log(r.flip[k]);
+    const double y0 = std::log(series[k - 1]), y1 = std::log(series[k]);
     return std::exp(y0 + (y1 - y0) * (x - x0) / (x1 - x0));
   }
-  return r.flip.back();
+  return series.back();
 }
+double flip_at(const CacheRun& r, double ms) { return value_at(r, r.flip, ms); }
 
 void path_cache_plot(const std::vector<CacheRun>& runs, const std::string& name, double target,
                      const fs::path& path) {
@@ -769,7 +775,8 @@ void path_cache(const Options& o) {
       "irradiance lights the object's own diffuse lobe (no bounce sampled for it, no area-light "
       "sample). "
       "*equal-error time*: when it got there (log-log interpolated between frames); "
-      "*speed-up*: %.0f ms over it. *on the mirror / elsewhere*: the mean FLIP over the pixels "
+      "*speed-up*: %.0f ms over it; the same for the RMSE (runs go on until both are reached). *on "
+      "the mirror / elsewhere*: the mean FLIP over the pixels "
       "whose camera ray meets the cached object, and over the others, at the frame that "
       "reached %.0f ms (or the last). The uncached run is repeated last, to show the machine's "
       "drift.\n\n",
@@ -786,6 +793,7 @@ void path_cache(const Options& o) {
     CacheRun off = accumulate(scene, ref, cache::CacheSettings{}, mask, 3.0 * budget);
     off.label = "uncached";
     const double target = flip_at(off, budget);
+    const double target_rmse = value_at(off, off.rmse, budget);
     runs.push_back(off);
     // Path mode's lookups test the surface hit instead of the parallax (tau and march behave as
     // direction there): what varies is the texel size and the refresh rate, and whether the
@@ -807,7 +815,7 @@ void path_cache(const Options& o) {
       cs.path_irradiance = st.irradiance;
       cs.path_samples = st.samples;
       cs.path_refresh = st.refresh;
-      CacheRun r = accumulate(scene, ref, cs, mask, 3.0 * budget, target);
+      CacheRun r = accumulate(scene, ref, cs, mask, 3.0 * budget, target, target_rmse);
       char label[128];
       if (!st.serve)
         std::snprintf(label, sizeof label, "irradiance only, %u² cells",
@@ -829,23 +837,27 @@ void path_cache(const Options& o) {
         "after %.0f ms = %.4f (the repeated uncached run: %.4f).\n\n",
         name.c_str(), 100.0 * coverage, budget, target, flip_at(again, budget));
     out("| contender | frame ms (median) | frames in %.0f ms | FLIP after %.0f ms | on the mirror "
-        "/ elsewhere | RMSE after %.0f ms | equal-error time (ms) | speed-up | lookups served | "
-        "texels valid | memory |\n"
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "/ elsewhere | RMSE after %.0f ms | equal-error time (ms) | speed-up | equal-RMSE time "
+        "(ms) | speed-up (RMSE) | lookups served | texels valid | memory |\n"
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         budget, budget, budget);
     for (const CacheRun& r : runs) {
-      const double t = time_to_flip(r, target);
+      const double t = time_to(r, r.flip, target);
+      const double t_rmse = time_to(r, r.rmse, target_rmse);
       std::size_t at = 0;
       while (at + 1 < r.ms.size() && r.ms[at] < budget) ++at;
       const bool cached = r.resolution != 0;
-      char row[512];
+      char row[768];
       std::snprintf(
           row, sizeof row,
-          "| %s | %.1f | %zu | %.4f | %.4f / %.4f | %.4f | %s | %s | %s | %s | %s |\n",
+          "| %s | %.1f | %zu | %.4f | %.4f / %.4f | %.4f | %s | %s | %s | %s | %s | %s | %s |\n",
           r.label.c_str(), median(r.frame_ms), at + 1, flip_at(r, budget), r.flip_cached[at],
           r.flip_rest[at], r.rmse[at],
           std::isnan(t) ? ("not in " + fixed(r.ms.back(), 0)).c_str() : fixed(t, 0).c_str(),
           std::isnan(t) ? "—" : (fixed(budget / t, 2) + "×").c_str(),
+          std::isnan(t_rmse) ? ("not in " + fixed(r.ms.back(), 0)).c_str()
+                             : fixed(t_rmse, 0).c_str(),
+          std::isnan(t_rmse) ? "—" : (fixed(budget / t_rmse, 2) + "×").c_str(),
           cached && r.serve ? (fixed(100.0 * r.served, 1) + "%").c_str() : "—",
           cached && r.serve
               ? (std::to_string(r.last.valid) + " / " + std::to_string(r.last.texels)).c_str()

@@ -283,6 +283,10 @@ struct RayCacheStore::Cube {
   /// (kIncomingScale) and the count — integer sums, the same in whatever order the tiles
   /// deliver them.
   std::vector<std::int64_t> incoming_batch;
+  /// The frame's traced leaving samples that hit within kNearRadii radii, and all of them; the
+  /// latest frame's share of near ones.
+  std::uint64_t near_samples = 0, incoming_samples = 0;
+  float near_share = 0.0f;
   void clear_incoming() {
     std::fill(incoming.begin(), incoming.end(), IncomingCell{});
     irradiance_ready = false;
@@ -920,14 +924,19 @@ void RayCacheStore::begin_frame(std::uint32_t width, std::uint32_t height, Trace
   candidates_.clear();
 }
 
+bool RayCacheStore::serving() const {
+  // Auto never lets path mode's texels serve: measured not to pay (docs/design/ray-cache.md).
+  return settings_.path_serve && settings_.policy != CachePolicy::Auto;
+}
+
 bool RayCacheStore::wants_lookups() const {
   // Path mode asks only where texels may serve.
-  return lookups_ && (!averaging_ || settings_.path_serve);
+  return lookups_ && (!averaging_ || serving());
 }
 
 bool RayCacheStore::wants_leaving() const {
   // Path mode's leaving samples feed the texels' probes, or the incoming-light probes.
-  return lookups_ && (!averaging_ || settings_.path_serve || settings_.path_irradiance);
+  return lookups_ && (!averaging_ || serving() || settings_.path_irradiance);
 }
 
 namespace {
@@ -1224,8 +1233,10 @@ void RayCacheStore::leaving(std::span<const LeavingRadiance> rays) {
         cell[ch] +=
             std::llround(double(std::clamp(light[ch], 0.0f, kIncomingMax)) * kIncomingScale);
       ++cell[3];
+      ++c.incoming_samples;
+      if (r.hit_t < kNearRadii * c.radius) ++c.near_samples;
     }
-    if (averaging_ && !settings_.path_serve) continue; // no texel serves: nothing to write
+    if (averaging_ && !serving()) continue; // no texel serves: nothing to write
     const std::uint32_t ti = texel_of(r.direction, c.resolution);
     // Only outdated texels are written (the paper); path mode's average every sample.
     if (!averaging_ && c.texels[ti].valid()) continue;
@@ -1334,13 +1345,16 @@ void RayCacheStore::start_auto(Cube& c) const {
   c.retrying = false;
   c.return_rung = -1;
   if (averaging_) {
-    // Measured (docs/cache-report/path-cache.md): on every scene and setting there, cached path
-    // tracing reached uncached path tracing's error later, not sooner — a probe's blur and its
-    // shared noise, on the texel's pixels at once, cost more than the paths it saves. Auto keeps
-    // path mode uncached; --cache on uses the probes anyway.
-    c.enabled = false;
-    c.reason = "path mode: off (measured to reach uncached path tracing's error later, not "
-               "sooner: --cache on forces the probes)";
+    // Measured (docs/cache-report/path-cache.md): texels that serve leaving rays reached
+    // uncached path tracing's error later on every scene and setting there, so auto never lets
+    // them serve; the incoming-light probe lighting the object's diffuse lobe reached it sooner
+    // on both scenes, so auto keeps it where the object's surroundings are far (decide).
+    c.enabled = settings_.path_irradiance;
+    c.reason = c.enabled ? "path mode: the incoming-light probe lights the diffuse lobe "
+                           "(measured to reach uncached path tracing's error sooner); texels "
+                           "do not serve (measured not to pay)"
+                         : "path mode: off (texels that serve were measured to reach uncached "
+                           "path tracing's error later; --cache-irradiance is off)";
     return;
   }
   int start = 0;
@@ -1364,6 +1378,16 @@ void RayCacheStore::decide(Cube& c, double ns_per_ray, double frame_rays) {
                             double(c.march_steps.load()) * kMarchStepRayCost - double(c.fill_rays);
   c.fill_rays = 0;
   c.saved_ms = saved_rays * ns_per_ray * 1e-6;
+  if (settings_.policy == CachePolicy::Auto && averaging_ && c.enabled &&
+      c.near_share > kNearShare) {
+    // The probe stands for the object's every point only where what it sees is far: here it
+    // would not, and keeping the records would only cost.
+    c.enabled = false;
+    c.reason = format("path mode: %.0f%% of its leaving rays hit something within %.0f radii: "
+                      "the incoming-light probe assumes far surroundings; off",
+                      100.0 * c.near_share, double(kNearRadii));
+    return;
+  }
   if (settings_.policy != CachePolicy::Auto || averaging_) return;
   if (c.retry_rung >= 0 && !c.retrying && (!c.enabled || c.rung > c.retry_rung) &&
       ++c.frames_below_retry >= kRetryFrames) {
@@ -1484,9 +1508,12 @@ void RayCacheStore::fold_incoming() {
     }
     std::fill(c.incoming_batch.begin(), c.incoming_batch.end(), 0);
     if (!any) continue;
+    c.near_share =
+        float(double(c.near_samples) / double(std::max<std::uint64_t>(1, c.incoming_samples)));
+    c.near_samples = c.incoming_samples = 0;
     float coverage = 0.0f;
     c.irradiance = project_irradiance(c.incoming, c.incoming_side(), coverage);
-    c.irradiance_ready = coverage >= kIncomingCoverage;
+    c.irradiance_ready = coverage >= kIncomingCoverage && c.near_share <= kNearShare;
   }
 }
 
@@ -1516,7 +1543,10 @@ void RayCacheStore::end_frame(double trace_ms, std::uint64_t rays) {
     CubeReport r;
     r.entity = c.owner.index;
     r.resolution = c.resolution;
-    r.mode = c.enabled ? lookup_mode_name(c.mode) : "off";
+    // Path mode's cubes whose texels do not serve only light their object's diffuse lobe.
+    r.mode = !c.enabled                 ? "off"
+             : averaging_ && !serving() ? "irradiance"
+                                        : lookup_mode_name(c.mode);
     r.reason = c.reason;
     r.lookups = c.lookups.load();
     r.hits = c.used;

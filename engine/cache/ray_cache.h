@@ -95,6 +95,11 @@ inline constexpr std::uint32_t kIncomingCells = 16;
 /// its silhouette reflects, get few samples or none (a sphere half the height of a 48² image
 /// covers 57% of 16² cells).
 inline constexpr float kIncomingCoverage = 0.5f;
+/// The probe is of the light at the object's centre, so it stands for every point of the object
+/// only where what the object sees is far: it lights diffuse lobes while at most kNearShare of
+/// the leaving rays a frame hit something within kNearRadii of the object's bounding radius.
+inline constexpr float kNearRadii = 10.0f;
+inline constexpr float kNearShare = 0.1f;
 
 /// Nine coefficients of an irradiance: E(n) = Σ c_i · Y_i(n), the cosine convolution folded in.
 struct IrradianceSH {
@@ -256,6 +261,8 @@ private:
   std::uint64_t apply_writes();
   /// Path mode: the frame's samples into each cube's incoming-light probe, and its irradiance.
   void fold_incoming();
+  /// Path mode: whether texels serve leaving rays (--cache-serve on, never under auto).
+  [[nodiscard]] bool serving() const;
   /// Traces texels `todo` of cube c and stores them, flagged prefilled: from the centre, or with
   /// an eye from the point of the bounding sphere that reflects each towards it. `ahead`: fill
   /// ahead's, whose rays the cube's savings must cover (prefill, the ideal bound, is free).

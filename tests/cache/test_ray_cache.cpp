@@ -1082,31 +1082,65 @@ TEST(RayCachePathMode, SwitchingBetweenWhittedAndPathStartsTheCubesAfresh) {
   EXPECT_TRUE(store_of(w.reg).cube(0).probe.empty());
 }
 
-TEST(RayCachePathMode, AutoKeepsPathModeUncachedAndSaysWhy) {
-  // Measured (docs/cache-report/path-cache.md): no probe setting reached uncached path tracing's
-  // error sooner, so auto turns path-mode cubes off — and then the frames are uncached ones,
-  // image and rays alike (no lookups, no leaving records).
+TEST(RayCachePathMode, AutoLightsTheDiffuseLobeWhereTheSurroundingsAreFarAndNeverServes) {
+  // Measured (docs/cache-report/path-cache.md): texels that serve reached uncached path
+  // tracing's error later, the incoming-light probe sooner. Auto keeps the probe (and no texel
+  // serves: no lookups) while what the object sees is far.
   LitSurroundings lit;
   const auto build = [&](ecs::Registry& r) { lit(r); };
   CacheSettings automatic;
   automatic.policy = CachePolicy::Auto;
+  automatic.path_serve = true; // auto does not let texels serve, whatever it is told
   World cached, uncached;
-  make_world(cached, automatic, 16, build, 48);
-  make_world(uncached, CacheSettings{}, 16, build, 48);
+  make_world(cached, automatic, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, mirror_material(0.5f));
+  make_world(uncached, CacheSettings{}, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2,
+             mirror_material(0.5f));
   path_mode(cached);
   path_mode(uncached);
   Framebuffer a{1, 1}, b{1, 1};
-  for (int k = 0; k < 3; ++k) {
+  for (int k = 0; k < 4; ++k) {
     a = frame(cached);
     b = frame(uncached);
   }
   const FrameStats& last = cached.reg.resource<RenderJob>().last;
-  EXPECT_EQ(rmse(a, b), 0.0);
-  EXPECT_EQ(last.rays.total(), uncached.reg.resource<RenderJob>().last.rays.total());
   EXPECT_EQ(last.cache.lookups, 0u);
   ASSERT_EQ(last.cache.cubes.size(), 1u);
-  EXPECT_EQ(last.cache.cubes[0].mode, "off");
-  EXPECT_NE(last.cache.cubes[0].reason.find("path mode"), std::string::npos);
+  EXPECT_EQ(last.cache.cubes[0].mode, "irradiance");
+  EXPECT_NE(last.cache.cubes[0].reason.find("incoming-light probe"), std::string::npos);
+  EXPECT_TRUE(store_of(cached.reg).cube(0).lights_diffuse);
+  EXPECT_GT(rmse(a, b), 0.0); // the lobe is lit by the probe, not sampled
+}
+
+TEST(RayCachePathMode, AutoTurnsTheProbeOffWhereTheSurroundingsAreNearAndRunsUncached) {
+  // Inside a diffuse sphere of radius 6 (every leaving ray hits within 10 radii) the probe
+  // would not stand for the mirror's every point: auto turns the cube off after a frame, and the
+  // frames after are uncached ones, image and rays alike.
+  const auto build = [](ecs::Registry& r) {
+    test::add_mesh(r, test::primitive("sphere", 6.0f, vec3(1.0f), 48, 24), test::at(vec3(0.0f)),
+                   diffuse(vec3(0.6f, 0.5f, 0.4f)));
+    test::add_point_light(r, vec3(0, 3, 2), 40.0f);
+  };
+  CacheSettings automatic;
+  automatic.policy = CachePolicy::Auto;
+  World cached, uncached;
+  make_world(cached, automatic, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, mirror_material(0.5f));
+  make_world(uncached, CacheSettings{}, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2,
+             mirror_material(0.5f));
+  path_mode(cached);
+  path_mode(uncached);
+  (void)frame(cached);
+  (void)frame(uncached);
+  const FrameStats& first = cached.reg.resource<RenderJob>().last;
+  ASSERT_EQ(first.cache.cubes.size(), 1u);
+  EXPECT_EQ(first.cache.cubes[0].mode, "off");
+  EXPECT_NE(first.cache.cubes[0].reason.find("within 10 radii"), std::string::npos)
+      << first.cache.cubes[0].reason;
+  // The first frame had no probe yet, and the frames after are uncached ones: the images are
+  // the same, and so are the rays.
+  const Framebuffer a = frame(cached), b = frame(uncached);
+  EXPECT_EQ(rmse(a, b), 0.0);
+  EXPECT_EQ(cached.reg.resource<RenderJob>().last.rays.total(),
+            uncached.reg.resource<RenderJob>().last.rays.total());
 }
 
 TEST(RayCachePathMode, AMoveOutdatesSamplesStillBeingAveraged) {
