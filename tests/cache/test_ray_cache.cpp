@@ -466,15 +466,20 @@ TEST(RayCache, FillAheadTracesItsBudgetInTheTilesTheLookupsAddressedFirst) {
   EXPECT_EQ(ahead, kBudget);
 }
 
+/// Direction mode with fill ahead K, 128² faces, distant surroundings.
+void fill_ahead_world(World& w, std::uint32_t ahead) {
+  CacheSettings s = on(LookupMode::Direction);
+  s.fill_ahead = ahead;
+  make_world(w, s, 128, distant_surroundings);
+}
+
 TEST(RayCache, FillAheadLetsAPanningViewFindTheDirectionsItTurnsToValid) {
   // The camera orbits 3° a frame (about four texels of 128² faces): without fill ahead most
   // lookups of the next frame find outdated texels; with it (rings of tiles around the last
   // frame's lookups, half the cube a frame), almost none do.
   auto outdated_share = [](std::uint32_t ahead) {
-    CacheSettings s = on(LookupMode::Direction);
-    s.fill_ahead = ahead;
     World w;
-    make_world(w, s, 128, distant_surroundings);
+    fill_ahead_world(w, ahead);
     double share = 0.0;
     for (int k = 0; k < 4; ++k) {
       (void)frame(w);
@@ -496,10 +501,8 @@ TEST(RayCache, FillAheadsRaysAreChargedAgainstWhatTheCubeSaves) {
   // served whole, with or without fill ahead (which fills texels it does not look up). The
   // rays fill ahead traces come off what the cube is said to save.
   auto saved_ms = [](std::uint32_t ahead) {
-    CacheSettings s = on(LookupMode::Direction);
-    s.fill_ahead = ahead;
     World w;
-    make_world(w, s, 128, distant_surroundings);
+    fill_ahead_world(w, ahead);
     (void)frame(w);
     (void)frame(w);
     const CacheCounts& c = store_of(w.reg).counts();
@@ -757,6 +760,16 @@ CacheSettings path_cache(std::uint32_t samples, std::uint32_t refresh = 2,
   return s;
 }
 
+/// The sum of a's pixel components over b's: whether two images are as bright.
+double brightness_ratio(const Framebuffer& a, const Framebuffer& b) {
+  double sa = 0.0, sb = 0.0;
+  for (std::size_t i = 0; i < a.pixel_count(); ++i) {
+    sa += double(a.pixels()[i].x + a.pixels()[i].y + a.pixels()[i].z);
+    sb += double(b.pixels()[i].x + b.pixels()[i].y + b.pixels()[i].z);
+  }
+  return sa / sb;
+}
+
 bool served(const LeavingRadiance& r) {
   return r.answer == CacheAnswer::Use || r.answer == CacheAnswer::Refresh;
 }
@@ -839,12 +852,7 @@ TEST(RayCachePathMode, TheIncomingProbeLightsTheDiffuseLobeWithLessErrorAndNoBia
   };
   EXPECT_LT(mirror_rmse(a), 0.9 * mirror_rmse(b))
       << "cached " << mirror_rmse(a) << ", uncached " << mirror_rmse(b);
-  double mean_a = 0.0, mean_ref = 0.0;
-  for (std::size_t i = 0; i < a.pixel_count(); ++i) {
-    mean_a += double(a.pixels()[i].x + a.pixels()[i].y + a.pixels()[i].z);
-    mean_ref += double(ref.pixels()[i].x + ref.pixels()[i].y + ref.pixels()[i].z);
-  }
-  EXPECT_NEAR(mean_a / mean_ref, 1.0, 0.02);
+  EXPECT_NEAR(brightness_ratio(a, ref), 1.0, 0.02);
 }
 
 TEST(RayCachePathMode, TheIncomingProbeIsTheSameWhateverTheThreadCount) {
@@ -1032,12 +1040,7 @@ TEST(RayCachePathMode, ServedSamplesEndAtTheirFirstHitAndTheImageConvergesToUnca
   // The cache's error against uncached is of the order of the noise between two uncached runs.
   const double noise = psnr(b, c);
   EXPECT_GE(psnr(a, b), noise - 3.0) << "two uncached seeds: " << noise << " dB";
-  double mean_a = 0.0, mean_b = 0.0;
-  for (std::size_t i = 0; i < a.pixel_count(); ++i) {
-    mean_a += double(a.pixels()[i].x + a.pixels()[i].y + a.pixels()[i].z);
-    mean_b += double(b.pixels()[i].x + b.pixels()[i].y + b.pixels()[i].z);
-  }
-  EXPECT_NEAR(mean_a / mean_b, 1.0, 0.02);
+  EXPECT_NEAR(brightness_ratio(a, b), 1.0, 0.02);
 }
 
 TEST(RayCachePathMode, FramesAndProbesAreTheSameWhateverTheThreadCount) {
