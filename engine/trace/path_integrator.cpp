@@ -362,16 +362,17 @@ private:
     const float specular =
         (kMirror ? m.reflectivity : 0.0f) + (kDielectric ? m.transmission : 0.0f);
     const float total = diffuse + specular;
-    // A cached object's own probe of incoming light may light its diffuse lobe (ray-cache
-    // cubes in path mode: RadianceHook::irradiance): then that lobe is neither light-sampled
-    // nor continued, and the path goes on by its specular lobe alone.
-    vec3 probe(0.0f);
-    const bool probe_lit = (kMirror || kDielectric) && hook_ != nullptr && diffuse > 0.0f &&
-                           specular > 0.0f &&
-                           hook_->irradiance(v.instance, sp.shading_normal, probe);
     // Probability of the diffuse lobe: with it, the mixture's density of a direction.
     const float p_diffuse = total > 0.0f ? diffuse / total : 0.0f;
     const bool last = depth >= settings_.max_depth;
+    // A cached object's own probe of incoming light may light its diffuse lobe (ray-cache
+    // cubes in path mode: RadianceHook::irradiance): then that lobe is neither light-sampled
+    // nor continued, and the path goes on by its specular lobe alone. Not at the depth limit,
+    // where the lobe gathers no indirect light either way.
+    vec3 probe(0.0f);
+    const bool probe_lit = (kMirror || kDielectric) && !last && hook_ != nullptr &&
+                           diffuse > 0.0f && specular > 0.0f &&
+                           hook_->irradiance(v.instance, sp.shading_normal, probe);
 
     vec3 origin(0.0f);
     if (diffuse > 0.0f) {
