@@ -193,18 +193,15 @@ std::uint32_t mix_hash(std::uint64_t x) {
   return std::uint32_t(x);
 }
 
-/// Fill ahead's tiles (RayCacheStore::fill_ahead): `side`² a face, each `size`² texels.
+/// Fill ahead's tiles (RayCacheStore::fill_ahead): `side`² a face, each `size`² texels. Both are
+/// powers of two, so a tile is addressed as the texel of a cube of resolution `side`
+/// (texel_of, texel_index).
 struct TileGrid {
   std::uint32_t side, size;
   explicit TileGrid(std::uint32_t resolution)
       : side(std::min(resolution, RayCacheStore::kFillAheadTiles)),
         size(std::max(1u, resolution / side)) {}
   [[nodiscard]] std::uint32_t count() const { return kFaceCount * side * side; }
-  [[nodiscard]] std::uint32_t of_texel(std::uint32_t texel, std::uint32_t resolution) const {
-    const std::uint32_t per_face = resolution * resolution;
-    const std::uint32_t face = texel / per_face, within = texel % per_face;
-    return (face * side + (within / resolution) / size) * side + (within % resolution) / size;
-  }
 };
 
 /// The ladder auto walks down when the error bound is not kept: fastest first.
@@ -273,12 +270,6 @@ struct RayCacheStore::Cube {
   IrradianceSH irradiance;
   bool irradiance_ready = false;
   [[nodiscard]] std::uint32_t incoming_side() const { return std::min(resolution, kIncomingCells); }
-  [[nodiscard]] std::uint32_t incoming_cell(std::uint32_t texel) const {
-    const std::uint32_t side = incoming_side(), per = resolution / side;
-    const std::uint32_t face = texel / (resolution * resolution);
-    const std::uint32_t within = texel % (resolution * resolution);
-    return (face * side + (within / resolution) / per) * side + (within % resolution) / per;
-  }
   /// The frame's samples for `incoming`, per cell: red, green, blue in fixed point
   /// (kIncomingScale) and the count — integer sums, the same in whatever order the tiles
   /// deliver them.
@@ -870,13 +861,10 @@ std::uint64_t RayCacheStore::fill_ahead(const Tracer& tracer, const SceneLayer& 
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx) {
             if (dx == 0 && dy == 0) continue;
-            const CubeCoord n = cube_coord(
-                cube_direction(face, (float(tx + dx) + 0.5f) * inv, (float(ty + dy) + 0.5f) * inv));
             const std::uint32_t nt =
-                (n.face * w.grid.side +
-                 std::min(w.grid.side - 1, std::uint32_t(n.v * float(w.grid.side)))) *
-                    w.grid.side +
-                std::min(w.grid.side - 1, std::uint32_t(n.u * float(w.grid.side)));
+                texel_index(cube_coord(cube_direction(face, (float(tx + dx) + 0.5f) * inv,
+                                                      (float(ty + dy) + 0.5f) * inv)),
+                            w.grid.side);
             if (w.reached[nt]) continue;
             w.reached[nt] = 1;
             next.push_back(nt);
@@ -1077,8 +1065,7 @@ void RayCacheStore::lookup(std::span<const LeavingQuery> queries,
     if (settings_.fill_ahead != 0 && !averaging_) {
       // Fill ahead starts from the tiles the lookups addressed (a set: the same whatever the
       // threads' order).
-      const std::uint32_t tile =
-          TileGrid(c.resolution).of_texel(texel_of(q.direction, c.resolution), c.resolution);
+      const std::uint32_t tile = texel_of(q.direction, TileGrid(c.resolution).side);
       std::atomic_ref<std::uint32_t> word(cubes_[std::size_t(ci)]->addressed[tile >> 5]);
       const std::uint32_t bit = 1u << (tile & 31u);
       if ((word.load(std::memory_order_relaxed) & bit) == 0)
