@@ -286,6 +286,12 @@ struct RayCacheStore::Cube {
   /// set from the lookup threads through atomic_ref.
   std::vector<std::uint32_t> addressed;
   std::uint64_t generation = next_generation();
+  /// The texels changed since generation `journal_from` (a device copy made at that generation
+  /// sends only those: CubeView::changes); past an eighth of the texels it gives up
+  /// (journal_whole) and a copy goes up whole. Restarted by restart_journals.
+  std::vector<std::uint32_t> journal;
+  std::uint64_t journal_from = generation;
+  bool journal_whole = false;
   std::vector<std::uint32_t> edges; ///< by entity index: valid texels whose first hit it is
   std::uint64_t valid = 0;
   // Policy.
@@ -337,23 +343,35 @@ struct RayCacheStore::Cube {
   [[nodiscard]] bool holds(std::uint32_t i) const {
     return texels[i].valid() || (!probe.empty() && probe[i].samples > 0);
   }
+  /// Texel i changed: a new generation, and i in the journal.
+  void changed(std::uint32_t i) {
+    generation = next_generation();
+    if (journal_whole) return;
+    if (journal.size() >= texels.size() / 8) {
+      journal_whole = true;
+      journal.clear();
+      journal.shrink_to_fit();
+      return;
+    }
+    journal.push_back(i);
+  }
   void outdate(std::uint32_t i) {
     Texel& t = texels[i];
     if (!probe.empty() && probe[i].samples > 0) {
       probe[i] = ProbeTexel{};
-      generation = next_generation();
+      changed(i);
     }
     if (!t.valid()) return;
     t.state &= std::uint8_t(~kValid);
     --valid;
-    generation = next_generation();
+    changed(i);
     if (t.hit < edges.size()) --edges[t.hit];
   }
   void store(std::uint32_t i, const Texel& value) {
     outdate(i);
     texels[i] = value;
     ++valid;
-    generation = next_generation();
+    changed(i);
     if (value.hit != kNoInstance) {
       if (value.hit >= edges.size()) edges.resize(value.hit + 1, 0);
       ++edges[value.hit];
@@ -383,7 +401,7 @@ struct RayCacheStore::Cube {
         make_texel(vec3(p.sum[0], p.sum[1], p.sum[2]) / p.weight, 0.0f, kNoInstance, 0, 0);
     std::copy(std::begin(m.rgb), std::end(m.rgb), std::begin(t.rgb));
     t.seen |= seen;
-    generation = next_generation();
+    changed(i);
     const bool serves = p.weight >= float(serve_at);
     if (serves == t.valid()) return;
     if (serves) {
@@ -408,7 +426,11 @@ struct RayCacheStore::Cube {
     for (Texel& t : texels) t.state &= std::uint8_t(~kValid);
     std::fill(edges.begin(), edges.end(), 0u);
     valid = 0;
-    if (was > 0) generation = next_generation();
+    if (was > 0) {
+      generation = next_generation();
+      journal_whole = true;
+      journal.clear();
+    }
     return was;
   }
 };
@@ -449,6 +471,8 @@ CubeView RayCacheStore::cube(std::size_t i) const {
                   c.enabled,
                   c.cos_tau,
                   c.generation,
+                  c.journal_whole ? 0u : c.journal_from,
+                  c.journal,
                   settings_.policy == CachePolicy::Auto ? verify_period(c) : 0u,
                   c.incoming,
                   c.incoming_side(),
@@ -915,6 +939,47 @@ void RayCacheStore::begin_frame(std::uint32_t width, std::uint32_t height, Trace
 bool RayCacheStore::serving() const {
   // Auto never lets path mode's texels serve: measured not to pay (docs/design/ray-cache.md).
   return settings_.path_serve && settings_.policy != CachePolicy::Auto;
+}
+
+void RayCacheStore::restart_journals() {
+  for (auto& c : cubes_) {
+    c->journal.clear();
+    c->journal_whole = false;
+    c->journal_from = c->generation;
+  }
+}
+
+bool RayCacheStore::needs_every_lookup() const {
+  return log_lookups_ || (settings_.fill_ahead != 0 && !averaging_);
+}
+
+CubeFrameCounts RayCacheStore::frame_counts(std::size_t i) const {
+  const Cube& c = *cubes_.at(i);
+  CubeFrameCounts n;
+  n.lookups = c.lookups.load();
+  n.outdated = c.outdated.load();
+  n.rejected = c.rejected.load();
+  n.march_steps = c.march_steps.load();
+  n.offered_rays = c.offered_rays.load();
+  n.used = c.used;
+  n.used_rays = c.used_rays;
+  n.traced = c.traced;
+  n.traced_rays = c.traced_rays;
+  return n;
+}
+
+void RayCacheStore::add_frame_counts(std::size_t i, const CubeFrameCounts& n) {
+  const std::lock_guard lock(mutex_);
+  Cube& c = *cubes_.at(i);
+  c.lookups += n.lookups;
+  c.outdated += n.outdated;
+  c.rejected += n.rejected;
+  c.march_steps += n.march_steps;
+  c.offered_rays += n.offered_rays;
+  c.used += n.used;
+  c.used_rays += n.used_rays;
+  c.traced += n.traced;
+  c.traced_rays += n.traced_rays;
 }
 
 bool RayCacheStore::wants_lookups() const {

@@ -132,6 +132,11 @@ struct CubeView {
   /// Changes whenever a texel does (from a process-wide counter: never reused, even by a cube
   /// made anew), so a device copy re-uploads only the cubes that changed.
   std::uint64_t generation;
+  /// The texels changed (some perhaps more than once) since generation `changes_from`, when
+  /// the cube kept track (0 when it did not: a flush, or too many changes): a copy made at that
+  /// generation needs only these (RayCacheStore::restart_journals).
+  std::uint64_t changes_from;
+  std::span<const std::uint32_t> changes;
   /// Auto, Whitted frames: one accepted lookup in this many is traced anyway to measure the
   /// error (verify_chosen); 0: none (policy on).
   std::uint32_t verify_every;
@@ -178,6 +183,16 @@ struct LookupRecord {
 struct InvalidationStats {
   std::uint64_t outdated = 0;  ///< texels this invalidation outdated
   std::uint64_t flush_all = 0; ///< valid texels before it (what flushing every cube would cost)
+};
+
+/// What a frame's lookups and unrecorded leaving rays added to one cube, counted where they
+/// were made (the device frames' kernels, DeviceCache) instead of by lookup() and leaving().
+struct CubeFrameCounts {
+  std::uint64_t lookups = 0, outdated = 0, rejected = 0, march_steps = 0;
+  std::uint64_t offered_rays = 0;            ///< what the served texels cost when they were traced
+  std::uint64_t used = 0, used_rays = 0;     ///< served leaving rays, and the rays they traced
+  std::uint64_t traced = 0, traced_rays = 0; ///< traced leaving rays, and their subtrees' rays
+  friend bool operator==(const CubeFrameCounts&, const CubeFrameCounts&) = default;
 };
 
 class RayCacheStore final : public RadianceHook {
@@ -228,6 +243,19 @@ public:
   /// The lookups of the frame since the latest begin_frame, in no particular order (batches
   /// append as their threads finish), with set_log_lookups on.
   [[nodiscard]] const std::vector<LookupRecord>& lookup_log() const { return lookup_log_; }
+  /// Starts every cube's list of changed texels afresh from its current generation
+  /// (CubeView::changes): the device copy calls it once it is up to date. A second copy finds
+  /// the lists started at another generation than its own and sends whole cubes.
+  void restart_journals();
+  /// Whether every lookup of the frame must reach lookup() itself (the lookup log, or fill
+  /// ahead's tile marks): then no one may count lookups for it (add_frame_counts).
+  [[nodiscard]] bool needs_every_lookup() const;
+  /// Cube i's counts of the frame so far (since begin_frame).
+  [[nodiscard]] CubeFrameCounts frame_counts(std::size_t i) const;
+  /// Adds lookups and leaving rays counted elsewhere to cube i's frame, as lookup() and leaving()
+  /// would have counted them (between begin_frame and end_frame). Rays that may write a texel or
+  /// that were verified must still reach leaving().
+  void add_frame_counts(std::size_t i, const CubeFrameCounts& n);
   /// The frame number verify_chosen hashes (counted by begin_frame; its low 32 bits).
   [[nodiscard]] std::uint32_t verify_frame() const { return std::uint32_t(frame_); }
   /// True unless every cube is off.

@@ -184,11 +184,12 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
   frame.params->upload(&params, sizeof params);
 
   std::vector<const Buffer*> buffers(scene_.bindings().begin(), scene_.bindings().end());
-  for (const Buffer* b : {frame.params, frame.materials, frame.lights, frame.normals,
-                          frame.counters, frame.image, frame.primary, &paths_, &hits_, &queues_,
-                          &shadows_, &shadow_queues_, &no_cache_, &no_cache_, &no_cache_,
-                          &path_params_, &emitters_, &emitter_first_, &sums_, &sobol_,
-                          &pool_.states, &pool_.stacks, &guides_})
+  for (const Buffer* b :
+       {frame.params,  frame.materials, frame.lights,    frame.normals, frame.counters,
+        frame.image,   frame.primary,   &paths_,         &hits_,        &queues_,
+        &shadows_,     &shadow_queues_, &no_cache_,      &no_cache_,    &no_cache_,
+        &path_params_, &emitters_,      &emitter_first_, &sums_,        &sobol_,
+        &pool_.states, &pool_.stacks,   &guides_,        &no_cache_})
     buffers.push_back(b);
 
   Commands cmd(context_, 4);

@@ -192,7 +192,7 @@ std::vector<const Buffer*> DeviceRenderer::bindings() const {
                             &primary_buffer_, &nodes_, &hits_, &queues_, &shadows_,
                             &shadow_queues_})
     b.push_back(own);
-  for (const Buffer* own : cache_buffers_) b.push_back(own);
+  for (int k = 0; k < 3; ++k) b.push_back(cache_buffers_[k]);
   // Hybrid mode's visibility buffer and slot boxes (23-24), the rest of the path frames' range
   // (25-27), unused here, then the state pools.
   b.push_back(raster_ ? &raster_->visibility() : &unused_);
@@ -201,6 +201,7 @@ std::vector<const Buffer*> DeviceRenderer::bindings() const {
   b.push_back(&pool_->states);
   b.push_back(&pool_->stacks);
   b.push_back(&unused_); // 30: the path frames' guides
+  b.push_back(cache_buffers_[3]); // 31: the cubes' counts
   return b;
 }
 
@@ -208,6 +209,13 @@ void DeviceRenderer::bind_cache(bool cache) {
   cache_buffers_[0] = cache ? &cache_->cubes() : &unused_;
   cache_buffers_[1] = cache ? &cache_->texels() : &unused_;
   cache_buffers_[2] = cache ? &cache_->records() : &unused_;
+  cache_buffers_[3] = cache ? &cache_->counts() : &unused_;
+}
+
+void DeviceRenderer::zero_cache_counts(Commands& cmd) const {
+  if (cache_buffers_[3] == &unused_) return;
+  cmd.fill(*cache_buffers_[3], 0u);
+  cmd.barrier();
 }
 
 void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t pixels) {
@@ -221,6 +229,7 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
   Commands cmd(context_, 8);
   WavePush push;
   const std::uint32_t t0 = cmd.timestamp();
+  zero_cache_counts(cmd);
   cmd.dispatch(p.eye, buffers, &push, groups(pixels));
   cmd.barrier();
   ++dispatches_;
@@ -292,6 +301,7 @@ void DeviceRenderer::run_single(std::uint32_t pixels) {
   params_.download(&params, sizeof params);
   Commands cmd(context_, 4);
   const WavePush push;
+  zero_cache_counts(cmd);
   if (raster_) {
     // Hybrid mode: the whole frame's visibility buffer before the first walk.
     const std::uint32_t begin = cmd.timestamp();

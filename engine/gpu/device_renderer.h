@@ -78,12 +78,15 @@ public:
               Framebuffer& out, FrameStats& stats, GpuTraceCounters& counters,
               RadianceHook* hook = nullptr, GuideBuffers* guides = nullptr);
 
-  /// Ray-cache records of the last frame whose device answer differed from the store's replayed
-  /// lookup (must be 0), and texels uploaded for it.
+  /// Where every leaving ray is recorded (DeviceCache::Records::every): the last frame's
+  /// ray-cache records whose device answer differed from the store's replayed lookup, and cubes
+  /// whose lookup counts did (must be 0); texels uploaded for it.
   [[nodiscard]] std::uint64_t cache_mismatches() const { return cache_mismatches_; }
   [[nodiscard]] std::uint64_t cache_texels_uploaded() const;
   /// Leaving rays the last frame recorded for the store.
   [[nodiscard]] std::uint32_t cache_records() const { return cache_records_; }
+  /// The device copy of the ray-cache store (which leaving rays it records: set_records).
+  [[nodiscard]] DeviceCache& cache() { return *cache_; }
 
   /// The instance slot each pixel's primary ray hit in the last frame (kNoIndex: a miss), row
   /// major: for comparing primary visibility with the CPU backends (read back on first use).
@@ -125,6 +128,8 @@ private:
   void run_wavefront(const TraceSettings& settings, std::uint32_t pixels);
   void run_single(std::uint32_t pixels);
   void bind_cache(bool cache);
+  /// Records the zeroing of the cubes' counts (binding 31) where the frame has cubes.
+  void zero_cache_counts(Commands& cmd) const;
   /// Every frame kernel's buffers, bindings 0 to kFramePoolBindings - 1 (frame_layout.h), with
   /// `unused_` where the frame has no cubes or no visibility buffer.
   [[nodiscard]] std::vector<const Buffer*> bindings() const;
@@ -138,7 +143,7 @@ private:
   /// switches between two sets instead of rebuilding each time.
   std::unique_ptr<Pipelines> previous_;
   std::unique_ptr<DeviceCache> cache_;
-  const Buffer* cache_buffers_[3] = {nullptr, nullptr, nullptr};
+  const Buffer* cache_buffers_[4] = {nullptr, nullptr, nullptr, nullptr}; ///< bindings 20-22, 31
   std::uint64_t cache_mismatches_ = 0;
   std::uint32_t cache_records_ = 0;
   std::unique_ptr<DevicePath> path_; ///< path and shadow frames, made on first use

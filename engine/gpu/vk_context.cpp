@@ -545,6 +545,24 @@ void Buffer::upload(const void* data, VkDeviceSize bytes, VkDeviceSize offset) {
   });
 }
 
+void Buffer::scatter(const void* data, VkDeviceSize bytes, std::span<const VkBufferCopy> regions) {
+  if (regions.empty()) return;
+  for (const VkBufferCopy& r : regions)
+    if (r.srcOffset + r.size > bytes || r.dstOffset + r.size > size_)
+      throw GpuError("Buffer::scatter beyond its data or the buffer's end", VK_ERROR_UNKNOWN);
+  const auto* from = static_cast<const char*>(data);
+  if (mapped_ != nullptr) {
+    for (const VkBufferCopy& r : regions)
+      std::memcpy(static_cast<char*>(mapped_) + r.dstOffset, from + r.srcOffset, r.size);
+    return;
+  }
+  Buffer staging = context_->make_buffer(bytes, MemoryKind::host);
+  std::memcpy(staging.mapped(), data, bytes);
+  context_->run_now([&](VkCommandBuffer cmd) {
+    vkCmdCopyBuffer(cmd, staging.handle(), buffer_, std::uint32_t(regions.size()), regions.data());
+  });
+}
+
 void Buffer::download(void* data, VkDeviceSize bytes, VkDeviceSize offset) const {
   if (bytes == 0) return;
   if (offset + bytes > size_)

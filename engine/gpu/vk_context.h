@@ -95,6 +95,9 @@ public:
   template <class T> void upload(std::span<const T> data, VkDeviceSize offset = 0) {
     upload(data.data(), data.size_bytes(), offset);
   }
+  /// Copies pieces of `data` (`bytes` long) into the buffer, each region's srcOffset into
+  /// `data` and dstOffset into the buffer: one staging copy and one submit for all (waits).
+  void scatter(const void* data, VkDeviceSize bytes, std::span<const VkBufferCopy> regions);
   /// Copies bytes out of the buffer (a staging copy when not host-visible; waits).
   void download(void* data, VkDeviceSize bytes, VkDeviceSize offset = 0) const;
   template <class T> void download(std::span<T> data, VkDeviceSize offset = 0) const {

@@ -14,9 +14,39 @@ layout(constant_id = 5) const bool kCache = false;
 layout(std430, set = 0, binding = 20) readonly buffer CacheCubes { GpuCube cubes[]; };
 layout(std430, set = 0, binding = 21) readonly buffer CacheTexels { uvec4 texels[]; };
 layout(std430, set = 0, binding = 22) writeonly buffer CacheRecords { GpuLeavingRecord records[]; };
+layout(std430, set = 0, binding = 31) buffer CacheCounts { uint cube_counts[]; };
 
-// Answer bits beside the CacheAnswer value: the ray was looked up (the host replays the lookup).
+// Answer bits beside the CacheAnswer value: the ray was looked up (the host replays the lookup
+// where every ray is recorded); above them, the texel the lookup read (kAnswerTexelShift).
 const uint kAnswerLookedUp = 16u;
+const uint kAnswerTexelShift = 5u;
+
+// Adds v to word `field` of slot's counts (kCount*, cache_layout.h): one atomic for the
+// subgroup's active lanes where they share the slot (adjacent pixels mostly leave one object).
+void cache_count(uint slot, uint field, uint v) {
+  uint at = slot * kCubeCountWords + field;
+  if (subgroupAllEqual(slot)) {
+    uint sum = subgroupAdd(v);
+    if (subgroupElect() && sum != 0u) atomicAdd(cube_counts[at], sum);
+  } else if (v != 0u) {
+    atomicAdd(cube_counts[at], v);
+  }
+}
+
+// As cache_count, into a 64-bit sum (low word at `field`, high word after it).
+void cache_count64(uint slot, uint field, uint v) {
+  uint at = slot * kCubeCountWords + field;
+  uint sum = v;
+  bool add = v != 0u;
+  if (subgroupAllEqual(slot)) {
+    sum = subgroupAdd(v);
+    add = subgroupElect() && sum != 0u;
+  }
+  if (add) {
+    uint before = atomicAdd(cube_counts[at], sum);
+    if (before + sum < before) atomicAdd(cube_counts[at + 1u], 1u);
+  }
+}
 
 // The slot whose cube gets a record of a ray leaving instance `slot` (kNoIndex: none). Only rays
 // that go away from the object (exits) are the cube's.
@@ -49,8 +79,10 @@ bool cache_verify(GpuCube c, uint pixel, uint depth) {
 // crossing anything sees what the texel of its direction saw: a miss, confirmed by an occlusion
 // ray (kAnswerUseIfClear). Returns kAnswerTrace (outdated, rejected, out of steps), kAnswerUse or
 // kAnswerUseIfClear, with the texel's index in `texel`. At most kCubeMarchIterations iterations.
-uint cache_march(GpuCube c, vec3 p, vec3 d, out uint texel) {
+uint cache_march(GpuCube c, vec3 p, vec3 d, out uint texel, out bool outdated, out uint steps) {
   texel = 0u;
+  outdated = false;
+  steps = 0u;
   uint res = c.resolution;
   vec3 pc = p - c.centre;
   float texel_angle = 2.0 / float(res);
@@ -59,18 +91,23 @@ uint cache_march(GpuCube c, vec3 p, vec3 d, out uint texel) {
   float t = 0.0;
   float t_inside = 0.0;
   for (uint step = 0u; step < kCubeMarchSteps; ++step) {
+    ++steps;
     vec3 q = pc + t * d;
     float r = length3(q);
     uint ti = cube_texel(r > 0.0 ? q : d, res);
     uvec4 tx = texels[c.first_texel + ti];
-    if (!texel_valid(tx)) return kAnswerTrace;
+    if (!texel_valid(tx)) {
+      outdated = true;
+      return kAnswerTrace;
+    }
     float D = texel_distance(tx);
     if (isinf(D)) {
       float bound = r * c.cos_half_texel;
       if (r > 0.0 && dot3(q, d) >= bound) {
         uint td = cube_texel(d, res);
         uvec4 own = texels[c.first_texel + td];
-        if (!texel_valid(own) || !isinf(texel_distance(own))) return kAnswerTrace;
+        outdated = !texel_valid(own);
+        if (outdated || !isinf(texel_distance(own))) return kAnswerTrace;
         texel = td;
         return kAnswerUseIfClear;
       }
@@ -79,12 +116,16 @@ uint cache_march(GpuCube c, vec3 p, vec3 d, out uint texel) {
       float lo = t_inside, hi = t;
       uint found = ti;
       for (uint k = 0u; k < kCubeRefineSteps; ++k) {
+        ++steps;
         float mid = 0.5 * (lo + hi);
         vec3 qm = pc + mid * d;
         float rm = length3(qm);
         uint tm = cube_texel(rm > 0.0 ? qm : d, res);
         uvec4 mx = texels[c.first_texel + tm];
-        if (!texel_valid(mx)) return kAnswerTrace;
+        if (!texel_valid(mx)) {
+          outdated = true;
+          return kAnswerTrace;
+        }
         float Dm = texel_distance(mx);
         if (!isinf(Dm) && rm >= Dm) {
           hi = mid;
@@ -120,8 +161,9 @@ uint cache_march(GpuCube c, vec3 p, vec3 d, out uint texel) {
 
 // RayCacheStore::lookup for one ray leaving `slot` (a cube's) from `pixel` at `depth`:
 // kAnswerTrace, or kAnswerUse / kAnswerUseIfClear with the texel's radiance and seen mask, or
-// kAnswerVerify (traced as kAnswerTrace, its radiance and mask left 0: the host takes the cached
-// value from the store), | kAnswerLookedUp when the cube is looked up at all this frame.
+// kAnswerVerify (traced as kAnswerTrace, its radiance and mask left 0), | kAnswerLookedUp when
+// the cube is looked up at all this frame, | the texel read << kAnswerTexelShift. Counts the
+// lookup in the slot's counts as the store's lookup() counts it.
 uint cache_lookup(uint slot, uint pixel, uint depth, vec3 origin, vec3 direction,
                   out vec3 radiance, out uint seen) {
   radiance = vec3(0.0);
@@ -130,35 +172,64 @@ uint cache_lookup(uint slot, uint pixel, uint depth, vec3 origin, vec3 direction
   if ((c.flags & kCubeEnabled) == 0u) return kAnswerTrace;
   uint texel = cube_texel(direction, c.resolution);
   uint answer = kAnswerTrace;
+  bool outdated = false;
+  uint steps = 0u;
   if (c.mode == kCubeMarch) {
-    answer = cache_march(c, origin, direction, texel);
+    answer = cache_march(c, origin, direction, texel, outdated, steps);
   }
   uvec4 t = texels[c.first_texel + texel];
-  if (c.mode != kCubeMarch && texel_valid(t)) {
-    if (c.mode == kCubeDirection) {
-      answer = kAnswerUse;
-    } else {
-      float d = texel_distance(t);
-      if (isinf(d)) answer = kAnswerUseIfClear; // a miss: an occlusion ray confirms
-      else if (cache_within_tau(c.centre, direction, d, origin, direction, c.cos_tau))
+  if (c.mode != kCubeMarch) {
+    outdated = !texel_valid(t);
+    if (!outdated) {
+      if (c.mode == kCubeDirection) {
         answer = kAnswerUse;
+      } else {
+        float d = texel_distance(t);
+        if (isinf(d)) answer = kAnswerUseIfClear; // a miss: an occlusion ray confirms
+        else if (cache_within_tau(c.centre, direction, d, origin, direction, c.cos_tau))
+          answer = kAnswerUse;
+      }
     }
   }
-  if (answer != kAnswerTrace && cache_verify(c, pixel, depth))
-    return kAnswerVerify | kAnswerLookedUp;
+  bool verify = answer != kAnswerTrace && cache_verify(c, pixel, depth);
+  cache_count(slot, kCountLookups, 1u);
+  cache_count(slot, kCountOutdated, outdated ? 1u : 0u);
+  cache_count(slot, kCountRejected, answer == kAnswerTrace && !outdated ? 1u : 0u);
+  if (c.mode == kCubeMarch) cache_count64(slot, kCountSteps, steps);
+  // What a served texel cost when it was traced (the store's offered rays).
+  cache_count64(slot, kCountOffered, answer != kAnswerTrace && !verify ? (t.w >> 16) & 0xFFu : 0u);
+  uint bits = kAnswerLookedUp | (texel << kAnswerTexelShift);
+  if (verify) return kAnswerVerify | bits;
   if (answer != kAnswerTrace) {
     radiance = texel_radiance(t);
     uint hit = texel_hit(t);
     seen = texel_seen(t) | (hit != kNoIndex ? 1u << (hit & 31u) : 0u);
   }
-  return answer | kAnswerLookedUp;
+  return answer | bits;
 }
 
-// The record of a ray leaving a cube's object once its subtree is folded; records past the
-// buffer are counted (the host reports the overflow).
+// A ray leaving a cube's object once its subtree is folded. Recorded for the host (the store's
+// leaving()) where every ray is (kCubeRecordAll) or where it may change the store: traced with
+// its texel outdated (a write) or verified (an error sample); otherwise counted here. Records
+// past the buffer are counted (the host reports the overflow).
 void cache_record(uint slot, vec3 origin, vec3 direction, uint pixel, vec3 radiance, float hit_t,
                   uint hit_entity, uint seen, uint rays, uint depth, uint kind, uint answer,
                   vec3 throughput) {
+  GpuCube c = cubes[slot];
+  uint a = answer & 15u;
+  if ((c.flags & kCubeRecordAll) == 0u) {
+    // The store writes only outdated texels: a traced ray finding its texel valid changes
+    // nothing but the counts.
+    bool served = a == kAnswerUse || a == kAnswerUseIfClear;
+    bool counted = served || (a == kAnswerTrace &&
+                              texel_valid(texels[c.first_texel + cube_texel(direction, c.resolution)]));
+    // Each word in a call of its own: the subgroup sums one word at a time.
+    cache_count(slot, kCountUsed, served ? 1u : 0u);
+    cache_count64(slot, kCountUsedRays, served ? rays : 0u);
+    cache_count(slot, kCountTraced, counted && !served ? 1u : 0u);
+    cache_count64(slot, kCountTracedRays, counted && !served ? rays : 0u);
+    if (counted) return;
+  }
   uint k = atomicAdd(counters.records, 1u);
   if (k >= params.record_capacity) return;
   GpuLeavingRecord r;
@@ -171,9 +242,9 @@ void cache_record(uint slot, vec3 origin, vec3 direction, uint pixel, vec3 radia
   r.hit_entity = hit_entity;
   r.seen = seen;
   r.rays = rays;
-  r.packed = depth | (kind << 8) | (answer << 12);
+  r.packed = depth | (kind << 8) | ((answer & 31u) << 12);
   r.throughput = throughput;
-  r._pad0 = 0u;
+  r.texel = answer >> kAnswerTexelShift;
   records[k] = r;
 }
 

@@ -22,6 +22,10 @@ SPECULA_CONST uint kCacheCubesBinding = 20u;
 SPECULA_CONST uint kCacheTexelsBinding = 21u;
 SPECULA_CONST uint kCacheRecordsBinding = 22u;
 SPECULA_CONST uint kCacheBindings = 23u;
+/// Per instance slot, kCubeCountWords words of what the frame's lookups and unrecorded leaving
+/// rays added to its cube (kCount* below): after the pool and guide bindings
+/// (frame_layout.h's kFramePoolBindings - 1).
+SPECULA_CONST uint kCacheCountsBinding = 31u;
 
 /// GpuCube::mode: cache::LookupMode (Direction, Tau, March); kCubeNone: the slot has no cube.
 SPECULA_CONST uint kCubeDirection = 0u;
@@ -36,6 +40,24 @@ SPECULA_CONST uint kCubeMarchIterations = kCubeMarchSteps + kCubeRefineSteps;
 SPECULA_CONST uint kCubeNone = 0xFFFFFFFFu;
 /// GpuCube::flags.
 SPECULA_CONST uint kCubeEnabled = 1u; ///< looked up (else only its leaving rays are recorded)
+/// Every leaving ray is recorded, looked up or served, and the host replays the lookups on the
+/// store (DeviceCache::Records::every, checked against the kernels' counts). Without it, only
+/// rays that may change the store are recorded (a traced ray whose texel is outdated: a write;
+/// a verified one: an error sample), and the rest are counted in the kernels.
+SPECULA_CONST uint kCubeRecordAll = 2u;
+
+/// A slot's words in the counts buffer (kCacheCountsBinding): 32-bit counts, and 64-bit sums as
+/// two words, low first (the kernels carry into the high word).
+SPECULA_CONST uint kCountLookups = 0u;
+SPECULA_CONST uint kCountOutdated = 1u;
+SPECULA_CONST uint kCountRejected = 2u;
+SPECULA_CONST uint kCountUsed = 3u;        ///< served leaving rays (CacheAnswer Use / UseIfClear)
+SPECULA_CONST uint kCountTraced = 4u;      ///< traced leaving rays that wrote nothing
+SPECULA_CONST uint kCountSteps = 6u;       ///< march steps (64-bit, words 6-7)
+SPECULA_CONST uint kCountOffered = 8u;     ///< what the served texels cost when traced (64-bit)
+SPECULA_CONST uint kCountUsedRays = 10u;   ///< rays the served leaving rays traced (64-bit)
+SPECULA_CONST uint kCountTracedRays = 12u; ///< rays of the unrecorded traced ones (64-bit)
+SPECULA_CONST uint kCubeCountWords = 16u;
 
 /// How a leaving ray was served (CacheAnswer's values), and a lookup's first answer.
 SPECULA_CONST uint kAnswerTrace = 0u;
@@ -71,7 +93,7 @@ struct GpuLeavingRecord {
   uint rays;
   uint packed; ///< depth | kind << 8 | answer << 12 | looked up << 16
   vec3 throughput; ///< relative to the pixel (a verified ray's error is weighed by it)
-  uint _pad0;
+  uint texel; ///< the texel its lookup read, in its cube (a verified ray's error is against it)
 };
 
 #ifdef __cplusplus

@@ -42,10 +42,11 @@ SPECULA_CONST uint kFrameSlotBoxesBinding = 24u;
 /// Saved traversal states (trace_pool.glsl): GpuTraceState per slot and params.stack_stride stack
 /// entries per slot, after both families' bindings so that frame_shadow.comp serves both
 /// renderers; every frame and path pipeline has kFramePoolBindings (binding 30: the path frames'
-/// denoiser guides, path_layout.h's kPathGuidesBinding).
+/// denoiser guides, path_layout.h's kPathGuidesBinding; 31: the ray-cache cubes' counts,
+/// cache_layout.h's kCacheCountsBinding).
 SPECULA_CONST uint kFramePoolStatesBinding = 28u;
 SPECULA_CONST uint kFramePoolStacksBinding = 29u;
-SPECULA_CONST uint kFramePoolBindings = 31u;
+SPECULA_CONST uint kFramePoolBindings = 32u;
 
 /// Single kernel: stack frames per pixel. A pixel's Whitted tree is walked depth first, so it
 /// needs max_depth + 1 frames; children deeper than the stack are not traced and counted as

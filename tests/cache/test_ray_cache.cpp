@@ -243,6 +243,48 @@ TEST(RayCacheInvalidation, MovingAnEntityOutdatesExactlyTheTexelsThatSawItOrNowC
   EXPECT_EQ(store.cube(0).texels[cache::texel_of(new_a, res)].hit, two.a.index);
 }
 
+// A device copy made at one generation sends only the texels listed since (CubeView::changes):
+// the list holds every texel that changed, through invalidation and writes alike; a flush, or
+// more changes than the list keeps, leaves no list (changes_from 0: the copy goes up whole).
+TEST(RayCacheInvalidation, TheListOfChangesHoldsEveryTexelThatChangedSinceItRestarted) {
+  TwoSpheres two;
+  World w;
+  make_world(
+      w, on(LookupMode::Direction), 64, [&](ecs::Registry& r) { two(r); }, 16,
+      vec3(0.0f, 50.0f, 0.0f));
+  w.reg.patch<Camera>(w.camera, [](Camera& c) { c.look_at = vec3(0.0f, 100.0f, 1.0f); });
+  (void)frame(w);
+  RayCacheStore& store = store_of(w.reg);
+  ASSERT_EQ(store.cube_count(), 1u);
+  store.prefill(*w.reg.resource<ActiveTracer>().tracer, w.reg.resource<SceneLayer>(),
+                w.reg.resource<RenderJob>().settings);
+  EXPECT_EQ(store.cube(0).changes_from, 0u) << "a whole cube's prefill was listed texel by texel";
+  store.restart_journals();
+  const std::uint64_t from = store.cube(0).generation;
+  EXPECT_EQ(store.cube(0).changes_from, from);
+  EXPECT_TRUE(store.cube(0).changes.empty());
+  const std::vector<cache::Texel> before(store.cube(0).texels.begin(), store.cube(0).texels.end());
+  // A small move of B outdates some texels; a refill writes them again.
+  move(w.reg, two.b, vec3(-10.0f, 0.0f, 0.3f));
+  (void)frame(w);
+  store.prefill(*w.reg.resource<ActiveTracer>().tracer, w.reg.resource<SceneLayer>(),
+                w.reg.resource<RenderJob>().settings);
+  const cache::CubeView v = store.cube(0);
+  ASSERT_NE(v.generation, from) << "nothing changed: no test";
+  ASSERT_EQ(v.changes_from, from) << "the list gave up: no test of it";
+  std::vector<std::uint8_t> listed(before.size(), 0);
+  for (const std::uint32_t i : v.changes) listed.at(i) = 1;
+  std::uint32_t differ = 0;
+  for (std::size_t i = 0; i < before.size(); ++i)
+    if (std::memcmp(&before[i], &v.texels[i], sizeof(cache::Texel)) != 0) {
+      ++differ;
+      EXPECT_TRUE(listed[i]) << "texel " << i << " changed but is not listed";
+    }
+  EXPECT_GT(differ, 0u);
+  store.flush();
+  EXPECT_EQ(store.cube(0).changes_from, 0u);
+}
+
 TEST(RayCacheInvalidation, AStoreThatMissedASyncWithChangesOutdatesEveryTexel) {
   // Caching switched off (no store) while A moves: the store back on cannot know what changed in
   // the sync it missed, so nothing it holds may be used.

@@ -2,11 +2,13 @@
 // cube_map.h's bit for bit; cached Whitted frames (direction, tau and march modes, wavefront and
 // single kernel) equal the CPU integrator's over native-bvh — image and the store's counters —
 // frame after frame while the cubes fill, and again after an object moves and the store
-// invalidates; no ray is cut by the driver and every device lookup agrees with the store's own.
+// invalidates; no ray is cut by the driver; the kernels count lookups and served rays as the
+// store does, and, where every ray is recorded, every device lookup agrees with the store's own.
 #include "device_scenes.h"
 #include "specula/cache/cube_map.h"
 #include "specula/cache/ray_cache.h"
 #include "specula/core/error.h"
+#include "specula/gpu/device_cache.h"
 #include "specula/gpu/device_renderer.h"
 #include "specula/gpu/gpu_scene.h"
 #include "specula/gpu/shaders.h"
@@ -150,6 +152,9 @@ struct Param {
   LookupMode mode;
   gpu::Execution execution;
   CachePolicy policy = CachePolicy::On;
+  /// every: each leaving ray recorded and its lookup replayed on the host, which checks the
+  /// device's answers and counts; changes (the default): only rays that may change the store.
+  gpu::DeviceCache::Records records = gpu::DeviceCache::Records::changes;
 };
 
 class DeviceCacheFrames : public ::testing::TestWithParam<Param> {};
@@ -172,6 +177,7 @@ int compare_frames(const Param& p, int frames, int move_at, std::uint32_t budget
   gpu::GpuScene gpu_scene(*context, gpu::GpuStructure::bvh);
   gpu_scene.update(world.layer);
   gpu::DeviceRenderer renderer(*context, gpu_scene, p.execution);
+  renderer.cache().set_records(p.records);
   if (budget > 0) renderer.set_budget(budget);
   TraceSettings s;
   s.mode = TraceMode::Whitted;
@@ -203,6 +209,12 @@ int compare_frames(const Param& p, int frames, int move_at, std::uint32_t budget
     if (f == move_at) {
       EXPECT_GT(di.outdated, 0u) << "the move outdated nothing: no test of it";
     }
+    // What the device copy must hold for this frame: the store's texels after invalidation.
+    std::vector<cache::Texel> before;
+    for (std::size_t c = 0; c < device_store.cube_count(); ++c) {
+      const auto t = device_store.cube(c).texels;
+      before.insert(before.end(), t.begin(), t.end());
+    }
     Framebuffer cpu(kSize, kSize), device(kSize, kSize);
     (void)render_frame(*world.tracer, world.layer, scene.camera, s, cpu, &cpu_store);
     FrameStats stats;
@@ -225,6 +237,13 @@ int compare_frames(const Param& p, int frames, int move_at, std::uint32_t budget
               << b.valid << " (" << a.valid << "), records " << renderer.cache_records()
               << ", texels uploaded " << renderer.cache_texels_uploaded() << "\n";
     EXPECT_EQ(differ, 0u) << "frame " << f;
+    if (device_frame && device_store.wants_leaving()) {
+      // Uploaded whole or only the texels that changed, the device copy equals the store's.
+      std::vector<cache::Texel> copy(before.size());
+      renderer.cache().texels().download(copy.data(), copy.size() * sizeof(cache::Texel));
+      EXPECT_TRUE(std::memcmp(copy.data(), before.data(), copy.size() * sizeof(cache::Texel)) == 0)
+          << "frame " << f << ": the device's texels are not the store's";
+    }
     if (device_frame) {
       EXPECT_EQ(counters.cut, 0u);
       EXPECT_EQ(counters.restarted, 0u);
@@ -232,8 +251,16 @@ int compare_frames(const Param& p, int frames, int move_at, std::uint32_t budget
         EXPECT_GT(counters.resumed, 0u) << "no trace stopped mid-walk: no test of resumption";
       }
       EXPECT_EQ(renderer.cache_mismatches(), 0u) << "device lookups the store answers otherwise";
-      if (device_store.wants_leaving()) {
-        EXPECT_GT(renderer.cache_records(), 0u);
+      if (p.records == gpu::DeviceCache::Records::every) {
+        if (device_store.wants_leaving()) {
+          EXPECT_GT(renderer.cache_records(), 0u);
+        }
+      } else {
+        // Only writes (a traced ray onto an outdated texel: the first of each texel is written)
+        // and verified rays are recorded.
+        EXPECT_GE(renderer.cache_records(), b.written + b.verified) << "frame " << f;
+        EXPECT_EQ(renderer.cache_records() == 0, b.written == 0 && b.verified == 0)
+            << "frame " << f;
       }
     }
     EXPECT_EQ(b.lookups, a.lookups) << "frame " << f;
@@ -257,9 +284,18 @@ int compare_frames(const Param& p, int frames, int move_at, std::uint32_t budget
     }
     hits += b.hits;
     if (device_frame) verified += b.verified;
-    // The stores hold the same texels, bit for bit.
+    // The stores hold the same texels, bit for bit, and counted the frame's lookups and leaving
+    // rays alike (what auto's savings are computed from).
     EXPECT_EQ(cpu_store.cube_count(), device_store.cube_count());
     for (std::size_t c = 0; c < std::min(cpu_store.cube_count(), device_store.cube_count()); ++c) {
+      const cache::CubeFrameCounts ca = cpu_store.frame_counts(c),
+                                   cb = device_store.frame_counts(c);
+      EXPECT_TRUE(ca == cb) << "frame " << f << ", cube " << c << ": lookups " << cb.lookups << " ("
+                            << ca.lookups << "), outdated " << cb.outdated << " (" << ca.outdated
+                            << "), march steps " << cb.march_steps << " (" << ca.march_steps
+                            << "), offered rays " << cb.offered_rays << " (" << ca.offered_rays
+                            << "), used rays " << cb.used_rays << " (" << ca.used_rays
+                            << "), traced rays " << cb.traced_rays << " (" << ca.traced_rays << ")";
       const auto ta = cpu_store.cube(c).texels, tb = device_store.cube(c).texels;
       EXPECT_TRUE(ta.size() == tb.size() &&
                   std::memcmp(ta.data(), tb.data(), ta.size_bytes()) == 0)
@@ -295,15 +331,62 @@ TEST_P(DeviceCacheFrames, SmallBudgetFramesEqualTheCpuFrames) {
 // --cache auto on device frames: verified lookups are chosen by the same hash, traced, and their
 // errors reach the store with the texel and throughput the CPU would give it, so over a pan the
 // policy takes the same decisions on both, and the images stay equal, every frame on the device
-// (cubes on trial in march mode included).
+// (cubes on trial in march mode included). Once with every leaving ray recorded and its lookup
+// (and verified texel) checked against the store's.
 TEST(DeviceCacheAuto, APanDecidesAndRendersAsOnTheCpu) {
   SPECULA_NEED_DEVICE();
-  for (const gpu::Execution e : {gpu::Execution::wavefront, gpu::Execution::single_kernel}) {
+  using Records = gpu::DeviceCache::Records;
+  for (const auto& [e, records] : {std::pair{gpu::Execution::wavefront, Records::changes},
+                                   std::pair{gpu::Execution::single_kernel, Records::changes},
+                                   std::pair{gpu::Execution::wavefront, Records::every}}) {
     const int frames = 14;
-    const int on_device =
-        compare_frames(Param{LookupMode::Direction, e, CachePolicy::Auto}, frames, 9, 0, 2.0f);
+    const int on_device = compare_frames(
+        Param{LookupMode::Direction, e, CachePolicy::Auto, records}, frames, 9, 0, 2.0f);
     std::cout << on_device << " of " << frames << " frames on the device\n";
     EXPECT_EQ(on_device, frames);
+  }
+}
+
+// Once the cubes hold what a still view looks up, its frames hand the store no record at all:
+// the kernels count the served rays (and the lookups) as the store would, so nothing in
+// proportion to the pixels is read back or replayed on the host; recording every ray instead
+// gives the same counts, texels and image (compare_frames checks both against the CPU).
+TEST(DeviceCache, AFilledStillViewRecordsNothingAndCountsAsTheStore) {
+  SPECULA_NEED_DEVICE();
+  using Records = gpu::DeviceCache::Records;
+  for (const LookupMode mode : {LookupMode::Direction, LookupMode::March}) {
+    std::uint32_t last[2] = {0, 0};
+    for (const Records records : {Records::changes, Records::every}) {
+      CacheScene scene;
+      test::TracedWorld world(scene.reg, "native-bvh", test::device_mirror_options());
+      CacheSettings cs;
+      cs.policy = CachePolicy::On;
+      cs.lookup = mode;
+      RayCacheStore store(cs);
+      auto context = gpu::Context::create();
+      gpu::GpuScene gpu_scene(*context, gpu::GpuStructure::bvh);
+      gpu_scene.update(world.layer);
+      gpu::DeviceRenderer renderer(*context, gpu_scene, gpu::Execution::wavefront);
+      renderer.cache().set_records(records);
+      TraceSettings s;
+      s.mode = TraceMode::Whitted;
+      s.max_depth = 4;
+      Framebuffer image(kSize, kSize);
+      FrameStats stats;
+      gpu::GpuTraceCounters counters;
+      std::uint32_t first = 0;
+      for (int f = 0; f < 3; ++f) {
+        (void)store.invalidate(scene.reg, world.layer);
+        renderer.render(world.layer, scene.camera, s, image, stats, counters, &store);
+        if (f == 0) first = renderer.cache_records();
+        EXPECT_EQ(renderer.cache_mismatches(), 0u);
+      }
+      EXPECT_GT(first, 0u) << "the first frame wrote nothing: no test";
+      EXPECT_GT(store.counts().hits, 0u);
+      last[records == Records::every ? 1 : 0] = renderer.cache_records();
+    }
+    EXPECT_EQ(last[0], 0u) << cache::lookup_mode_name(mode);
+    EXPECT_GT(last[1], 0u) << cache::lookup_mode_name(mode);
   }
 }
 
@@ -314,10 +397,17 @@ INSTANTIATE_TEST_SUITE_P(
                       Param{LookupMode::March, gpu::Execution::wavefront},
                       Param{LookupMode::Direction, gpu::Execution::single_kernel},
                       Param{LookupMode::Tau, gpu::Execution::single_kernel},
-                      Param{LookupMode::March, gpu::Execution::single_kernel}),
+                      Param{LookupMode::March, gpu::Execution::single_kernel},
+                      Param{LookupMode::Direction, gpu::Execution::wavefront, CachePolicy::On,
+                            gpu::DeviceCache::Records::every},
+                      Param{LookupMode::Tau, gpu::Execution::single_kernel, CachePolicy::On,
+                            gpu::DeviceCache::Records::every},
+                      Param{LookupMode::March, gpu::Execution::wavefront, CachePolicy::On,
+                            gpu::DeviceCache::Records::every}),
     [](const auto& param_info) {
       return std::string(cache::lookup_mode_name(param_info.param.mode)) +
-             (param_info.param.execution == gpu::Execution::wavefront ? "_wavefront" : "_single");
+             (param_info.param.execution == gpu::Execution::wavefront ? "_wavefront" : "_single") +
+             (param_info.param.records == gpu::DeviceCache::Records::every ? "_every_record" : "");
     });
 
 TEST(DeviceCache, ARenderJobWithCachesRendersOnTheDeviceAsOnTheCpu) {
