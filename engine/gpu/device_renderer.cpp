@@ -351,10 +351,12 @@ void DeviceRenderer::read_back(Framebuffer& out) const {
                               std::to_string(out.width()) + "x" + std::to_string(out.height()) +
                               " image");
   const std::size_t pixels = std::size_t(frame_.width) * frame_.height;
-  std::vector<vec4> image(pixels);
-  image_.download(image.data(), image.size() * sizeof(vec4));
   std::span<vec3> px = out.pixels();
-  for (std::size_t i = 0; i < pixels; ++i) px[i] = vec3(image[i]);
+  // Straight from the staging copy into the image.
+  image_.read(pixels * sizeof(vec4), 0, [&](const void* from) {
+    const auto* image = static_cast<const vec4*>(from);
+    for (std::size_t i = 0; i < pixels; ++i) px[i] = vec3(image[i]);
+  });
   image_pending_ = false;
 }
 

@@ -375,6 +375,7 @@ std::unique_ptr<Context> Context::create(const Options& options) {
 }
 
 Context::~Context() {
+  staging_.reset(); // before the device
   if (device_ != VK_NULL_HANDLE) {
     if (!lost_) (void)vkDeviceWaitIdle(device_);
     if (command_pool_ != VK_NULL_HANDLE) vkDestroyCommandPool(device_, command_pool_, nullptr);
@@ -437,6 +438,24 @@ Buffer Context::make_buffer(VkDeviceSize bytes, MemoryKind kind) {
       check(vkMapMemory(device_, b.memory_, 0, VK_WHOLE_SIZE, 0, &b.mapped_), "vkMapMemory");
   }
   return b;
+}
+
+Context::StagingLease Context::lease_staging(VkDeviceSize bytes) {
+  StagingLease lease;
+  lease.lock_ = std::unique_lock<std::mutex>(staging_mutex_);
+  if (bytes > kKeptStagingBytes) {
+    lease.own_ = make_buffer(bytes, MemoryKind::host);
+    return lease;
+  }
+  if (!staging_ || staging_->size() < bytes) {
+    staging_.reset();
+    // Grown to the next power of two (1 MiB at least): a few sizes serve every frame.
+    VkDeviceSize size = VkDeviceSize(1) << 20;
+    while (size < bytes) size *= 2;
+    staging_ = std::make_unique<Buffer>(make_buffer(size, MemoryKind::host));
+  }
+  lease.kept_ = staging_.get();
+  return lease;
 }
 
 void Context::run_now(const std::function<void(VkCommandBuffer)>& record) {
@@ -537,7 +556,8 @@ void Buffer::upload(const void* data, VkDeviceSize bytes, VkDeviceSize offset) {
     std::memcpy(static_cast<char*>(mapped_) + offset, data, bytes);
     return;
   }
-  Buffer staging = context_->make_buffer(bytes, MemoryKind::host);
+  Context::StagingLease lease = context_->lease_staging(bytes);
+  Buffer& staging = lease.buffer();
   std::memcpy(staging.mapped(), data, bytes);
   context_->run_now([&](VkCommandBuffer cmd) {
     const VkBufferCopy region{0, offset, bytes};
@@ -556,27 +576,34 @@ void Buffer::scatter(const void* data, VkDeviceSize bytes, std::span<const VkBuf
       std::memcpy(static_cast<char*>(mapped_) + r.dstOffset, from + r.srcOffset, r.size);
     return;
   }
-  Buffer staging = context_->make_buffer(bytes, MemoryKind::host);
+  Context::StagingLease lease = context_->lease_staging(bytes);
+  Buffer& staging = lease.buffer();
   std::memcpy(staging.mapped(), data, bytes);
   context_->run_now([&](VkCommandBuffer cmd) {
     vkCmdCopyBuffer(cmd, staging.handle(), buffer_, std::uint32_t(regions.size()), regions.data());
   });
 }
 
-void Buffer::download(void* data, VkDeviceSize bytes, VkDeviceSize offset) const {
+void Buffer::read(VkDeviceSize bytes, VkDeviceSize offset,
+                  const std::function<void(const void*)>& use) const {
   if (bytes == 0) return;
   if (offset + bytes > size_)
-    throw GpuError("Buffer::download beyond the buffer's end", VK_ERROR_UNKNOWN);
+    throw GpuError("Buffer::read beyond the buffer's end", VK_ERROR_UNKNOWN);
   if (mapped_ != nullptr) {
-    std::memcpy(data, static_cast<const char*>(mapped_) + offset, bytes);
+    use(static_cast<const char*>(mapped_) + offset);
     return;
   }
-  Buffer staging = context_->make_buffer(bytes, MemoryKind::host);
+  Context::StagingLease lease = context_->lease_staging(bytes);
+  Buffer& staging = lease.buffer();
   context_->run_now([&](VkCommandBuffer cmd) {
     const VkBufferCopy region{offset, 0, bytes};
     vkCmdCopyBuffer(cmd, buffer_, staging.handle(), 1, &region);
   });
-  std::memcpy(data, staging.mapped(), bytes);
+  use(staging.mapped());
+}
+
+void Buffer::download(void* data, VkDeviceSize bytes, VkDeviceSize offset) const {
+  read(bytes, offset, [&](const void* from) { std::memcpy(data, from, bytes); });
 }
 
 // ---- Pipeline -------------------------------------------------------------------------------------

@@ -100,6 +100,11 @@ public:
   void scatter(const void* data, VkDeviceSize bytes, std::span<const VkBufferCopy> regions);
   /// Copies bytes out of the buffer (a staging copy when not host-visible; waits).
   void download(void* data, VkDeviceSize bytes, VkDeviceSize offset = 0) const;
+  /// Hands `use` the buffer's bytes [offset, offset + bytes) in host memory (the mapping, or the
+  /// staging copy, valid during the call): a read-back converted on the way, with no copy of
+  /// its own.
+  void read(VkDeviceSize bytes, VkDeviceSize offset,
+            const std::function<void(const void*)>& use) const;
   template <class T> void download(std::span<T> data, VkDeviceSize offset = 0) const {
     download(data.data(), data.size_bytes(), offset);
   }
@@ -363,6 +368,22 @@ public:
   /// One-shot commands on the queue, waited for (uploads, readbacks).
   void run_now(const std::function<void(VkCommandBuffer)>& record);
 
+  /// A host-visible buffer of at least `bytes` for one upload or read-back, held (locked) while
+  /// the lease lives: the context's own, kept between calls (no allocation per frame), up to
+  /// kKeptStagingBytes; a larger one is made for the lease.
+  class StagingLease {
+  public:
+    [[nodiscard]] Buffer& buffer() { return own_.valid() ? own_ : *kept_; }
+
+  private:
+    friend class Context;
+    std::unique_lock<std::mutex> lock_;
+    Buffer* kept_ = nullptr;
+    Buffer own_;
+  };
+  [[nodiscard]] StagingLease lease_staging(VkDeviceSize bytes);
+  static constexpr VkDeviceSize kKeptStagingBytes = VkDeviceSize(64) << 20;
+
   /// The queue is shared by whoever holds the context (a window presenting from a thread of its
   /// own, a tracer rendering on the window's device): every vkQueueSubmit, vkQueuePresentKHR,
   /// vkQueueWaitIdle and vkDeviceWaitIdle holds this lock, as Vulkan asks of a queue used from
@@ -391,6 +412,8 @@ private:
   std::mutex queue_mutex_;
   /// Guards every Buffer's cache of views (Buffer::view runs wherever a dispatch is recorded).
   std::mutex views_mutex_;
+  std::mutex staging_mutex_;
+  std::unique_ptr<Buffer> staging_; ///< lease_staging's kept buffer
   friend class Buffer;
   /// Set 0 of p's storage buffers visible to `stages`; push constants to `push_stages`.
   static void make_layouts(VkDevice device, Pipeline& p, VkShaderStageFlags stages,
