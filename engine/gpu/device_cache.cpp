@@ -98,7 +98,8 @@ void DeviceCache::upload(cache::RayCacheStore& store, std::uint32_t slots, bool 
   store.restart_journals();
   uploaded_ = std::move(now);
   const VkDeviceSize table_bytes = table.size() * sizeof(GpuCube);
-  ensure_size(context_, cubes_, table_bytes, MemoryKind::host);
+  // Device-local (every lookup reads it): one staging copy a frame.
+  ensure_size(context_, cubes_, table_bytes);
   cubes_.upload(table.data(), table_bytes);
   ensure_size(context_, counts_, table.size() * kCubeCountWords * sizeof(std::uint32_t));
 }

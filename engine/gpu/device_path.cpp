@@ -11,6 +11,7 @@
 #include "specula/trace/sampler.h"
 
 #include <algorithm>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -172,7 +173,7 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
   ensure_size(context_, shadows_, VkDeviceSize(shadow_capacity) * sizeof(GpuShadowRay));
   ensure_size(context_, shadow_queues_, single ? 16 : VkDeviceSize(shadow_capacity) * 8);
   ensure_size(context_, sums_, VkDeviceSize(pixels) * 16);
-  ensure_size(context_, path_params_, sizeof(GpuPathParams), MemoryKind::host);
+  ensure_size(context_, path_params_, sizeof(GpuPathParams)); // written in the command stream
   ensure_size(context_, no_cache_, 16);
   ensure_size(context_, guides_, guides != nullptr ? VkDeviceSize(pixels) * sizeof(GpuGuide) : 16);
   params.node_capacity = capacity;
@@ -203,11 +204,14 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
   };
   const auto submit = [&] {
     const std::uint32_t end = cmd.timestamp();
+    cmd.barrier();
+    cmd.copy(*frame.counters, *frame.counters_host, sizeof(GpuFrameCounters));
+    cmd.host_barrier();
     cmd.submit();
     gpu_ms += cmd.elapsed_ms(begin, end);
     open = false;
     GpuFrameCounters c{};
-    frame.counters->download(&c, sizeof c);
+    std::memcpy(&c, frame.counters_host->mapped(), sizeof c);
     return c;
   };
   // Passes of the trace kernel `k` (queue `which`: 0 paths, 1 shadow rays) until its queue is
@@ -252,8 +256,8 @@ void DevicePath::render(const SceneLayer& layer, const TraceSettings& settings,
       pp.shadow_slots = std::max(1u, slots);
       pp.emitter_count = emitter_count_;
       pp.last_batch = first + count >= spp ? 1u : 0u;
-      path_params_.upload(&pp, sizeof pp);
       mark();
+      cmd.update(path_params_, &pp, sizeof pp);
       const std::uint32_t all = groups(pp.path_count);
       // The eye kernel queues every path (queue 0) and empties queue 1.
       cmd.fill(*frame.counters, 0, offsetof(GpuFrameCounters, queue_count), 16);

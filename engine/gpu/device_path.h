@@ -43,6 +43,7 @@ struct FrameBuffers {
   Buffer* counters;
   Buffer* image;
   Buffer* primary;
+  Buffer* counters_host; ///< host-visible: each submit's commands copy the counters here
 };
 
 /// Saved traversal states of the frame kernels (shaders/include/trace_pool.glsl): pools of

@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstring>
 #include <string>
 
 namespace specula::gpu {
@@ -144,8 +145,11 @@ void DeviceRenderer::ensure_pipelines(const Features& f) {
 }
 
 void DeviceRenderer::ensure_frame_buffers(std::uint32_t pixels) {
-  ensure_size(context_, params_, sizeof(GpuFrameParams), MemoryKind::host);
-  ensure_size(context_, counters_buffer_, sizeof(GpuFrameCounters), MemoryKind::host);
+  // Device-local: every invocation reads the parameters and adds to the counters (atomics on
+  // host memory would cross the bus); the commands copy the counters to counters_host_.
+  ensure_size(context_, params_, sizeof(GpuFrameParams));
+  ensure_size(context_, counters_buffer_, sizeof(GpuFrameCounters));
+  ensure_size(context_, counters_host_, sizeof(GpuFrameCounters), MemoryKind::host);
   // A window may still be presenting the last frame from image_ (in place, on a shared
   // device): its commands finish before the buffer is replaced.
   if (image_.valid() && image_.size() < VkDeviceSize(pixels) * 16) context_.wait_idle();
@@ -224,12 +228,13 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
   GpuFrameCounters init{};
   init.node_count = pixels;
   init.queue_count[0] = pixels;
-  counters_buffer_.upload(&init, sizeof init);
 
   Commands cmd(context_, 8);
   WavePush push;
   const std::uint32_t t0 = cmd.timestamp();
+  cmd.update(counters_buffer_, &init, sizeof init);
   zero_cache_counts(cmd);
+  cmd.barrier();
   cmd.dispatch(p.eye, buffers, &push, groups(pixels));
   cmd.barrier();
   ++dispatches_;
@@ -265,10 +270,11 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
       dispatches_ += 1;
     }
     const std::uint32_t end = cmd.timestamp();
+    record_counters_to_host(cmd);
     cmd.submit();
     gpu_ms_ += cmd.elapsed_ms(begin, end);
     waves += batch;
-    counters_buffer_.download(&c, sizeof c);
+    std::memcpy(&c, counters_host_.mapped(), sizeof c);
     // The last wave appended to the queues of `parity`: empty means every ray is done.
     if (c.queue_count[parity] == 0 && c.shadow_queue_count[parity] == 0) break;
     if (waves >= kMaxWaves)
@@ -288,20 +294,26 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
     ++dispatches_;
   }
   const std::uint32_t end = cmd.timestamp();
+  record_counters_to_host(cmd);
   cmd.submit();
   gpu_ms_ += cmd.elapsed_ms(begin, end);
 }
 
-void DeviceRenderer::run_single(std::uint32_t pixels) {
+void DeviceRenderer::record_counters_to_host(Commands& cmd) const {
+  cmd.barrier();
+  cmd.copy(counters_buffer_, counters_host_, sizeof(GpuFrameCounters));
+  cmd.host_barrier();
+}
+
+void DeviceRenderer::run_single(std::uint32_t pixels, GpuFrameParams params) {
   const Pipelines& p = *pipelines_;
   const std::vector<const Buffer*> buffers = bindings();
   const GpuFrameCounters init{};
-  counters_buffer_.upload(&init, sizeof init);
-  GpuFrameParams params{};
-  params_.download(&params, sizeof params);
   Commands cmd(context_, 4);
   const WavePush push;
+  cmd.update(counters_buffer_, &init, sizeof init);
   zero_cache_counts(cmd);
+  cmd.barrier();
   if (raster_) {
     // Hybrid mode: the whole frame's visibility buffer before the first walk.
     const std::uint32_t begin = cmd.timestamp();
@@ -314,7 +326,7 @@ void DeviceRenderer::run_single(std::uint32_t pixels) {
   for (std::uint32_t first = 0; first < pixels; first += chunk_pixels_) {
     params.first_pixel = first;
     params.chunk_pixels = std::min(chunk_pixels_, pixels - first);
-    params_.upload(&params, sizeof params);
+    cmd.update(params_, &params, sizeof params);
     cmd.fill(queues_, 0xFFFFFFFFu, 0, VkDeviceSize(params.chunk_pixels) * 4); // kWalkNew
     cmd.barrier();
     for (std::uint32_t rounds = 0;;) {
@@ -329,11 +341,12 @@ void DeviceRenderer::run_single(std::uint32_t pixels) {
         ++dispatches_;
       }
       const std::uint32_t end = cmd.timestamp();
+      record_counters_to_host(cmd);
       cmd.submit();
       gpu_ms_ += cmd.elapsed_ms(begin, end);
       rounds += kSingleRounds;
       GpuFrameCounters c{};
-      counters_buffer_.download(&c, sizeof c);
+      std::memcpy(&c, counters_host_.mapped(), sizeof c);
       if (c.pending == 0) break;
       if (rounds >= kMaxWaves)
         throw Error("vulkan", "device frame: " + std::to_string(c.pending) +
@@ -456,15 +469,16 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
       if (!path_) path_ = std::make_unique<DevicePath>(context_, scene_, execution_);
       path_->render(layer, settings, params,
                     FrameBuffers{&params_, &materials_, &lights_, &normals_, &counters_buffer_,
-                                 &image_, &primary_buffer_},
+                                 &image_, &primary_buffer_, &counters_host_},
                     gpu_ms_, dispatches_, guides);
     } else if (execution_ == Execution::wavefront)
       run_wavefront(settings, pixels);
     else
-      run_single(pixels);
+      run_single(pixels, params);
 
+    // The frames copied their counters to the host with their last commands.
     GpuFrameCounters c{};
-    counters_buffer_.download(&c, sizeof c);
+    std::memcpy(&c, counters_host_.mapped(), sizeof c);
     frame_ = DeviceFrame{&context_, &image_, width, height};
     primary_pending_ = true;
     // Cast and Whitted frames may stay on the device (presented in place); path and shadow

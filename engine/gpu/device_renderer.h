@@ -20,6 +20,7 @@
 #include "specula/gpu/gpu_scene.h"
 #include "specula/gpu/raster_primary.h"
 #include "specula/gpu/vk_context.h"
+#include "specula/shared/frame_layout.h"
 
 #include <cstdint>
 #include <memory>
@@ -126,7 +127,10 @@ private:
   void ensure_frame_buffers(std::uint32_t pixels);
   void ensure_buffers(std::uint32_t pixels, const Features& features);
   void run_wavefront(const TraceSettings& settings, std::uint32_t pixels);
-  void run_single(std::uint32_t pixels);
+  /// `params`: the frame's (the chunks' first pixel and size are set in the commands).
+  void run_single(std::uint32_t pixels, GpuFrameParams params);
+  /// Records the copy of the counters into counters_host_ (read once the submit has finished).
+  void record_counters_to_host(Commands& cmd) const;
   void bind_cache(bool cache);
   /// Records the zeroing of the cubes' counts (binding 31) where the frame has cubes.
   void zero_cache_counts(Commands& cmd) const;
@@ -150,6 +154,7 @@ private:
   std::unique_ptr<RasterPrimary> raster_; ///< hybrid mode only
   // Tables at bindings 8.. (frame_layout.h).
   Buffer params_, materials_, lights_, normals_, counters_buffer_, image_, primary_buffer_;
+  Buffer counters_host_; ///< host-visible: the counters as the last submit left them
   Buffer nodes_, hits_, queues_, shadows_, shadow_queues_;
   Buffer unused_; ///< 16 bytes, bound where a frame has no cubes or no visibility buffer
   std::unique_ptr<StatePool> pool_; ///< saved traversal states (trace_pool.glsl)

@@ -1125,6 +1125,26 @@ void Commands::fill(const Buffer& buffer, std::uint32_t value, VkDeviceSize offs
   vkCmdFillBuffer(cmd_, buffer.handle(), offset, bytes, value);
 }
 
+void Commands::update(const Buffer& buffer, const void* data, VkDeviceSize bytes,
+                      VkDeviceSize offset) {
+  if (bytes == 0) return;
+  if (bytes % 4 != 0 || bytes > 65536 || offset + bytes > buffer.size())
+    throw GpuError("Commands::update: " + std::to_string(bytes) + " bytes at " +
+                       std::to_string(offset) + " (a multiple of 4, at most 65536, in the buffer)",
+                   VK_ERROR_UNKNOWN);
+  begin_if_needed();
+  vkCmdUpdateBuffer(cmd_, buffer.handle(), offset, bytes, data);
+}
+
+void Commands::host_barrier() {
+  begin_if_needed();
+  VkMemoryBarrier mb{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  mb.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT;
+  mb.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                       VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &mb, 0, nullptr, 0, nullptr);
+}
+
 void Commands::copy(const Buffer& from, const Buffer& to, VkDeviceSize bytes,
                     VkDeviceSize from_offset, VkDeviceSize to_offset) {
   begin_if_needed();

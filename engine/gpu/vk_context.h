@@ -286,6 +286,13 @@ public:
   void barrier();
   void fill(const Buffer& buffer, std::uint32_t value, VkDeviceSize offset = 0,
             VkDeviceSize bytes = VK_WHOLE_SIZE);
+  /// Writes `bytes` (a multiple of 4, at most 65536) of `data` into the buffer in the command
+  /// stream (vkCmdUpdateBuffer): small per-frame values into device-local memory without a
+  /// staging copy or a submit of their own. A barrier() makes them visible to shaders.
+  void update(const Buffer& buffer, const void* data, VkDeviceSize bytes, VkDeviceSize offset = 0);
+  /// Transfer and shader writes before are visible to the host once the submit has finished
+  /// (after copying device-local counters into a host-visible buffer).
+  void host_barrier();
   void copy(const Buffer& from, const Buffer& to, VkDeviceSize bytes, VkDeviceSize from_offset = 0,
             VkDeviceSize to_offset = 0);
   /// Writes a timestamp after all previous commands; returns its index (0, 1, ...). Without

@@ -52,7 +52,9 @@ struct VulkanTracer::Kernels {
   std::mutex mutex;
   std::size_t capacity = 0;      ///< rays the batch buffers hold
   std::uint32_t stack_stride = 0; ///< saved stack entries per ray they were sized for
-  Buffer rays, hits, occluded, states, stacks, counters;
+  // The counters live in device memory (a kernel's atomics on host memory would cross the
+  // bus); each dispatch's commands copy them into counters_host.
+  Buffer rays, hits, occluded, states, stacks, counters, counters_host;
   Buffer status[2];
   std::vector<GpuHit> hit_host;
   std::vector<std::uint32_t> word_host;
@@ -69,7 +71,9 @@ struct VulkanTracer::Kernels {
     states = context.make_buffer(capacity * sizeof(GpuTraceState));
     stacks = context.make_buffer(capacity * stack_stride * 2 * sizeof(std::uint32_t));
     for (Buffer& s : status) s = context.make_buffer(capacity * sizeof(std::uint32_t));
-    if (!counters.valid()) counters = context.make_buffer(sizeof(TraceCounters), MemoryKind::host);
+    if (!counters.valid()) counters = context.make_buffer(sizeof(TraceCounters));
+    if (!counters_host.valid())
+      counters_host = context.make_buffer(sizeof(TraceCounters), MemoryKind::host);
   }
 };
 
@@ -144,11 +148,14 @@ void VulkanTracer::trace_locked(std::span<const Ray> rays, Hit* hits,
                    std::span<const Buffer* const>(buffers), &push,
                    std::uint32_t((n + kTraceGroup - 1) / kTraceGroup));
       const std::uint32_t t1 = cmd.timestamp();
+      cmd.barrier();
+      cmd.copy(k.counters, k.counters_host, sizeof(TraceCounters));
+      cmd.host_barrier();
       cmd.submit();
       total.gpu_ms += cmd.elapsed_ms(t0, t1);
       ++total.dispatches;
       TraceCounters c;
-      std::memcpy(&c, k.counters.mapped(), sizeof c);
+      std::memcpy(&c, k.counters_host.mapped(), sizeof c);
       total.resumed += c.budget;
       total.cut += c.cut;
       for (std::uint32_t s = 0; s < kStepSlots; ++s) total.steps += c.steps[s * kStepSlotStride];
