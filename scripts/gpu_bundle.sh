@@ -71,6 +71,14 @@ shift
 export LD_LIBRARY_PATH="$here/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 # Vulkan tools print errors without a runtime directory.
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"
+# The lent GPU machines mount the NVIDIA driver under /usr/local/nvidia; the loader did not find
+# it through the system's manifest on an earlier machine (vk_icdGetInstanceProcAddr refused for
+# libGLX_nvidia.so.0): name the driver's own manifest unless the caller chose one.
+nvidia_icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+if [ -z "${VK_DRIVER_FILES:-}${VK_ICD_FILENAMES:-}" ] && [ -f "$nvidia_icd" ]; then
+  export VK_DRIVER_FILES="$nvidia_icd"
+  [ -d /usr/local/nvidia/lib64 ] && export LD_LIBRARY_PATH="$LD_LIBRARY_PATH:/usr/local/nvidia/lib64"
+fi
 case "$program" in
   specula) exec "$here/bin/specula" "$@" ;;
   # The bench finds samples/ under --source-dir: the bundle's own unless given.
