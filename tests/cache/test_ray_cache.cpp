@@ -179,18 +179,26 @@ struct TwoSpheres {
   }
 };
 
-TEST(RayCacheInvalidation, MovingAnEntityOutdatesExactlyTheTexelsThatSawItOrNowCould) {
-  // The camera looks away, so frames write nothing: the texels show what invalidation did.
-  TwoSpheres two;
-  World w;
-  make_world(w, on(LookupMode::Direction), 32, [&](ecs::Registry& r) { two(r); }, 16,
-             vec3(0.0f, 50.0f, 0.0f));
+/// A mirror with a cube of `resolution` between the two spheres, filled from its centre, and a
+/// camera that looks away, so frames write nothing: the texels show what invalidation did.
+RayCacheStore& prefilled_looking_away(World& w, TwoSpheres& two, std::uint32_t resolution) {
+  make_world(
+      w, on(LookupMode::Direction), resolution, [&](ecs::Registry& r) { two(r); }, 16,
+      vec3(0.0f, 50.0f, 0.0f));
   w.reg.patch<Camera>(w.camera, [](Camera& c) { c.look_at = vec3(0.0f, 100.0f, 1.0f); });
   (void)frame(w);
   RayCacheStore& store = store_of(w.reg);
-  ASSERT_EQ(store.cube_count(), 1u);
+  EXPECT_EQ(store.cube_count(), 1u);
   store.prefill(*w.reg.resource<ActiveTracer>().tracer, w.reg.resource<SceneLayer>(),
                 w.reg.resource<RenderJob>().settings);
+  return store;
+}
+
+TEST(RayCacheInvalidation, MovingAnEntityOutdatesExactlyTheTexelsThatSawItOrNowCould) {
+  TwoSpheres two;
+  World w;
+  RayCacheStore& store = prefilled_looking_away(w, two, 32);
+  ASSERT_EQ(store.cube_count(), 1u);
   const std::vector<cache::Texel> before(store.cube(0).texels.begin(), store.cube(0).texels.end());
   std::uint32_t saw_a = 0, saw_b = 0;
   for (const cache::Texel& t : before) {
@@ -249,15 +257,8 @@ TEST(RayCacheInvalidation, MovingAnEntityOutdatesExactlyTheTexelsThatSawItOrNowC
 TEST(RayCacheInvalidation, TheListOfChangesHoldsEveryTexelThatChangedSinceItRestarted) {
   TwoSpheres two;
   World w;
-  make_world(
-      w, on(LookupMode::Direction), 64, [&](ecs::Registry& r) { two(r); }, 16,
-      vec3(0.0f, 50.0f, 0.0f));
-  w.reg.patch<Camera>(w.camera, [](Camera& c) { c.look_at = vec3(0.0f, 100.0f, 1.0f); });
-  (void)frame(w);
-  RayCacheStore& store = store_of(w.reg);
+  RayCacheStore& store = prefilled_looking_away(w, two, 64);
   ASSERT_EQ(store.cube_count(), 1u);
-  store.prefill(*w.reg.resource<ActiveTracer>().tracer, w.reg.resource<SceneLayer>(),
-                w.reg.resource<RenderJob>().settings);
   EXPECT_EQ(store.cube(0).changes_from, 0u) << "a whole cube's prefill was listed texel by texel";
   store.restart_journals();
   const std::uint64_t from = store.cube(0).generation;
