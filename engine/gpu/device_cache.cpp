@@ -42,6 +42,11 @@ void DeviceCache::upload(cache::RayCacheStore& store, std::uint32_t slots, bool 
   for (std::size_t i = 0; i < store.cube_count(); ++i) {
     const cache::CubeView v = store.cube(i);
     if (v.instance >= table.size()) throw Error("vulkan", "ray-cache cube of an unknown instance");
+    // A lookup's answer word carries the texel it read above kAnswerTexelShift.
+    if (v.texels.size() > (std::size_t(1) << (32 - kAnswerTexelShift)))
+      throw Error("vulkan", "a ray-cache cube of " + std::to_string(v.resolution) +
+                                "² faces has more texels than device frames address (" +
+                                std::to_string(std::size_t(1) << (32 - kAnswerTexelShift)) + ")");
     GpuCube& c = table[v.instance];
     c.centre = v.centre;
     c.resolution = v.resolution;

@@ -19,7 +19,6 @@ layout(std430, set = 0, binding = 31) buffer CacheCounts { uint cube_counts[]; }
 // Answer bits beside the CacheAnswer value: the ray was looked up (the host replays the lookup
 // where every ray is recorded); above them, the texel the lookup read (kAnswerTexelShift).
 const uint kAnswerLookedUp = 16u;
-const uint kAnswerTexelShift = 5u;
 
 // Adds v to word `field` of slot's counts (kCount*, cache_layout.h): one atomic for the
 // subgroup's active lanes where they share the slot (adjacent pixels mostly leave one object).

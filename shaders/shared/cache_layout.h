@@ -64,6 +64,9 @@ SPECULA_CONST uint kAnswerTrace = 0u;
 SPECULA_CONST uint kAnswerUse = 1u;
 SPECULA_CONST uint kAnswerUseIfClear = 2u;
 SPECULA_CONST uint kAnswerVerify = 3u; ///< auto: it would be used, but is traced to measure the error
+/// The frame kernels' answer word: the answer, kAnswerLookedUp (16) and, from this bit up, the
+/// texel the lookup read (so a cube has at most 2^27 texels: faces up to 4096² and beyond).
+SPECULA_CONST uint kAnswerTexelShift = 5u;
 
 /// One cube per scene-layer instance slot (mode kCubeNone where the slot has none).
 struct GpuCube {
