@@ -102,7 +102,7 @@ public:
   void download(void* data, VkDeviceSize bytes, VkDeviceSize offset = 0) const;
   /// Hands `use` the buffer's bytes [offset, offset + bytes) in host memory (the mapping, or the
   /// staging copy, valid during the call): a read-back converted on the way, with no copy of
-  /// its own.
+  /// its own. `use` holds the context's staging buffer: it must not upload or read back itself.
   void read(VkDeviceSize bytes, VkDeviceSize offset,
             const std::function<void(const void*)>& use) const;
   template <class T> void download(std::span<T> data, VkDeviceSize offset = 0) const {
