@@ -6,7 +6,7 @@
 #   scripts/gpu_bundle.sh [--build-dir DIR] [--out DIR] [--no-build]
 #     --build-dir  where specula and specula_bench are (default build/ci); built there with ninja
 #                  unless --no-build
-#     --out        the bundle folder (default build/gpu-bundle; replaced), and OUT.tar.xz beside it
+#     --out        the bundle folder (default build/gpu-bundle; replaced), and OUT.tar.gz beside it
 #   then, on the GPU machine:
 #     BUNDLE/run.sh specula info
 #     BUNDLE/run.sh specula render BUNDLE/samples/scenes/cornell_box.json --backend vulkan
@@ -113,6 +113,7 @@ if [ "$size_mb" -gt 60 ]; then
   exit 1
 fi
 # The device tool carries at most 64 MiB with the working tree: the bundle goes as a tarball
-# (about 13 MB), which scripts/gpu_measure.sh unpacks there.
-tar -C "$(dirname "$out")" -cJf "$out.tar.xz" "$(basename "$out")"
-echo "gpu_bundle.sh: $out (${size_mb} MB; $out.tar.xz $(du -m "$out.tar.xz" | cut -f1) MB): run.sh specula|specula_bench ARGS"
+# (about 23 MB, gzip: a few seconds, where xz took half a minute), which scripts/gpu_measure.sh
+# unpacks there.
+tar -C "$(dirname "$out")" -czf "$out.tar.gz" "$(basename "$out")"
+echo "gpu_bundle.sh: $out (${size_mb} MB; $out.tar.gz $(du -m "$out.tar.gz" | cut -f1) MB): run.sh specula|specula_bench ARGS"

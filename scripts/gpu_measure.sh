@@ -5,12 +5,12 @@
 # frames at 1024² — then, time permitting, the whole gpu section. Each step is bounded by its own
 # timeout, writes its report to OUT as it goes, and a step that fails does not stop the next.
 #
-#   here:   scripts/gpu_bundle.sh          (build/gpu-bundle and build/gpu-bundle.tar.xz, 13 MB)
+#   here:   scripts/gpu_bundle.sh          (build/gpu-bundle and build/gpu-bundle.tar.gz, 23 MB)
 #   there:  scripts/gpu_measure.sh [BUNDLE] [OUT]
-#           BUNDLE: the bundle's folder or its .tar.xz (unpacked under /tmp); default
-#           build/gpu-bundle.tar.xz, else build/gpu-bundle. OUT: default $OUT (the device
+#           BUNDLE: the bundle's folder or its .tar.gz (unpacked under /tmp); default
+#           build/gpu-bundle.tar.gz, else build/gpu-bundle. OUT: default $OUT (the device
 #           tool's), else ./gpu-out
-#   device tool: run(command="scripts/gpu_measure.sh", carry=["build/gpu-bundle.tar.xz"],
+#   device tool: run(command="scripts/gpu_measure.sh", carry=["build/gpu-bundle.tar.gz"],
 #                    timeout_s=540)  (the folder itself is over the tool's 64 MiB with the tree)
 #
 # SPECULA_GPU_STEPS (default "info traversal cache gpu") picks the steps; SPECULA_GPU_THREADS the
@@ -21,7 +21,7 @@ set -uo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bundle="${1:-}"
 if [ -z "$bundle" ]; then
-  bundle="$root/build/gpu-bundle.tar.xz"
+  bundle="$root/build/gpu-bundle.tar.gz"
   [ -f "$bundle" ] || bundle="$root/build/gpu-bundle"
 fi
 out="${2:-${OUT:-$root/gpu-out}}"
@@ -31,7 +31,7 @@ size="${SPECULA_GPU_SIZE:-1024}"
 mkdir -p "$out"
 if [ -f "$bundle" ]; then
   unpacked=/tmp/specula-gpu
-  rm -rf "$unpacked" && mkdir -p "$unpacked" && tar -C "$unpacked" -xJf "$bundle" ||
+  rm -rf "$unpacked" && mkdir -p "$unpacked" && tar -C "$unpacked" -xzf "$bundle" ||
     { echo "gpu_measure.sh: cannot unpack $bundle" >&2; exit 1; }
   bundle="$(find "$unpacked" -maxdepth 2 -name run.sh -printf '%h\n' | head -n 1)"
 fi
