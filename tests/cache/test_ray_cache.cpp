@@ -791,6 +791,26 @@ void path_mode(World& w, std::uint32_t seed = 0) {
   job.settings.seed = seed;
 }
 
+/// Two path-mode worlds of one scene, each made by `make(world, cache settings)`: `cached` with
+/// `cache`, `uncached` without.
+template <class Make>
+void path_worlds(World& cached, World& uncached, const CacheSettings& cache, Make make) {
+  make(cached, cache);
+  make(uncached, CacheSettings{});
+  path_mode(cached);
+  path_mode(uncached);
+}
+
+/// As above, and `third` without a cache under seed `seed` (a reference, or an estimate
+/// independent of `uncached`).
+template <class Make>
+void path_worlds(World& cached, World& uncached, World& third, const CacheSettings& cache,
+                 std::uint32_t seed, Make make) {
+  path_worlds(cached, uncached, cache, make);
+  make(third, CacheSettings{});
+  path_mode(third, seed);
+}
+
 /// Path mode with the texels' probes serving (--cache-serve on) and, unless asked, without the
 /// incoming-light probe (so that a pixel is its own part plus what the texels gave).
 CacheSettings path_cache(std::uint32_t samples, std::uint32_t refresh = 2,
@@ -867,12 +887,9 @@ TEST(RayCachePathMode, TheIncomingProbeLightsTheDiffuseLobeWithLessErrorAndNoBia
   const Material half = mirror_material(0.5f);
   CacheSettings probe = on(LookupMode::Direction); // path mode's defaults: irradiance, no serving
   World cached, uncached, reference;
-  make_world(cached, probe, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, half);
-  make_world(uncached, CacheSettings{}, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, half);
-  make_world(reference, CacheSettings{}, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, half);
-  path_mode(cached);
-  path_mode(uncached);
-  path_mode(reference, 11);
+  path_worlds(cached, uncached, reference, probe, 11, [&](World& w, const CacheSettings& cs) {
+    make_world(w, cs, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, half);
+  });
   Framebuffer a{1, 1}, b{1, 1}, ref{1, 1};
   for (int k = 0; k < 16; ++k) {
     a = frame(cached);
@@ -1063,12 +1080,8 @@ TEST(RayCachePathMode, ServedSamplesEndAtTheirFirstHitAndTheImageConvergesToUnca
   LitSurroundings lit;
   World cached, uncached, other_seed;
   const auto build = [&](ecs::Registry& r) { lit(r); };
-  make_world(cached, path_cache(4, 1), 16, build, 64);
-  make_world(uncached, CacheSettings{}, 16, build, 64);
-  make_world(other_seed, CacheSettings{}, 16, build, 64);
-  path_mode(cached);
-  path_mode(uncached);
-  path_mode(other_seed, 7);
+  path_worlds(cached, uncached, other_seed, path_cache(4, 1), 7,
+              [&](World& w, const CacheSettings& cs) { make_world(w, cs, 16, build, 64); });
   Framebuffer a{1, 1}, b{1, 1}, c{1, 1};
   for (int k = 0; k < 64; ++k) {
     a = frame(cached);
@@ -1138,11 +1151,9 @@ TEST(RayCachePathMode, AutoLightsTheDiffuseLobeWhereTheSurroundingsAreFarAndNeve
   automatic.policy = CachePolicy::Auto;
   automatic.path_serve = true; // auto does not let texels serve, whatever it is told
   World cached, uncached;
-  make_world(cached, automatic, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, mirror_material(0.5f));
-  make_world(uncached, CacheSettings{}, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2,
-             mirror_material(0.5f));
-  path_mode(cached);
-  path_mode(uncached);
+  path_worlds(cached, uncached, automatic, [&](World& w, const CacheSettings& cs) {
+    make_world(w, cs, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, mirror_material(0.5f));
+  });
   Framebuffer a{1, 1}, b{1, 1};
   for (int k = 0; k < 4; ++k) {
     a = frame(cached);
@@ -1169,11 +1180,9 @@ TEST(RayCachePathMode, AutoTurnsTheProbeOffWhereTheSurroundingsAreNearAndRunsUnc
   CacheSettings automatic;
   automatic.policy = CachePolicy::Auto;
   World cached, uncached;
-  make_world(cached, automatic, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, mirror_material(0.5f));
-  make_world(uncached, CacheSettings{}, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2,
-             mirror_material(0.5f));
-  path_mode(cached);
-  path_mode(uncached);
+  path_worlds(cached, uncached, automatic, [&](World& w, const CacheSettings& cs) {
+    make_world(w, cs, 16, build, 48, vec3(0.0f, 0.3f, 4.0f), 2, mirror_material(0.5f));
+  });
   (void)frame(cached);
   (void)frame(uncached);
   const FrameStats& first = cached.reg.resource<RenderJob>().last;
