@@ -197,6 +197,8 @@ GpuFrameStats gpu_frame_stats(const Tracer& tracer) {
     g.cut = d->cut;
     g.dispatches = d->dispatches;
     g.gpu_ms = d->gpu_ms;
+    g.stage_ms = d->stage_ms;
+    g.submits = d->submits;
   }
   return g;
 }
@@ -498,8 +500,16 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
     const GpuFrameStats& g = last.gpu;
     out << "  device: " << device << ", " << tracer_dev->execution << ", device frames "
         << (tracer_dev->device_frames ? "on" : "off") << "; last frame " << g.rays << " GPU rays, "
-        << g.dispatches << " dispatches, " << g.resumed << " resumed, " << g.cut << " cut, "
-        << g.gpu_ms << " GPU ms\n";
+        << g.dispatches << " dispatches, " << g.submits << " submits, " << g.resumed << " resumed, "
+        << g.cut << " cut, " << g.gpu_ms << " GPU ms";
+    if (g.stage_ms != GpuStageTimes{}) {
+      out << " (";
+      for (int k = 0; k < kGpuStageCount; ++k)
+        out << (k > 0 ? ", " : "") << gpu_stage_name(GpuStage(k)) << " "
+            << g.stage_ms[std::size_t(k)];
+      out << ")";
+    }
+    out << "\n";
   }
   if (cache_settings.policy != cache::CachePolicy::Off) {
     const CacheCounts& c = last.cache;

@@ -1,6 +1,7 @@
 #version 460
 // Wavefront: before a wave, the indirect dispatch sizes of its ray and shadow queues (the ones
-// the previous wave appended to), and the queues and the state pool it appends to emptied.
+// the previous wave appended to), and the queues and the state pool it appends to emptied; the
+// node count before the wave's shading marked (wave pc.depth) for the fold's ranges.
 #extension GL_GOOGLE_include_directive : require
 #include "include/common.glsl"
 #include "include/frame_wavefront.glsl"
@@ -19,4 +20,5 @@ void main() {
   counters.queue_count[1u - pc.parity] = 0u;
   counters.shadow_queue_count[1u - pc.parity] = 0u;
   counters.state_count[1u - pc.parity] = 0u;
+  if (pc.depth < kWaveMarks) counters.wave_nodes[pc.depth] = min(counters.node_count, params.node_capacity);
 }

@@ -2,7 +2,8 @@
 // Wavefront, after the last wave, one dispatch per depth from the deepest up: a node's radiance
 // is its starting value plus its visible shadow rays in light order, then its refraction child
 // and its reflection child × their weights (the CPU's fold: children in reverse creation order).
-// The primaries (depth 0, node p = pixel p) write the image.
+// The primaries (depth 0, node p = pixel p) write the image. Each dispatch covers the nodes
+// [pc.first, pc.count) that may have its depth (kWaveMarks), not the whole buffer.
 #extension GL_GOOGLE_include_directive : require
 #include "include/common.glsl"
 #include "include/frame_wavefront.glsl"
@@ -10,7 +11,7 @@
 layout(local_size_x = 64) in;
 
 void main() {
-  uint n = gl_GlobalInvocationID.x;
+  uint n = pc.first + gl_GlobalInvocationID.x;
   if (n >= pc.count) return;
   GpuFrameNode node = nodes[n];
   if (node.depth != pc.depth) return;

@@ -21,7 +21,8 @@ cache::RayCacheStore* DeviceCache::store_of(RadianceHook* hook) {
 
 void DeviceCache::upload(cache::RayCacheStore& store, std::uint32_t slots, bool lookups) {
   const VkDeviceSize range = context_.info().max_storage_buffer_range;
-  std::vector<GpuCube> table(std::max(1u, slots));
+  std::vector<GpuCube>& table = table_;
+  table.assign(std::max(1u, slots), GpuCube{});
   for (GpuCube& c : table) c = GpuCube{vec3(0.0f), 0, 0, kCubeNone, 1.0f, 0, 0, 0, 0, 1.0f};
   std::uint64_t total = 0;
   for (std::size_t i = 0; i < store.cube_count(); ++i) total += store.cube(i).texels.size();
@@ -103,10 +104,24 @@ void DeviceCache::upload(cache::RayCacheStore& store, std::uint32_t slots, bool 
   store.restart_journals();
   uploaded_ = std::move(now);
   const VkDeviceSize table_bytes = table.size() * sizeof(GpuCube);
-  // Device-local (every lookup reads it): one staging copy a frame.
+  // Device-local (every lookup reads it): written by the frame's commands (record_start) where
+  // vkCmdUpdateBuffer takes it, else one staging copy here.
   ensure_size(context_, cubes_, table_bytes);
-  cubes_.upload(table.data(), table_bytes);
-  ensure_size(context_, counts_, table.size() * kCubeCountWords * sizeof(std::uint32_t));
+  if (table_bytes > kMaxCommandUpdateBytes) cubes_.upload(table.data(), table_bytes);
+  const VkDeviceSize count_bytes = table.size() * kCubeCountWords * sizeof(std::uint32_t);
+  ensure_size(context_, counts_, count_bytes);
+  ensure_size(context_, counts_host_, count_bytes, MemoryKind::host);
+}
+
+void DeviceCache::record_start(Commands& cmd) const {
+  const VkDeviceSize table_bytes = table_.size() * sizeof(GpuCube);
+  if (table_bytes <= kMaxCommandUpdateBytes) cmd.update(cubes_, table_.data(), table_bytes);
+  cmd.fill(counts_, 0u);
+  cmd.barrier();
+}
+
+void DeviceCache::record_counts_to_host(Commands& cmd) const {
+  cmd.copy(counts_, counts_host_, table_.size() * kCubeCountWords * sizeof(std::uint32_t));
 }
 
 void DeviceCache::reserve_records(std::uint32_t capacity) {
@@ -123,7 +138,7 @@ std::uint64_t DeviceCache::deliver(cache::RayCacheStore& store, const SceneTable
                               " ray-cache records, room for " + std::to_string(record_capacity_));
   // The kernels' counts, by slot (kCount*: 32-bit words, and 64-bit sums low word first).
   std::vector<std::uint32_t> words(cube_of_slot_.size() * kCubeCountWords);
-  counts_.download(words.data(), words.size() * sizeof(std::uint32_t));
+  std::memcpy(words.data(), counts_host_.mapped(), words.size() * sizeof(std::uint32_t));
   const auto counted = [&](std::size_t slot) {
     const std::uint32_t* w = &words[slot * kCubeCountWords];
     const auto wide = [&](std::uint32_t at) {

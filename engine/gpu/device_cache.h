@@ -19,6 +19,7 @@
 /// chosen by the same hash, cache::verify_chosen).
 
 #include "specula/gpu/vk_context.h"
+#include "specula/shared/cache_layout.h"
 
 #include <cstdint>
 #include <vector>
@@ -55,9 +56,17 @@ public:
   /// kept track (CubeView::changes; its lists are restarted); `lookups`: whether the store
   /// wants lookups this frame (after begin_frame).
   void upload(cache::RayCacheStore& store, std::uint32_t slots, bool lookups);
+  /// Records what the frame's first commands do for the cubes: the cube table written (in the
+  /// command stream where it fits vkCmdUpdateBuffer; upload() sent a larger one) and the counts
+  /// zeroed. No submit of its own.
+  void record_start(Commands& cmd) const;
+  /// Records the copy of the counts to host memory, for deliver(): with each submit that copies
+  /// the frame's counters.
+  void record_counts_to_host(Commands& cmd) const;
   /// Makes room for `capacity` records.
   void reserve_records(std::uint32_t capacity);
-  /// Reads the kernels' counts and `count` records back and delivers them to the store
+  /// Takes the kernels' counts (copied by the frame's last submit) and reads `count` records
+  /// back (a submit only when there are any), and delivers them to the store
   /// (add_frame_counts, leaving). Where every ray was recorded, replays their lookups on the
   /// store first and returns how many recorded answers, verified texels and cubes' lookup counts
   /// differ from the replay's (0 unless the device addresses or tests a texel differently from
@@ -83,6 +92,8 @@ private:
   };
   Context& context_;
   Buffer cubes_, texels_, records_, counts_;
+  Buffer counts_host_;         ///< the counts as the frame's last submit left them
+  std::vector<GpuCube> table_; ///< by slot, as upload() built it
   std::vector<Uploaded> uploaded_;
   std::vector<std::int32_t> cube_of_slot_; ///< the store's cube index by slot, -1: none
   Records records_mode_ = Records::changes;

@@ -26,11 +26,12 @@ static_assert(std::uint32_t(LightSampling::Mis) == kSamplingMis &&
               std::uint32_t(LightSampling::Bsdf) == kSamplingBsdf &&
               std::uint32_t(LightSampling::Light) == kSamplingLight);
 
-/// path_layout.h's PathPush (frame_wavefront.glsl's WavePush for frame_shadow).
+/// path.glsl's PathPush, the size of frame_wavefront.glsl's WavePush (for frame_shadow).
 struct PathPush {
   std::uint32_t parity = 0;
   std::uint32_t depth = 0;
   std::uint32_t count = 0;
+  std::uint32_t unused = 0; ///< WavePush's fold range start
 };
 
 /// Most paths in flight (one chunk): 24 MiB of records; fewer where the shadow slots would

@@ -7,6 +7,7 @@
 #include "specula/gpu/shaders.h"
 #include "specula/gpu/vulkan_tracer.h"
 #include "specula/render/scene_layer.h"
+#include "specula/scene/scene.h"
 #include "specula/shared/cache_layout.h"
 #include "specula/shared/frame_layout.h"
 #include "specula/trace/camera_rays.h"
@@ -25,9 +26,13 @@ static_assert(sizeof(GpuHit) == 32 && sizeof(vec3) == 12);
 /// The push constants of every frame kernel (frame_wavefront.glsl's WavePush).
 struct WavePush {
   std::uint32_t parity = 0;
-  std::uint32_t depth = 0;
-  std::uint32_t count = 0;
+  std::uint32_t depth = 0; ///< frame_args: the wave's index; frame_fold: the depth it folds
+  std::uint32_t count = 0; ///< frame_fold: the end of its node range
+  std::uint32_t first = 0; ///< frame_fold: the start of its node range
 };
+
+// Every depth the fold passes over has its wave's node mark.
+static_assert(kWaveMarks >= kMaxTraceDepth);
 
 /// Waves recorded per submit beyond the max_depth + 1 a tree needs (its last shadow rays).
 constexpr std::uint32_t kExtraWaves = 1;
@@ -216,27 +221,46 @@ void DeviceRenderer::bind_cache(bool cache) {
   cache_buffers_[3] = cache ? &cache_->counts() : &unused_;
 }
 
-void DeviceRenderer::zero_cache_counts(Commands& cmd) const {
-  if (cache_buffers_[3] == &unused_) return;
-  cmd.fill(*cache_buffers_[3], 0u);
+void DeviceRenderer::record_start(Commands& cmd, const GpuFrameParams& params,
+                                  const GpuFrameCounters& counters) const {
+  cmd.update(params_, &params, sizeof params);
+  cmd.update(counters_buffer_, &counters, sizeof counters);
+  if (cache_bound()) cache_->record_start(cmd);
   cmd.barrier();
 }
 
-void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t pixels) {
+void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t pixels,
+                                   const GpuFrameParams& params) {
   const Pipelines& p = *pipelines_;
   const std::vector<const Buffer*> buffers = bindings();
   GpuFrameCounters init{};
   init.node_count = pixels;
   init.queue_count[0] = pixels;
 
-  Commands cmd(context_, 8);
+  const std::uint32_t batch =
+      settings.mode == TraceMode::Cast ? 1 + kExtraWaves : settings.max_depth + 1 + kExtraWaves;
+  const std::uint32_t deepest = settings.mode == TraceMode::Cast ? 0 : settings.max_depth;
+  // A timestamp after each stage's dispatches (stage_ms_): a submit has at most the eye and
+  // visibility stages and a batch of waves, or the folds, between its first and last.
+  Commands cmd(context_, 4 + std::max(3 * batch + 2, deepest + 1));
+  std::vector<std::pair<GpuStage, std::uint32_t>> stamps;
+  const auto stamp = [&](GpuStage stage) { stamps.emplace_back(stage, cmd.timestamp()); };
+  // After a submit: each stage's time from the timestamp before its own, the whole from `begin`.
+  const auto settle = [&](std::uint32_t begin, std::uint32_t end) {
+    std::uint32_t before = begin;
+    for (const auto& [stage, at] : stamps) {
+      stage_ms_[std::size_t(stage)] += cmd.elapsed_ms(before, at);
+      before = at;
+    }
+    stamps.clear();
+    gpu_ms_ += cmd.elapsed_ms(begin, end);
+  };
   WavePush push;
   const std::uint32_t t0 = cmd.timestamp();
-  cmd.update(counters_buffer_, &init, sizeof init);
-  zero_cache_counts(cmd);
-  cmd.barrier();
+  record_start(cmd, params, init);
   cmd.dispatch(p.eye, buffers, &push, groups(pixels));
   cmd.barrier();
+  stamp(GpuStage::Eye);
   ++dispatches_;
   if (raster_) {
     // Hybrid mode: the primary hits from the raster pass; frame_trace skips the rays they settle.
@@ -244,35 +268,38 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
     cmd.barrier();
     cmd.dispatch(p.visibility, bindings(), &push, groups(pixels));
     cmd.barrier();
+    stamp(GpuStage::Visibility);
     ++dispatches_;
   }
-  const std::uint32_t batch =
-      settings.mode == TraceMode::Cast ? 1 + kExtraWaves : settings.max_depth + 1 + kExtraWaves;
   std::uint32_t parity = 0;
   GpuFrameCounters c{};
   for (std::uint32_t waves = 0;;) {
     const std::uint32_t begin = waves == 0 ? t0 : cmd.timestamp();
     for (std::uint32_t w = 0; w < batch; ++w, parity ^= 1u) {
       push.parity = parity;
+      push.depth = waves + w;
       cmd.dispatch(p.args, buffers, &push, 1);
       cmd.barrier();
       cmd.dispatch_indirect(p.trace, buffers, &push, counters_buffer_,
                             offsetof(GpuFrameCounters, ray_args));
       cmd.barrier();
+      stamp(GpuStage::Trace);
       cmd.dispatch_indirect(p.shade, buffers, &push, counters_buffer_,
                             offsetof(GpuFrameCounters, ray_args));
       cmd.barrier();
+      stamp(GpuStage::Shade);
       if (settings.mode == TraceMode::Whitted && settings.shadows && p.features.lights > 0) {
         cmd.dispatch_indirect(p.shadow, buffers, &push, counters_buffer_,
                               offsetof(GpuFrameCounters, shadow_args));
         cmd.barrier();
+        stamp(GpuStage::Shadow);
       }
       dispatches_ += 1;
     }
     const std::uint32_t end = cmd.timestamp();
     record_counters_to_host(cmd);
     cmd.submit();
-    gpu_ms_ += cmd.elapsed_ms(begin, end);
+    settle(begin, end);
     waves += batch;
     std::memcpy(&c, counters_host_.mapped(), sizeof c);
     // The last wave appended to the queues of `parity`: empty means every ray is done.
@@ -283,25 +310,31 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
                                 " too small for this scene)");
   }
 
-  // The fold, deepest level first.
+  // The fold, deepest level first, each depth over the nodes that may have it: the primaries
+  // (node p = pixel p), or those spawned from wave d − 1's shading on (kWaveMarks).
   const std::uint32_t nodes = std::min(c.node_count, node_capacity_);
-  const std::uint32_t deepest = settings.mode == TraceMode::Cast ? 0 : settings.max_depth;
   const std::uint32_t begin = cmd.timestamp();
   for (std::uint32_t d = deepest + 1; d-- > 0;) {
-    push = WavePush{0, d, nodes};
-    cmd.dispatch(p.fold, buffers, &push, groups(nodes));
+    const std::uint32_t first =
+        d == 0 ? 0u : std::min(d - 1 < kWaveMarks ? c.wave_nodes[d - 1] : 0u, nodes);
+    const std::uint32_t end = d == 0 ? std::min(pixels, nodes) : nodes;
+    if (end <= first) continue;
+    push = WavePush{0, d, end, first};
+    cmd.dispatch(p.fold, buffers, &push, groups(end - first));
     cmd.barrier();
+    stamp(GpuStage::Fold);
     ++dispatches_;
   }
   const std::uint32_t end = cmd.timestamp();
   record_counters_to_host(cmd);
   cmd.submit();
-  gpu_ms_ += cmd.elapsed_ms(begin, end);
+  settle(begin, end);
 }
 
 void DeviceRenderer::record_counters_to_host(Commands& cmd) const {
   cmd.barrier();
   cmd.copy(counters_buffer_, counters_host_, sizeof(GpuFrameCounters));
+  if (cache_bound()) cache_->record_counts_to_host(cmd);
   cmd.host_barrier();
 }
 
@@ -311,9 +344,7 @@ void DeviceRenderer::run_single(std::uint32_t pixels, GpuFrameParams params) {
   const GpuFrameCounters init{};
   Commands cmd(context_, 4);
   const WavePush push;
-  cmd.update(counters_buffer_, &init, sizeof init);
-  zero_cache_counts(cmd);
-  cmd.barrier();
+  record_start(cmd, params, init);
   if (raster_) {
     // Hybrid mode: the whole frame's visibility buffer before the first walk.
     const std::uint32_t begin = cmd.timestamp();
@@ -405,6 +436,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
   const std::uint32_t width = out.width(), height = out.height();
   const std::uint32_t pixels = width * height;
   if (store != nullptr) store->begin_frame(width, height, settings.mode);
+  const std::uint64_t submits = context_.submits();
   try {
     upload_tables(layer);
     const SceneFeatures& scene = layer.emitters().features();
@@ -458,10 +490,10 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     params.record_capacity = cache ? cache_->record_capacity() : 0;
     params.stack_stride = pool_->stride;
     params.pool_slots = pool_->slots;
-    params_.upload(&params, sizeof params);
     if (raster_ && !stochastic) raster_->prepare(layer, rays, width, height);
 
     gpu_ms_ = 0.0;
+    stage_ms_ = GpuStageTimes{};
     dispatches_ = 0;
     if (stochastic) {
       const GpuFrameCounters zero{};
@@ -472,7 +504,7 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
                                  &image_, &primary_buffer_, &counters_host_},
                     gpu_ms_, dispatches_, guides);
     } else if (execution_ == Execution::wavefront)
-      run_wavefront(settings, pixels);
+      run_wavefront(settings, pixels, params);
     else
       run_single(pixels, params);
 
@@ -497,8 +529,10 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     counters.restarted = c.restarted;
     counters.dispatches = dispatches_;
     counters.gpu_ms = gpu_ms_;
+    counters.stage_ms = stage_ms_;
     cache_records_ = cache ? c.records : 0;
     cache_mismatches_ = cache ? cache_->deliver(*store, layer.tables(), c.records) : 0;
+    counters.submits = context_.submits() - submits;
   } catch (const GpuError& e) {
     throw GpuError(std::string("vulkan device frame (") + trace_mode_name(settings.mode) + ", " +
                        (execution_ == Execution::wavefront ? "wavefront" : "single kernel") +

@@ -21,6 +21,7 @@
 #include "specula/gpu/raster_primary.h"
 #include "specula/gpu/vk_context.h"
 #include "specula/shared/frame_layout.h"
+#include "specula/trace/stats.h"
 
 #include <cstdint>
 #include <memory>
@@ -126,14 +127,23 @@ private:
   void ensure_pipelines(const Features& features);
   void ensure_frame_buffers(std::uint32_t pixels);
   void ensure_buffers(std::uint32_t pixels, const Features& features);
-  void run_wavefront(const TraceSettings& settings, std::uint32_t pixels);
+  /// `params`: the frame's, written by its first commands (record_start), as in run_single.
+  void run_wavefront(const TraceSettings& settings, std::uint32_t pixels,
+                     const GpuFrameParams& params);
   /// `params`: the frame's (the chunks' first pixel and size are set in the commands).
   void run_single(std::uint32_t pixels, GpuFrameParams params);
-  /// Records the copy of the counters into counters_host_ (read once the submit has finished).
+  /// Records the copy of the counters into counters_host_ (read once the submit has finished),
+  /// and of the cubes' counts where the frame has cubes (DeviceCache::deliver reads them).
   void record_counters_to_host(Commands& cmd) const;
   void bind_cache(bool cache);
-  /// Records the zeroing of the cubes' counts (binding 31) where the frame has cubes.
-  void zero_cache_counts(Commands& cmd) const;
+  [[nodiscard]] bool cache_bound() const {
+    return cache_buffers_[3] != nullptr && cache_buffers_[3] != &unused_;
+  }
+  /// Records what a frame's first commands do, with no submit of their own: the parameters and
+  /// the counters' start written in the command stream, the cube table written and the cubes'
+  /// counts zeroed where the frame has cubes (DeviceCache::record_start); then a barrier.
+  void record_start(Commands& cmd, const GpuFrameParams& params,
+                    const GpuFrameCounters& counters) const;
   /// Every frame kernel's buffers, bindings 0 to kFramePoolBindings - 1 (frame_layout.h), with
   /// `unused_` where the frame has no cubes or no visibility buffer.
   [[nodiscard]] std::vector<const Buffer*> bindings() const;
@@ -169,6 +179,7 @@ private:
   mutable bool image_pending_ = false;   ///< the last frame is in image_ only
   mutable bool primary_pending_ = false; ///< primary_ not yet read from primary_buffer_
   double gpu_ms_ = 0.0;
+  GpuStageTimes stage_ms_{}; ///< wavefront cast and Whitted frames: gpu_ms_ by stage
   std::uint64_t dispatches_ = 0;
 };
 

@@ -216,6 +216,9 @@ std::vector<DeviceSummary> list_devices(std::string* why_none) {
 
 std::unique_ptr<Context> Context::create(const Options& options) {
   std::unique_ptr<Context> ctx(new Context());
+  ctx->map_device_memory_ = options.map_device_memory;
+  if (const char* v = std::getenv("SPECULA_VK_UNMAPPED"); v != nullptr && *v != '\0')
+    ctx->map_device_memory_ = std::strcmp(v, "0") == 0;
   bool validation = options.validation;
   if (const char* v = std::getenv("SPECULA_VK_VALIDATION"); v != nullptr && *v != '\0')
     validation = std::strcmp(v, "0") != 0;
@@ -433,7 +436,8 @@ Buffer Context::make_buffer(VkDeviceSize bytes, MemoryKind kind) {
   mai.memoryTypeIndex = type;
   check(vkAllocateMemory(device_, &mai, nullptr, &b.memory_), "vkAllocateMemory");
   check(vkBindBufferMemory(device_, b.buffer_, b.memory_, 0), "vkBindBufferMemory");
-  if (memory_.memoryTypes[type].propertyFlags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT) {
+  if ((memory_.memoryTypes[type].propertyFlags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT) &&
+      (kind == MemoryKind::host || map_device_memory_)) {
     if (memory_.memoryTypes[type].propertyFlags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT)
       check(vkMapMemory(device_, b.memory_, 0, VK_WHOLE_SIZE, 0, &b.mapped_), "vkMapMemory");
   }
@@ -481,6 +485,7 @@ void Context::run_now(const std::function<void(VkCommandBuffer)>& record) {
   si.commandBufferCount = 1;
   si.pCommandBuffers = &cmd;
   const std::unique_lock<std::mutex> lock = lock_queue();
+  submits_.fetch_add(1, std::memory_order_relaxed);
   const VkResult r = vkQueueSubmit(queue_, 1, &si, VK_NULL_HANDLE);
   if (r == VK_ERROR_DEVICE_LOST) lost_ = true;
   check(r, "vkQueueSubmit");
@@ -1128,7 +1133,7 @@ void Commands::fill(const Buffer& buffer, std::uint32_t value, VkDeviceSize offs
 void Commands::update(const Buffer& buffer, const void* data, VkDeviceSize bytes,
                       VkDeviceSize offset) {
   if (bytes == 0) return;
-  if (bytes % 4 != 0 || bytes > 65536 || offset + bytes > buffer.size())
+  if (bytes % 4 != 0 || bytes > kMaxCommandUpdateBytes || offset + bytes > buffer.size())
     throw GpuError("Commands::update: " + std::to_string(bytes) + " bytes at " +
                        std::to_string(offset) + " (a multiple of 4, at most 65536, in the buffer)",
                    VK_ERROR_UNKNOWN);
@@ -1180,6 +1185,7 @@ void Commands::submit() {
   VkResult r;
   {
     const std::unique_lock<std::mutex> lock = context_.lock_queue();
+    context_.submits_.fetch_add(1, std::memory_order_relaxed);
     r = vkQueueSubmit(context_.queue(), 1, &si, fence_);
   }
   if (r == VK_SUCCESS) r = vkWaitForFences(d, 1, &fence_, VK_TRUE, UINT64_MAX);

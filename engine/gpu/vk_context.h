@@ -12,6 +12,7 @@
 
 #include <vulkan/vulkan.h>
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -243,6 +244,9 @@ struct Draw {
   std::uint32_t instance = 0;
 };
 
+/// vkCmdUpdateBuffer's limit on one write (Commands::update).
+inline constexpr VkDeviceSize kMaxCommandUpdateBytes = 65536;
+
 /// One command buffer recorded and submitted at once: dispatches with their buffers bound,
 /// barriers between them, timestamps around them. submit() waits for completion and throws
 /// GpuError (device_lost() for a lost device). Every recording starts with a barrier on all
@@ -286,9 +290,9 @@ public:
   void barrier();
   void fill(const Buffer& buffer, std::uint32_t value, VkDeviceSize offset = 0,
             VkDeviceSize bytes = VK_WHOLE_SIZE);
-  /// Writes `bytes` (a multiple of 4, at most 65536) of `data` into the buffer in the command
-  /// stream (vkCmdUpdateBuffer): small per-frame values into device-local memory without a
-  /// staging copy or a submit of their own. A barrier() makes them visible to shaders.
+  /// Writes `bytes` (a multiple of 4, at most kMaxCommandUpdateBytes) of `data` into the buffer
+  /// in the command stream (vkCmdUpdateBuffer): small per-frame values into device-local memory
+  /// without a staging copy or a submit of their own. A barrier() makes them visible to shaders.
   void update(const Buffer& buffer, const void* data, VkDeviceSize bytes, VkDeviceSize offset = 0);
   /// Transfer and shader writes before are visible to the host once the submit has finished
   /// (after copying device-local counters into a host-visible buffer).
@@ -332,6 +336,11 @@ public:
 #endif
     /// Accept a CPU device (lavapipe). False: only a real GPU will do.
     bool allow_cpu = true;
+    /// Map device buffers where their memory is host-visible (lavapipe, unified memory): uploads
+    /// and read-backs are then plain copies. False (also SPECULA_VK_UNMAPPED=1): never, so they
+    /// take the staging copies and submits of a discrete GPU's device-local memory — for tests
+    /// of those paths on a device that does not need them.
+    bool map_device_memory = true;
     /// Extra instance / device extensions (a window's surface and swapchain); a device without
     /// every device extension is passed over.
     std::vector<std::string> instance_extensions;
@@ -357,6 +366,8 @@ public:
   [[nodiscard]] std::uint32_t queue_family() const { return family_; }
   [[nodiscard]] VkCommandPool command_pool() const { return command_pool_; }
   [[nodiscard]] bool validation_enabled() const { return validation_; }
+  /// Whether device buffers are mapped where they can be (Options::map_device_memory).
+  [[nodiscard]] bool maps_device_memory() const { return map_device_memory_; }
 
   /// A storage buffer of `bytes` (at least 4) with transfer src/dst usage (and indirect).
   [[nodiscard]] Buffer make_buffer(VkDeviceSize bytes, MemoryKind kind = MemoryKind::device);
@@ -374,6 +385,9 @@ public:
 
   /// One-shot commands on the queue, waited for (uploads, readbacks).
   void run_now(const std::function<void(VkCommandBuffer)>& record);
+  /// Submits waited for so far (run_now and Commands::submit): each is a round trip between
+  /// host and device, which on a discrete GPU costs tens of microseconds of a frame.
+  [[nodiscard]] std::uint64_t submits() const { return submits_.load(std::memory_order_relaxed); }
 
   /// A host-visible buffer of at least `bytes` for one upload or read-back, held (locked) while
   /// the lease lives: the context's own, kept between calls (no allocation per frame), up to
@@ -415,8 +429,10 @@ private:
   VkPhysicalDeviceMemoryProperties memory_{};
   DeviceInfo info_;
   bool validation_ = false;
+  bool map_device_memory_ = true;
   bool lost_ = false;
   std::mutex queue_mutex_;
+  std::atomic<std::uint64_t> submits_{0};
   /// Guards every Buffer's cache of views (Buffer::view runs wherever a dispatch is recorded).
   std::mutex views_mutex_;
   std::mutex staging_mutex_;

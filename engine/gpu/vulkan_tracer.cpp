@@ -232,8 +232,14 @@ bool VulkanTracer::render_frame_on_device(const SceneLayer& layer, const Camera&
     return false;
   renderer_->render(layer, camera, settings, out, stats, counters_, hook, guides);
   // The frame's own device counters, for the stats file (frames[].gpu).
-  stats.gpu = GpuFrameStats{true,          counters_.rays,       counters_.resumed,
-                            counters_.cut, counters_.dispatches, counters_.gpu_ms};
+  stats.gpu = GpuFrameStats{true,
+                            counters_.rays,
+                            counters_.resumed,
+                            counters_.cut,
+                            counters_.dispatches,
+                            counters_.gpu_ms,
+                            counters_.stage_ms,
+                            counters_.submits};
   return true;
 }
 

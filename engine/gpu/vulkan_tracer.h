@@ -17,6 +17,7 @@
 #include "specula/gpu/raster_primary.h"
 #include "specula/gpu/vk_context.h"
 #include "specula/shared/trace_layout.h"
+#include "specula/trace/stats.h"
 #include "specula/trace/tracer.h"
 
 #include <cstdint>
@@ -70,6 +71,8 @@ struct GpuTraceCounters {
   std::uint64_t steps = 0;      ///< traversal steps of trace_rays.comp (nodes, cells, tests, pops)
   std::uint64_t tests = 0;      ///< its ray/triangle tests (VulkanOptions::count_tests; else 0)
   double gpu_ms = 0.0;          ///< timestamp time of the dispatches
+  GpuStageTimes stage_ms{};     ///< of gpu_ms, by stage (wavefront cast and Whitted frames)
+  std::uint64_t submits = 0;    ///< device frames: submits waited for (uploads, read-backs)
 };
 
 class VulkanTracer final : public Tracer {

@@ -330,6 +330,8 @@ std::optional<TracerDevice> tracer_device(const Tracer& tracer) {
     d.steps = c.steps;
     d.tests = c.tests;
     d.gpu_ms = c.gpu_ms;
+    d.stage_ms = c.stage_ms;
+    d.submits = c.submits;
     return d;
   }
 #else

@@ -4,6 +4,7 @@
 /// name or by capability (`auto`); nothing else in the engine names a backend type.
 
 #include "specula/ecs/registry.h"
+#include "specula/trace/stats.h"
 #include "specula/trace/tracer.h"
 
 #include <cstdint>
@@ -128,6 +129,8 @@ struct TracerDevice {
   std::uint64_t steps = 0; ///< traversal steps of the latest batch of rays (not of device frames)
   std::uint64_t tests = 0; ///< its ray/triangle tests, with GpuTracerOptions::count_tests
   double gpu_ms = 0.0;
+  GpuStageTimes stage_ms{};  ///< of gpu_ms, by stage (wavefront cast and Whitted device frames)
+  std::uint64_t submits = 0; ///< device frames: submits waited for, uploads and read-backs included
 };
 [[nodiscard]] std::optional<TracerDevice> tracer_device(const Tracer& tracer);
 

@@ -53,6 +53,24 @@ template <typename T> void read_optional(const json& o, const char* key, T& valu
 
 } // namespace
 
+const char* gpu_stage_name(GpuStage stage) {
+  switch (stage) {
+  case GpuStage::Eye:
+    return "eye";
+  case GpuStage::Visibility:
+    return "visibility";
+  case GpuStage::Trace:
+    return "trace";
+  case GpuStage::Shade:
+    return "shade";
+  case GpuStage::Shadow:
+    return "shadow";
+  case GpuStage::Fold:
+    return "fold";
+  }
+  return "?";
+}
+
 const char* ray_kind_name(RayKind kind) {
   switch (kind) {
   case RayKind::Primary:
@@ -176,12 +194,17 @@ std::string stats_to_json(const RunStats& stats) {
                       {"accumulated_samples", f.accumulated_samples},
                       {"accumulation_restarted", f.accumulation_restarted},
                       {"denoise_ms", f.denoise_ms}});
-    if (f.gpu.present)
-      frames.back()["gpu"] = {{"rays", f.gpu.rays},
-                              {"resumed", f.gpu.resumed},
-                              {"cut", f.gpu.cut},
-                              {"dispatches", f.gpu.dispatches},
-                              {"gpu_ms", f.gpu.gpu_ms}};
+    if (f.gpu.present) {
+      frames.back()["gpu"] = {{"rays", f.gpu.rays},     {"resumed", f.gpu.resumed},
+                              {"cut", f.gpu.cut},       {"dispatches", f.gpu.dispatches},
+                              {"gpu_ms", f.gpu.gpu_ms}, {"submits", f.gpu.submits}};
+      if (f.gpu.stage_ms != GpuStageTimes{}) {
+        json stages = json::object();
+        for (int k = 0; k < kGpuStageCount; ++k)
+          stages[gpu_stage_name(GpuStage(k))] = f.gpu.stage_ms[std::size_t(k)];
+        frames.back()["gpu"]["stages_ms"] = stages;
+      }
+    }
     total_ms += f.ms;
     total_trace_ms += f.trace_ms;
     total_rays += f.rays;
@@ -370,6 +393,14 @@ RunStats stats_from_json(const std::string& text, const std::string& name) {
       f.gpu.cut = read<std::uint64_t>(g, "cut", name, where);
       f.gpu.dispatches = read<std::uint64_t>(g, "dispatches", name, where);
       f.gpu.gpu_ms = read<double>(g, "gpu_ms", name, where);
+      // Arrived 2026-11-29: older files have none.
+      read_optional(g, "submits", f.gpu.submits, name, where);
+      if (g.contains("stages_ms")) {
+        const json stages = read<json>(g, "stages_ms", name, where);
+        for (int k = 0; k < kGpuStageCount; ++k)
+          f.gpu.stage_ms[std::size_t(k)] =
+              read<double>(stages, gpu_stage_name(GpuStage(k)), name, where + ".stages_ms");
+      }
     }
     stats.frames.push_back(f);
   }

@@ -3,6 +3,7 @@
 /// Per-frame statistics written by `specula render --stats FILE.json` (docs/stats-format.md).
 /// Other tools read these names: keep them.
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -85,6 +86,15 @@ struct AccelStats {
   friend bool operator==(const AccelStats&, const AccelStats&) = default;
 };
 
+/// The stages of a wavefront device frame (cast and Whitted; gpu::DeviceRenderer): eye rays, hybrid
+/// mode's visibility pass, then per wave traversal (with its queue sizing), shading and shadow
+/// rays, and after the last wave the fold of every pixel's tree.
+enum class GpuStage : std::uint8_t { Eye, Visibility, Trace, Shade, Shadow, Fold };
+inline constexpr int kGpuStageCount = 6;
+[[nodiscard]] const char* gpu_stage_name(GpuStage stage);
+/// Device milliseconds by GpuStage (timestamps around each dispatch).
+using GpuStageTimes = std::array<double, kGpuStageCount>;
+
 /// A frame on a device (the Vulkan backends): the tracer's counters after it. Absent (present
 /// false) on CPU backends; the stats file then has no "gpu" object in the frame.
 struct GpuFrameStats {
@@ -94,6 +104,12 @@ struct GpuFrameStats {
   std::uint64_t cut = 0;        ///< rays the driver cut off silently: must be 0
   std::uint64_t dispatches = 0; ///< traversal dispatches
   double gpu_ms = 0.0;          ///< device time of those dispatches (timestamps)
+  /// Of gpu_ms, each stage's: wavefront cast and Whitted frames (all 0 for other frames, and in
+  /// the file no "stages_ms").
+  GpuStageTimes stage_ms{};
+  /// Submits waited for in the frame (device frames: its uploads and read-backs included); each
+  /// is a round trip between host and device.
+  std::uint64_t submits = 0;
   friend bool operator==(const GpuFrameStats&, const GpuFrameStats&) = default;
 };
 

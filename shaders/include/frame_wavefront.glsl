@@ -12,8 +12,9 @@ layout(std430, set = 0, binding = 17) buffer FrameQueues { uint queues[]; };
 layout(std430, set = 0, binding = 18) buffer FrameShadows { GpuShadowRay shadows[]; };
 layout(std430, set = 0, binding = 19) buffer FrameShadowQueues { uint shadow_queues[]; };
 
-// Which queue a wave reads (the other is the one it appends to), and the fold's depth.
-layout(push_constant) uniform WavePush { uint parity; uint depth; uint count; } pc;
+// Which queue a wave reads (the other is the one it appends to); the wave's index (frame_args)
+// or the fold's depth, and the fold's node range [first, count).
+layout(push_constant) uniform WavePush { uint parity; uint depth; uint count; uint first; } pc;
 
 void push_ray(uint node) {
   uint slot = atomicAdd(counters.queue_count[1u - pc.parity], 1u);

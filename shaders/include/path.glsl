@@ -28,8 +28,9 @@ layout(std430, set = 0, binding = 27) readonly buffer PathSobol { uint sobol_tab
 layout(std430, set = 0, binding = 30) writeonly buffer PathGuides { GpuGuide guides[]; };
 
 // parity: the queue a pass reads; depth: the vertex depth shaded; count: path_args' queue (0:
-// rays, 1: shadow rays).
-layout(push_constant) uniform PathPush { uint parity; uint depth; uint count; } pc;
+// rays, 1: shadow rays); unused: frame_wavefront.glsl's WavePush is as long (frame_shadow serves
+// both).
+layout(push_constant) uniform PathPush { uint parity; uint depth; uint count; uint unused; } pc;
 
 #include "include/sampler.glsl"
 

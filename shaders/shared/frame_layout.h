@@ -53,6 +53,12 @@ SPECULA_CONST uint kFramePoolBindings = 32u;
 /// dropped (DeviceRenderer::supports keeps max_depth below it in practice: it is reported).
 SPECULA_CONST uint kStackFrames = 8u;
 
+/// Wavefront: the node count marked before each of the first kWaveMarks waves
+/// (GpuFrameCounters::wave_nodes). The fold of depth d ≥ 1 covers only the nodes from the mark of
+/// wave d − 1 on: a depth-d node is spawned by shading a depth-(d − 1) ray, traced in wave d − 1 at
+/// the earliest. kMaxTraceDepth (scene.h) is 64, so every depth has its mark.
+SPECULA_CONST uint kWaveMarks = 64u;
+
 /// Per frame, uploaded once (binding kFrameParamsBinding). Camera in render space as
 /// trace/camera_rays.h computes it on the CPU.
 struct GpuFrameParams {
@@ -189,6 +195,7 @@ struct GpuFrameCounters {
   uint restarted; ///< traces out of budget that found their pool full: they start over
   uint _pad0;
   uint _pad1;
+  uint wave_nodes[kWaveMarks]; ///< wavefront: node_count (≤ capacity) before wave w's shading
 };
 
 #ifdef __cplusplus
@@ -197,7 +204,8 @@ static_assert(sizeof(GpuFrameParams) == 128 && offsetof(GpuFrameParams, backgrou
 static_assert(sizeof(GpuFrameNode) == 112 && offsetof(GpuFrameNode, kind) == 64);
 static_assert(sizeof(GpuShadowRay) == 48);
 static_assert(sizeof(GpuStackFrame) == 224 && offsetof(GpuStackFrame, refract_direction) == 192);
-static_assert(sizeof(GpuFrameCounters) == 112 && offsetof(GpuFrameCounters, queue_count) == 32 &&
+static_assert(sizeof(GpuFrameCounters) == 112 + 4 * kWaveMarks &&
+              offsetof(GpuFrameCounters, queue_count) == 32 &&
               offsetof(GpuFrameCounters, rays) == 48);
 } // namespace specula::gpu
 #endif

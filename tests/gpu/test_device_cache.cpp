@@ -390,6 +390,50 @@ TEST(DeviceCache, AFilledStillViewRecordsNothingAndCountsAsTheStore) {
   }
 }
 
+// The cube table, the counts and the frame's parameters travel in the frame's own commands: once
+// the cubes are filled, a cached frame of a still view waits for no more submits (host-device
+// round trips) than the same frame uncached; the first frame, which writes texels, pays for its
+// uploads and its records' read-back. Device memory unmapped, as on a discrete GPU (on lavapipe
+// uploads and read-backs would otherwise be plain copies, with no submit to count).
+TEST(DeviceCache, AFilledStillViewWaitsForNoMoreSubmitsThanAnUncachedFrame) {
+  SPECULA_NEED_DEVICE();
+  gpu::Context::Options unmapped;
+  unmapped.map_device_memory = false;
+  for (const gpu::Execution execution :
+       {gpu::Execution::wavefront, gpu::Execution::single_kernel}) {
+    SCOPED_TRACE(execution == gpu::Execution::wavefront ? "wavefront" : "single kernel");
+    CacheScene scene;
+    test::TracedWorld world(scene.reg, "native-bvh", test::device_mirror_options());
+    CacheSettings cs;
+    cs.policy = CachePolicy::On;
+    RayCacheStore store(cs);
+    auto context = gpu::Context::create(unmapped);
+    ASSERT_FALSE(context->maps_device_memory());
+    gpu::GpuScene gpu_scene(*context, gpu::GpuStructure::bvh);
+    gpu_scene.update(world.layer);
+    gpu::DeviceRenderer renderer(*context, gpu_scene, execution);
+    TraceSettings s;
+    s.mode = TraceMode::Whitted;
+    s.max_depth = 4;
+    Framebuffer image(kSize, kSize);
+    FrameStats stats;
+    gpu::GpuTraceCounters counters;
+    std::uint64_t first = 0;
+    for (int f = 0; f < 3; ++f) {
+      (void)store.invalidate(scene.reg, world.layer);
+      renderer.render(world.layer, scene.camera, s, image, stats, counters, &store);
+      if (f == 0) first = counters.submits;
+    }
+    const std::uint64_t cached = counters.submits;
+    EXPECT_EQ(renderer.cache_records(), 0u) << "not a filled still view: no test";
+    renderer.render(world.layer, scene.camera, s, image, stats, counters);
+    const std::uint64_t uncached = counters.submits;
+    EXPECT_GT(uncached, 0u);
+    EXPECT_EQ(cached, uncached);
+    EXPECT_GT(first, cached) << "the filling frame's records came back without a read-back";
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(
     Modes, DeviceCacheFrames,
     ::testing::Values(Param{LookupMode::Direction, gpu::Execution::wavefront},

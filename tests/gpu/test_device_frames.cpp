@@ -3,7 +3,8 @@
 // visibility agreeing on 99.9% of pixels, the wavefront and the single kernel giving the same
 // image, no ray cut by the driver, resumption after a small traversal budget, a moved object
 // seen where it moved, a dynamic object seen while it exists (the top level's code compiled in
-// and out), a morphing mesh shaded with its sampled normals, and a lost device reported as such.
+// and out), a morphing mesh shaded with its sampled normals, each wavefront stage's device time,
+// and a lost device reported as such.
 #include "device_scenes.h"
 #include "specula/core/error.h"
 #include "specula/gpu/device_renderer.h"
@@ -301,6 +302,41 @@ TEST(DeviceFramesScene, AMorphingMeshIsShadedWithItsSampledNormals) {
           << "smooth and faceted shading look alike";
     }
   }
+}
+
+// Timestamps after each stage's dispatches: a wavefront frame's eye, trace, shade, shadow and
+// fold stages each take time and together make the frame's device time (hybrid mode's
+// visibility stage none here); the single kernel has no stages.
+TEST(DeviceFramesScene, EachWavefrontStagesTimeAddsUpToTheFramesDeviceTime) {
+  SPECULA_NEED_DEVICE();
+  ecs::Registry reg;
+  test::cornell(reg);
+  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
+  const Camera camera = test::cornell_camera();
+  const TraceSettings s = settings_for(TraceMode::Whitted);
+  Device wavefront(world.layer, gpu::Execution::wavefront);
+  (void)wavefront.render(world.layer, camera, s);
+  const gpu::GpuTraceCounters& c = wavefront.counters;
+  if (!wavefront.context->info().timestamps) {
+    EXPECT_EQ(c.stage_ms, GpuStageTimes{}) << "no timestamps, no stage times";
+    GTEST_SKIP() << "the device has no timestamp queries";
+  }
+  double sum = 0.0;
+  for (int k = 0; k < kGpuStageCount; ++k) {
+    const double ms = c.stage_ms[std::size_t(k)];
+    SCOPED_TRACE(gpu_stage_name(GpuStage(k)));
+    if (GpuStage(k) == GpuStage::Visibility)
+      EXPECT_EQ(ms, 0.0);
+    else
+      EXPECT_GT(ms, 0.0);
+    sum += ms;
+  }
+  EXPECT_LE(sum, c.gpu_ms * (1.0 + 1e-9));
+  EXPECT_GE(sum, 0.95 * c.gpu_ms) << "the stages cover the frame's dispatches";
+  Device single(world.layer, gpu::Execution::single_kernel);
+  (void)single.render(world.layer, camera, s);
+  EXPECT_GT(single.counters.gpu_ms, 0.0);
+  EXPECT_EQ(single.counters.stage_ms, GpuStageTimes{});
 }
 
 TEST(DeviceFramesScene, FactoryBackendRendersOnTheDevice) {

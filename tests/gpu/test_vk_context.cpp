@@ -68,6 +68,36 @@ TEST(VkContext, BuffersRoundTripInBothMemoryKinds) {
   }
 }
 
+// A context that never maps device memory takes a discrete GPU's paths on any device: uploads,
+// scattered uploads and read-backs through the staging buffer, each a submit of its own; host
+// buffers stay mapped.
+TEST(VkContext, UnmappedDeviceMemoryGoesThroughStagingCopies) {
+  SPECULA_NEED_DEVICE(any);
+  Context::Options options;
+  options.map_device_memory = false;
+  const std::unique_ptr<Context> ctx = Context::create(options);
+  ASSERT_FALSE(ctx->maps_device_memory());
+  std::vector<std::uint32_t> data(1000);
+  std::iota(data.begin(), data.end(), 7u);
+  Buffer b = ctx->make_buffer(data.size() * 4);
+  EXPECT_EQ(b.mapped(), nullptr);
+  EXPECT_NE(ctx->make_buffer(64, MemoryKind::host).mapped(), nullptr);
+  const std::uint64_t before = ctx->submits();
+  b.upload(std::span<const std::uint32_t>(data));
+  EXPECT_EQ(ctx->submits(), before + 1);
+  // Two runs of new values, from one staging copy.
+  const std::vector<std::uint32_t> runs = {1, 2, 3, 4, 5};
+  const VkBufferCopy pieces[] = {{0, 10 * 4, 2 * 4}, {2 * 4, 500 * 4, 3 * 4}};
+  b.scatter(runs.data(), runs.size() * 4, pieces);
+  EXPECT_EQ(ctx->submits(), before + 2);
+  std::copy(runs.begin(), runs.begin() + 2, data.begin() + 10);
+  std::copy(runs.begin() + 2, runs.end(), data.begin() + 500);
+  std::vector<std::uint32_t> back(data.size());
+  b.download(std::span<std::uint32_t>(back));
+  EXPECT_EQ(ctx->submits(), before + 3);
+  EXPECT_EQ(back, data);
+}
+
 TEST(VkContext, DispatchAppliesPushAndSpecializationConstants) {
   SPECULA_NEED_DEVICE(ctx);
   const std::uint32_t n = 1000;

@@ -175,17 +175,49 @@ TEST(Stats, WritesTheDeviceAndGpuCountersOnlyForDeviceRuns) {
   s.settings.grid_density = 2.0f;
   s.settings.gpu_primary = "raster";
   s.frames[0].gpu = {true, 4096, 12, 0, 3, 1.5};
+  s.frames[0].gpu.submits = 4;
   const auto j = nlohmann::json::parse(stats_to_json(s));
   EXPECT_EQ(j.at("settings").at("gpu").at("primary"), "raster");
   EXPECT_EQ(j.at("settings").at("gpu").at("device_type"), "CPU (software)");
   EXPECT_EQ(j.at("settings").at("gpu").at("grid_density"), 2.0);
   EXPECT_EQ(j.at("frames").at(0).at("gpu").at("rays"), 4096);
   EXPECT_EQ(j.at("frames").at(0).at("gpu").at("cut"), 0);
+  EXPECT_EQ(j.at("frames").at(0).at("gpu").at("submits"), 4);
   EXPECT_EQ(stats_from_json(stats_to_json(s), "gpu.json"), s);
   // Files from before hybrid mode have no "primary": they traced their primary rays.
   auto old = j;
   old["settings"]["gpu"].erase("primary");
   EXPECT_EQ(stats_from_json(old.dump(), "old.json").settings.gpu_primary, "trace");
+  // Nor, from before 2026-11-29, a frame's submits.
+  old["frames"][0]["gpu"].erase("submits");
+  EXPECT_EQ(stats_from_json(old.dump(), "old.json").frames[0].gpu.submits, 0u);
+}
+
+TEST(Stats, WritesEachDeviceStagesTimeOnlyWhereItWasMeasured) {
+  RunStats s = sample_stats();
+  s.settings.backend = "vulkan";
+  s.frames[0].gpu = {true, 4096, 0, 0, 9, 3.0};
+  s.frames[1].gpu = {true, 4096, 0, 0, 9, 3.0};
+  s.frames[1].gpu.stage_ms = {0.25, 0.0, 1.0, 0.75, 0.5, 0.5};
+  const auto j = nlohmann::json::parse(stats_to_json(s));
+  EXPECT_FALSE(j.at("frames").at(0).at("gpu").contains("stages_ms"))
+      << "a frame without stage times (path, single kernel) writes none";
+  const auto& stages = j.at("frames").at(1).at("gpu").at("stages_ms");
+  for (int k = 0; k < kGpuStageCount; ++k)
+    EXPECT_EQ(stages.at(gpu_stage_name(GpuStage(k))).get<double>(),
+              s.frames[1].gpu.stage_ms[std::size_t(k)])
+        << gpu_stage_name(GpuStage(k));
+  EXPECT_EQ(stats_from_json(j.dump(), "gpu.json"), s);
+  // A stage missing from the object is named.
+  auto bad = j;
+  bad["frames"][1]["gpu"]["stages_ms"].erase("fold");
+  try {
+    (void)stats_from_json(bad.dump(), "bad.json");
+    FAIL() << "a partial stages_ms read";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("frames[1].gpu.stages_ms.fold"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(Stats, DerivedRatesFollowFromCountsAndTime) {
