@@ -13,34 +13,42 @@ layout(local_size_x = 64) in;
 void main() {
   uint n = pc.first + gl_GlobalInvocationID.x;
   if (n >= pc.count) return;
-  GpuFrameNode node = nodes[n];
-  if (node.depth != pc.depth) return;
-  vec3 radiance = node.radiance;
-  uint seen = node.seen, rays = node.rays;
+  // Field by field, each where it is needed: a node of another depth reads one word, and only
+  // a ray leaving a cube reads what its record carries.
+  uint depth = nodes[n].depth;
+  if (depth != pc.depth) return;
+  vec3 radiance = nodes[n].radiance;
+  uint seen = kCache ? nodes[n].seen : 0u, rays = kCache ? nodes[n].rays : 0u;
+  uint shadow_count = nodes[n].shadow_count, shadow_first = nodes[n].shadow_first;
   for (uint k = 0u; k < kLightCount; ++k) {
-    if (k >= node.shadow_count) break;
-    GpuShadowRay s = shadows[node.shadow_first + k];
+    if (k >= shadow_count) break;
+    GpuShadowRay s = shadows[shadow_first + k];
     if (s.status == kRayPending) atomicAdd(counters.cut, 1u);
     else if (s.status == kRayDone && s.visible != 0u) radiance = radiance + s.value;
   }
-  if (node.child_refract != kNoIndex) {
-    GpuFrameNode c = nodes[node.child_refract];
-    radiance = radiance + vec3(c.weight) * c.radiance;
-    seen |= c.seen;
-    rays += c.rays;
+  uint refract = nodes[n].child_refract, reflect = nodes[n].child_reflect;
+  if (refract != kNoIndex) {
+    radiance = radiance + vec3(nodes[refract].weight) * nodes[refract].radiance;
+    if (kCache) {
+      seen |= nodes[refract].seen;
+      rays += nodes[refract].rays;
+    }
   }
-  if (node.child_reflect != kNoIndex) {
-    GpuFrameNode c = nodes[node.child_reflect];
-    radiance = radiance + vec3(c.weight) * c.radiance;
-    seen |= c.seen;
-    rays += c.rays;
+  if (reflect != kNoIndex) {
+    radiance = radiance + vec3(nodes[reflect].weight) * nodes[reflect].radiance;
+    if (kCache) {
+      seen |= nodes[reflect].seen;
+      rays += nodes[reflect].rays;
+    }
   }
   nodes[n].radiance = radiance;
   if (kCache) {
     nodes[n].seen = seen;
     nodes[n].rays = rays;
-    if (node.leaves != kNoIndex) {
+    uint leaves = nodes[n].leaves;
+    if (leaves != kNoIndex) {
       // What the CPU hands the store: the first hit of a traced ray (none for a served one).
+      GpuFrameNode node = nodes[n];
       float hit_t = kInfinity;
       uint entity = kNoIndex;
       if ((node.answer & 15u) != kAnswerUse) {
@@ -50,9 +58,9 @@ void main() {
           entity = instances[hit.instance].entity_index;
         }
       }
-      cache_record(node.leaves, node.origin, node.direction, node.pixel, radiance, hit_t, entity,
-                   seen, rays, node.depth, node.kind, node.answer, node.throughput);
+      cache_record(leaves, node.origin, node.direction, node.pixel, radiance, hit_t, entity, seen,
+                   rays, depth, node.kind, node.answer, node.throughput);
     }
   }
-  if (node.depth == 0u) write_pixel(node.pixel, radiance);
+  if (depth == 0u) write_pixel(nodes[n].pixel, radiance);
 }
