@@ -116,4 +116,15 @@ fi
 # (about 23 MB, gzip: a few seconds, where xz took half a minute), which scripts/gpu_measure.sh
 # unpacks there.
 tar -C "$(dirname "$out")" -czf "$out.tar.gz" "$(basename "$out")"
+# The prepared script runs on the tarball as it will on a GPU machine (its quick steps, on tiny
+# images): a lent machine's minutes are not spent finding a broken step.
+check="$(mktemp -d)"
+if ! SPECULA_GPU_STEPS="info stages" SPECULA_GPU_SIZE=16 "$root/scripts/gpu_measure.sh" \
+  "$out.tar.gz" "$check" >"$check/log" 2>&1 || ! grep -q "^info: exit 0" "$check/steps.txt" ||
+  ! grep -q "^stages: exit 0" "$check/steps.txt" || [ ! -s "$check/stages_cache_on.json" ]; then
+  echo "gpu_bundle.sh: scripts/gpu_measure.sh failed on the bundle:" >&2
+  tail -n 20 "$check/log" >&2
+  exit 1
+fi
+rm -rf "$check"
 echo "gpu_bundle.sh: $out (${size_mb} MB; $out.tar.gz $(du -m "$out.tar.gz" | cut -f1) MB): run.sh specula|specula_bench ARGS"

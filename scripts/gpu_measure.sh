@@ -13,7 +13,7 @@
 #   device tool: run(command="scripts/gpu_measure.sh", carry=["build/gpu-bundle.tar.gz"],
 #                    timeout_s=540)  (the folder itself is over the tool's 64 MiB with the tree)
 #
-# SPECULA_GPU_STEPS (default "info traversal cache gpu") picks the steps; SPECULA_GPU_THREADS the
+# SPECULA_GPU_STEPS (default "info traversal cache stages gpu") picks the steps; SPECULA_GPU_THREADS the
 # CPU threads of the native columns (default: every core); SPECULA_GPU_SIZE the image side
 # (default 1024, the targets'; smaller for a try on lavapipe).
 set -uo pipefail
@@ -25,7 +25,7 @@ if [ -z "$bundle" ]; then
   [ -f "$bundle" ] || bundle="$root/build/gpu-bundle"
 fi
 out="${2:-${OUT:-$root/gpu-out}}"
-steps="${SPECULA_GPU_STEPS:-info traversal cache gpu}"
+steps="${SPECULA_GPU_STEPS:-info traversal cache stages gpu}"
 threads="${SPECULA_GPU_THREADS:-$(nproc)}"
 size="${SPECULA_GPU_SIZE:-1024}"
 mkdir -p "$out"
@@ -66,6 +66,14 @@ step traversal 150 "$bundle/run.sh" specula_bench --sections gpu-traversal --siz
   --threads "$threads" --repetitions 5
 # Target: mirror_spheres_32 with caches at >= 200 frames/s.
 step cache 150 "$bundle/run.sh" specula_bench --sections gpu-cache --size "$size" --threads "$threads"
+# Where a frame's time goes: each wavefront stage's device time, the submits and the host's part
+# (frames[].ms less frames[].gpu.gpu_ms), cached and uncached, in stats files beside the reports.
+step stages 60 bash -c '
+  for cache in on off; do
+    "$1/run.sh" specula render "$1/samples/scenes/mirror_spheres_32.json" --backend vulkan \
+      --mode whitted --frames 30 --width "$2" --height "$2" --cache "$cache" \
+      --stats "$3/stages_cache_$cache.json" || exit 1
+  done' stages "$bundle" "$size" "$out"
 step gpu 240 "$bundle/run.sh" specula_bench --sections gpu --size "$size" --threads "$threads" \
   --repetitions 3
 echo "gpu_measure.sh: reports in $out"
