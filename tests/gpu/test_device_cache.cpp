@@ -347,6 +347,47 @@ TEST(DeviceCacheAuto, APanDecidesAndRendersAsOnTheCpu) {
   }
 }
 
+/// A still view of CacheScene rendered on the device with a store of `mode` (wavefront or single
+/// kernel, on a context made with `options`): frame() renders one more frame, cached or not.
+struct StillView {
+  CacheScene scene;
+  test::TracedWorld world{scene.reg, "native-bvh", test::device_mirror_options()};
+  RayCacheStore store;
+  std::unique_ptr<gpu::Context> context;
+  gpu::GpuScene gpu_scene;
+  gpu::DeviceRenderer renderer;
+  TraceSettings settings;
+  Framebuffer image{kSize, kSize};
+  FrameStats stats;
+  gpu::GpuTraceCounters counters;
+
+  StillView(LookupMode mode, gpu::Execution execution, const gpu::Context::Options& options = {})
+      : store(settings_of(mode)), context(gpu::Context::create(options)),
+        gpu_scene(*context, gpu::GpuStructure::bvh),
+        renderer(*context, updated(gpu_scene, world.layer), execution) {
+    settings.mode = TraceMode::Whitted;
+    settings.max_depth = 4;
+  }
+  static gpu::GpuScene& updated(gpu::GpuScene& s, const SceneLayer& layer) {
+    s.update(layer);
+    return s;
+  }
+  static CacheSettings settings_of(LookupMode mode) {
+    CacheSettings cs;
+    cs.policy = CachePolicy::On;
+    cs.lookup = mode;
+    return cs;
+  }
+  void frame(bool cached = true) {
+    if (!cached) {
+      renderer.render(world.layer, scene.camera, settings, image, stats, counters);
+      return;
+    }
+    (void)store.invalidate(scene.reg, world.layer);
+    renderer.render(world.layer, scene.camera, settings, image, stats, counters, &store);
+  }
+};
+
 // Once the cubes hold what a still view looks up, its frames hand the store no record at all:
 // the kernels count the served rays (and the lookups) as the store would, so nothing in
 // proportion to the pixels is read back or replayed on the host; recording every ray instead
@@ -357,33 +398,17 @@ TEST(DeviceCache, AFilledStillViewRecordsNothingAndCountsAsTheStore) {
   for (const LookupMode mode : {LookupMode::Direction, LookupMode::March}) {
     std::uint32_t last[2] = {0, 0};
     for (const Records records : {Records::changes, Records::every}) {
-      CacheScene scene;
-      test::TracedWorld world(scene.reg, "native-bvh", test::device_mirror_options());
-      CacheSettings cs;
-      cs.policy = CachePolicy::On;
-      cs.lookup = mode;
-      RayCacheStore store(cs);
-      auto context = gpu::Context::create();
-      gpu::GpuScene gpu_scene(*context, gpu::GpuStructure::bvh);
-      gpu_scene.update(world.layer);
-      gpu::DeviceRenderer renderer(*context, gpu_scene, gpu::Execution::wavefront);
-      renderer.cache().set_records(records);
-      TraceSettings s;
-      s.mode = TraceMode::Whitted;
-      s.max_depth = 4;
-      Framebuffer image(kSize, kSize);
-      FrameStats stats;
-      gpu::GpuTraceCounters counters;
+      StillView view(mode, gpu::Execution::wavefront);
+      view.renderer.cache().set_records(records);
       std::uint32_t first = 0;
       for (int f = 0; f < 3; ++f) {
-        (void)store.invalidate(scene.reg, world.layer);
-        renderer.render(world.layer, scene.camera, s, image, stats, counters, &store);
-        if (f == 0) first = renderer.cache_records();
-        EXPECT_EQ(renderer.cache_mismatches(), 0u);
+        view.frame();
+        if (f == 0) first = view.renderer.cache_records();
+        EXPECT_EQ(view.renderer.cache_mismatches(), 0u);
       }
       EXPECT_GT(first, 0u) << "the first frame wrote nothing: no test";
-      EXPECT_GT(store.counts().hits, 0u);
-      last[records == Records::every ? 1 : 0] = renderer.cache_records();
+      EXPECT_GT(view.store.counts().hits, 0u);
+      last[records == Records::every ? 1 : 0] = view.renderer.cache_records();
     }
     EXPECT_EQ(last[0], 0u) << cache::lookup_mode_name(mode);
     EXPECT_GT(last[1], 0u) << cache::lookup_mode_name(mode);
@@ -402,32 +427,17 @@ TEST(DeviceCache, AFilledStillViewWaitsForNoMoreSubmitsThanAnUncachedFrame) {
   for (const gpu::Execution execution :
        {gpu::Execution::wavefront, gpu::Execution::single_kernel}) {
     SCOPED_TRACE(execution == gpu::Execution::wavefront ? "wavefront" : "single kernel");
-    CacheScene scene;
-    test::TracedWorld world(scene.reg, "native-bvh", test::device_mirror_options());
-    CacheSettings cs;
-    cs.policy = CachePolicy::On;
-    RayCacheStore store(cs);
-    auto context = gpu::Context::create(unmapped);
-    ASSERT_FALSE(context->maps_device_memory());
-    gpu::GpuScene gpu_scene(*context, gpu::GpuStructure::bvh);
-    gpu_scene.update(world.layer);
-    gpu::DeviceRenderer renderer(*context, gpu_scene, execution);
-    TraceSettings s;
-    s.mode = TraceMode::Whitted;
-    s.max_depth = 4;
-    Framebuffer image(kSize, kSize);
-    FrameStats stats;
-    gpu::GpuTraceCounters counters;
+    StillView view(LookupMode::Direction, execution, unmapped);
+    ASSERT_FALSE(view.context->maps_device_memory());
     std::uint64_t first = 0;
     for (int f = 0; f < 3; ++f) {
-      (void)store.invalidate(scene.reg, world.layer);
-      renderer.render(world.layer, scene.camera, s, image, stats, counters, &store);
-      if (f == 0) first = counters.submits;
+      view.frame();
+      if (f == 0) first = view.counters.submits;
     }
-    const std::uint64_t cached = counters.submits;
-    EXPECT_EQ(renderer.cache_records(), 0u) << "not a filled still view: no test";
-    renderer.render(world.layer, scene.camera, s, image, stats, counters);
-    const std::uint64_t uncached = counters.submits;
+    const std::uint64_t cached = view.counters.submits;
+    EXPECT_EQ(view.renderer.cache_records(), 0u) << "not a filled still view: no test";
+    view.frame(false);
+    const std::uint64_t uncached = view.counters.submits;
     EXPECT_GT(uncached, 0u);
     EXPECT_EQ(cached, uncached);
     EXPECT_GT(first, cached) << "the filling frame's records came back without a read-back";
