@@ -1,5 +1,5 @@
 #version 460
-// Wavefront, eye-ray generation: node p is pixel p's primary ray, queued for wave 0.
+// Wavefront, eye-ray generation: node i is the chunk's pixel i's primary ray, queued for wave 0.
 #extension GL_GOOGLE_include_directive : require
 #include "include/common.glsl"
 #include "include/frame_wavefront.glsl"
@@ -7,8 +7,11 @@
 layout(local_size_x = 64) in;
 
 void main() {
-  uint p = gl_GlobalInvocationID.x;
-  if (p >= params.pixel_count) return;
+  // Node i is the chunk's pixel i (a frame whose trees would outgrow the node buffer is rendered
+  // in chunks of pixels, DeviceRenderer::run_wavefront).
+  uint i = gl_GlobalInvocationID.x;
+  if (i >= params.chunk_pixels) return;
+  uint p = params.first_pixel + i;
   GpuFrameNode n;
   n.origin = params.camera_origin;
   n.tfar = kInfinity;
@@ -30,7 +33,7 @@ void main() {
   n.answer = kAnswerTrace;
   n.resume = kNoIndex;
   n._pad1 = 0u;
-  nodes[p] = n;
-  queues[p] = p;
+  nodes[i] = n;
+  queues[i] = i;
   primary_instance[p] = kNoIndex;
 }

@@ -1,7 +1,7 @@
 #version 460
-// Wavefront hybrid mode, after frame_eye: pixel p's primary ray (node p) takes its hit from the
-// raster pass (include/visibility.glsl); frame_trace skips the nodes settled here and traces the
-// rest.
+// Wavefront hybrid mode, after frame_eye: the chunk's pixel i's primary ray (node i) takes its hit
+// from the raster pass (include/visibility.glsl); frame_trace skips the nodes settled here and
+// traces the rest.
 #extension GL_GOOGLE_include_directive : require
 #include "include/common.glsl"
 #include "include/frame_wavefront.glsl"
@@ -10,12 +10,12 @@
 layout(local_size_x = 64) in;
 
 void main() {
-  uint p = gl_GlobalInvocationID.x;
-  if (p >= params.pixel_count) return;
-  GpuFrameNode node = nodes[p];
+  uint i = gl_GlobalInvocationID.x;
+  if (i >= params.chunk_pixels) return;
+  GpuFrameNode node = nodes[i];
   GpuHit hit;
-  if (!visibility_hit(p, node.origin, node.direction, hit)) return;
-  hits[p] = hit;
+  if (!visibility_hit(params.first_pixel + i, node.origin, node.direction, hit)) return;
+  hits[i] = hit;
   atomicAdd(counters.rays[node.kind], 1u);
-  nodes[p].status = kRayDone;
+  nodes[i].status = kRayDone;
 }

@@ -167,10 +167,15 @@ void DeviceRenderer::ensure_buffers(std::uint32_t pixels, const Features& f) {
   const VkDeviceSize range = context_.info().max_storage_buffer_range;
   ensure_frame_buffers(pixels);
   if (execution_ == Execution::wavefront) {
+    // Trees of per_pixel nodes for as many pixels as one storage buffer holds: a larger frame
+    // is rendered in chunks of chunk_pixels_ (run_wavefront), each with every slot.
     const std::uint64_t per_pixel = f.whitted && f.specular ? kNodesPerPixel : 1;
-    node_capacity_ = std::uint32_t(std::min<std::uint64_t>(
-        std::uint64_t(pixels) * per_pixel, range / sizeof(GpuFrameNode)));
-    node_capacity_ = std::max(node_capacity_, pixels);
+    const std::uint64_t most = range / sizeof(GpuFrameNode);
+    chunk_pixels_ = std::uint32_t(
+        std::min<std::uint64_t>(pixels, std::max<std::uint64_t>(64, most / per_pixel / 64 * 64)));
+    if (chunk_limit_ > 0) chunk_pixels_ = std::min(chunk_pixels_, chunk_limit_);
+    node_capacity_ =
+        std::uint32_t(std::min<std::uint64_t>(std::uint64_t(chunk_pixels_) * per_pixel, most));
     const std::uint64_t shadow_slots =
         f.whitted ? std::uint64_t(node_capacity_) * std::max(1u, f.lights) : 1;
     shadow_capacity_ =
@@ -230,13 +235,9 @@ void DeviceRenderer::record_start(Commands& cmd, const GpuFrameParams& params,
 }
 
 void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t pixels,
-                                   const GpuFrameParams& params) {
+                                   GpuFrameParams params) {
   const Pipelines& p = *pipelines_;
   const std::vector<const Buffer*> buffers = bindings();
-  GpuFrameCounters init{};
-  init.node_count = pixels;
-  init.queue_count[0] = pixels;
-
   const std::uint32_t batch =
       settings.mode == TraceMode::Cast ? 1 + kExtraWaves : settings.max_depth + 1 + kExtraWaves;
   const std::uint32_t deepest = settings.mode == TraceMode::Cast ? 0 : settings.max_depth;
@@ -255,80 +256,104 @@ void DeviceRenderer::run_wavefront(const TraceSettings& settings, std::uint32_t 
     stamps.clear();
     gpu_ms_ += cmd.elapsed_ms(begin, end);
   };
-  WavePush push;
-  const std::uint32_t t0 = cmd.timestamp();
-  record_start(cmd, params, init);
-  cmd.dispatch(p.eye, buffers, &push, groups(pixels));
-  cmd.barrier();
-  stamp(GpuStage::Eye);
-  ++dispatches_;
-  if (raster_) {
-    // Hybrid mode: the primary hits from the raster pass; frame_trace skips the rays they settle.
-    raster_->record(cmd);
+  // A frame whose trees would outgrow the node buffer goes in chunks of pixels (ensure_buffers),
+  // each with every node slot: its waves, then its fold. The counters of rays, cut, dropped and
+  // records run on over the chunks; those of nodes and queues start again with each.
+  for (std::uint32_t first_pixel = 0; first_pixel < pixels; first_pixel += chunk_pixels_) {
+    const std::uint32_t chunk = std::min(chunk_pixels_, pixels - first_pixel);
+    params.first_pixel = first_pixel;
+    params.chunk_pixels = chunk;
+    GpuFrameCounters init{};
+    init.node_count = chunk;
+    init.queue_count[0] = chunk;
+    WavePush push;
+    const std::uint32_t t0 = cmd.timestamp();
+    if (first_pixel == 0) {
+      record_start(cmd, params, init);
+    } else {
+      cmd.update(params_, &params, sizeof params);
+      cmd.update(counters_buffer_, &init, offsetof(GpuFrameCounters, rays));
+      cmd.update(counters_buffer_, &init.state_count, sizeof init.state_count,
+                 offsetof(GpuFrameCounters, state_count));
+      cmd.barrier();
+    }
+    cmd.dispatch(p.eye, buffers, &push, groups(chunk));
     cmd.barrier();
-    cmd.dispatch(p.visibility, bindings(), &push, groups(pixels));
-    cmd.barrier();
-    stamp(GpuStage::Visibility);
+    stamp(GpuStage::Eye);
     ++dispatches_;
-  }
-  std::uint32_t parity = 0;
-  GpuFrameCounters c{};
-  for (std::uint32_t waves = 0;;) {
-    const std::uint32_t begin = waves == 0 ? t0 : cmd.timestamp();
-    for (std::uint32_t w = 0; w < batch; ++w, parity ^= 1u) {
-      push.parity = parity;
-      push.depth = waves + w;
-      cmd.dispatch(p.args, buffers, &push, 1);
-      cmd.barrier();
-      cmd.dispatch_indirect(p.trace, buffers, &push, counters_buffer_,
-                            offsetof(GpuFrameCounters, ray_args));
-      cmd.barrier();
-      stamp(GpuStage::Trace);
-      cmd.dispatch_indirect(p.shade, buffers, &push, counters_buffer_,
-                            offsetof(GpuFrameCounters, ray_args));
-      cmd.barrier();
-      stamp(GpuStage::Shade);
-      if (settings.mode == TraceMode::Whitted && settings.shadows && p.features.lights > 0) {
-        cmd.dispatch_indirect(p.shadow, buffers, &push, counters_buffer_,
-                              offsetof(GpuFrameCounters, shadow_args));
+    if (raster_) {
+      // Hybrid mode: the primary hits from the raster pass (the whole frame's, drawn once);
+      // frame_trace skips the rays they settle.
+      if (first_pixel == 0) {
+        raster_->record(cmd);
         cmd.barrier();
-        stamp(GpuStage::Shadow);
       }
-      dispatches_ += 1;
+      cmd.dispatch(p.visibility, bindings(), &push, groups(chunk));
+      cmd.barrier();
+      stamp(GpuStage::Visibility);
+      ++dispatches_;
+    }
+    std::uint32_t parity = 0;
+    GpuFrameCounters c{};
+    for (std::uint32_t waves = 0;;) {
+      const std::uint32_t begin = waves == 0 ? t0 : cmd.timestamp();
+      for (std::uint32_t w = 0; w < batch; ++w, parity ^= 1u) {
+        push.parity = parity;
+        push.depth = waves + w;
+        cmd.dispatch(p.args, buffers, &push, 1);
+        cmd.barrier();
+        cmd.dispatch_indirect(p.trace, buffers, &push, counters_buffer_,
+                              offsetof(GpuFrameCounters, ray_args));
+        cmd.barrier();
+        stamp(GpuStage::Trace);
+        cmd.dispatch_indirect(p.shade, buffers, &push, counters_buffer_,
+                              offsetof(GpuFrameCounters, ray_args));
+        cmd.barrier();
+        stamp(GpuStage::Shade);
+        if (settings.mode == TraceMode::Whitted && settings.shadows && p.features.lights > 0) {
+          cmd.dispatch_indirect(p.shadow, buffers, &push, counters_buffer_,
+                                offsetof(GpuFrameCounters, shadow_args));
+          cmd.barrier();
+          stamp(GpuStage::Shadow);
+        }
+        dispatches_ += 1;
+      }
+      const std::uint32_t end = cmd.timestamp();
+      record_counters_to_host(cmd);
+      cmd.submit();
+      settle(begin, end);
+      waves += batch;
+      std::memcpy(&c, counters_host_.mapped(), sizeof c);
+      // The last wave appended to the queues of `parity`: empty means every ray is done.
+      if (c.queue_count[parity] == 0 && c.shadow_queue_count[parity] == 0) break;
+      if (waves >= kMaxWaves)
+        throw Error("vulkan", "device frame: rays still queued after " + std::to_string(waves) +
+                                  " waves (traversal budget " + std::to_string(budget_) +
+                                  " too small for this scene)");
+    }
+
+    // The fold, deepest level first, each depth over the nodes that may have it: the primaries
+    // (node i = the chunk's pixel i), or those spawned from wave d − 1's shading on
+    // (kWaveMarks).
+    const std::uint32_t nodes = std::min(c.node_count, node_capacity_);
+    const std::uint32_t begin = cmd.timestamp();
+    for (std::uint32_t d = deepest + 1; d-- > 0;) {
+      const std::uint32_t first =
+          d == 0 ? 0u : std::min(d - 1 < kWaveMarks ? c.wave_nodes[d - 1] : 0u, nodes);
+      const std::uint32_t end = d == 0 ? std::min(chunk, nodes) : nodes;
+      if (end <= first) continue;
+      push = WavePush{0, d, end, first};
+      cmd.dispatch(p.fold, buffers, &push, groups(end - first));
+      cmd.barrier();
+      stamp(GpuStage::Fold);
+      ++dispatches_;
     }
     const std::uint32_t end = cmd.timestamp();
     record_counters_to_host(cmd);
     cmd.submit();
     settle(begin, end);
-    waves += batch;
-    std::memcpy(&c, counters_host_.mapped(), sizeof c);
-    // The last wave appended to the queues of `parity`: empty means every ray is done.
-    if (c.queue_count[parity] == 0 && c.shadow_queue_count[parity] == 0) break;
-    if (waves >= kMaxWaves)
-      throw Error("vulkan", "device frame: rays still queued after " + std::to_string(waves) +
-                                " waves (traversal budget " + std::to_string(budget_) +
-                                " too small for this scene)");
   }
-
-  // The fold, deepest level first, each depth over the nodes that may have it: the primaries
-  // (node p = pixel p), or those spawned from wave d − 1's shading on (kWaveMarks).
-  const std::uint32_t nodes = std::min(c.node_count, node_capacity_);
-  const std::uint32_t begin = cmd.timestamp();
-  for (std::uint32_t d = deepest + 1; d-- > 0;) {
-    const std::uint32_t first =
-        d == 0 ? 0u : std::min(d - 1 < kWaveMarks ? c.wave_nodes[d - 1] : 0u, nodes);
-    const std::uint32_t end = d == 0 ? std::min(pixels, nodes) : nodes;
-    if (end <= first) continue;
-    push = WavePush{0, d, end, first};
-    cmd.dispatch(p.fold, buffers, &push, groups(end - first));
-    cmd.barrier();
-    stamp(GpuStage::Fold);
-    ++dispatches_;
-  }
-  const std::uint32_t end = cmd.timestamp();
-  record_counters_to_host(cmd);
-  cmd.submit();
-  settle(begin, end);
+  wave_chunks_ = (pixels + chunk_pixels_ - 1) / chunk_pixels_;
 }
 
 void DeviceRenderer::record_counters_to_host(Commands& cmd) const {
@@ -416,6 +441,10 @@ std::span<const std::uint32_t> DeviceRenderer::primary_instances() const {
 std::vector<GpuHit> DeviceRenderer::primary_hits() const {
   if (execution_ != Execution::wavefront)
     throw Error("vulkan", "primary hits are kept by wavefront device frames only");
+  if (wave_chunks_ != 1)
+    throw Error("vulkan",
+                "primary hits are kept by wavefront frames of one chunk only (this one had " +
+                    std::to_string(wave_chunks_) + ")");
   std::vector<GpuHit> hits(std::size_t(frame_.width) * frame_.height);
   if (!hits.empty()) hits_.download(hits.data(), hits.size() * sizeof(GpuHit));
   return hits;
@@ -460,10 +489,9 @@ void DeviceRenderer::render(const SceneLayer& layer, const Camera& camera,
     if (cache) {
       cache_->upload(*store, std::uint32_t(layer.tables().instances.size()),
                      store->wants_lookups());
-      // Each traced or served ray is at most one record: the wavefront's node slots bound them;
-      // the single kernel gets as many.
-      cache_->reserve_records(execution_ == Execution::wavefront ? node_capacity_
-                                                                 : pixels * kNodesPerPixel);
+      // Each traced or served ray is at most one record: as many as the frame's node slots
+      // (kNodesPerPixel a pixel), in one chunk or several.
+      cache_->reserve_records(pixels * kNodesPerPixel);
     }
     bind_cache(cache);
 

@@ -105,13 +105,18 @@ public:
   /// Copies the last frame into `out` (its size); no longer on the device only after.
   void read_back(Framebuffer& out) const;
   /// Each pixel's primary hit in the last frame, row major, read back from the device
-  /// (wavefront execution only: throws specula::Error otherwise): traced and rasterised primary
-  /// visibility compared hit by hit.
+  /// (wavefront frames of one chunk only: throws specula::Error otherwise): traced and rasterised
+  /// primary visibility compared hit by hit.
   [[nodiscard]] std::vector<GpuHit> primary_hits() const;
 
   /// Traversal iterations one invocation may spend per dispatch (default kDefaultBudget); lower
   /// values force resumption (tests).
   void set_budget(std::uint32_t budget) { budget_ = budget; }
+  /// For tests: wavefront frames go in chunks of at most `pixels` (0: as the node buffer
+  /// allows), as a frame too large for one storage buffer of nodes would.
+  void set_chunk_limit(std::uint32_t pixels) { chunk_limit_ = pixels; }
+  /// Chunks of pixels the latest wavefront frame went in.
+  [[nodiscard]] std::uint32_t wave_chunks() const { return wave_chunks_; }
   static constexpr std::uint32_t kDefaultBudget = 6144;
 
 private:
@@ -127,9 +132,9 @@ private:
   void ensure_pipelines(const Features& features);
   void ensure_frame_buffers(std::uint32_t pixels);
   void ensure_buffers(std::uint32_t pixels, const Features& features);
-  /// `params`: the frame's, written by its first commands (record_start), as in run_single.
-  void run_wavefront(const TraceSettings& settings, std::uint32_t pixels,
-                     const GpuFrameParams& params);
+  /// `params`: the frame's, written by its first commands (record_start), as in run_single;
+  /// the frame in chunks of chunk_pixels_ where its trees would outgrow the node buffer.
+  void run_wavefront(const TraceSettings& settings, std::uint32_t pixels, GpuFrameParams params);
   /// `params`: the frame's (the chunks' first pixel and size are set in the commands).
   void run_single(std::uint32_t pixels, GpuFrameParams params);
   /// Records the copy of the counters into counters_host_ (read once the submit has finished),
@@ -170,7 +175,11 @@ private:
   std::unique_ptr<StatePool> pool_; ///< saved traversal states (trace_pool.glsl)
   std::uint64_t tables_sync_ = 0; ///< SceneLayer::syncs() of the tables uploaded (0: none)
   std::size_t normals_uploaded_ = 0; ///< size of the normals pool last uploaded whole
+  /// chunk_pixels_: pixels per chunk (single kernel: its stacks; wavefront: node_capacity_ /
+  /// kNodesPerPixel where the frame's trees would outgrow one storage buffer, else the frame).
   std::uint32_t node_capacity_ = 0, shadow_capacity_ = 0, chunk_pixels_ = 0;
+  std::uint32_t wave_chunks_ = 0; ///< chunks of the latest wavefront frame
+  std::uint32_t chunk_limit_ = 0; ///< set_chunk_limit
   std::uint32_t light_count_ = 0;
   std::uint32_t max_depth_ = 0;
   mutable std::vector<std::uint32_t> primary_;

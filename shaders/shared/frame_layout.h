@@ -78,7 +78,7 @@ struct GpuFrameParams {
   uint shadow_capacity; ///< wavefront: entries of the shadow buffer
   uint budget;          ///< traversal iterations an invocation may use in one dispatch
   uint pixel_count;
-  uint first_pixel; ///< single kernel: the chunk's first pixel
+  uint first_pixel; ///< the chunk's first pixel (single kernel; a wavefront frame in chunks)
   uint chunk_pixels;
   uint record_capacity; ///< ray-cache records (cache_layout.h) the frame may write
   uint stack_stride;    ///< saved stack entries per pool slot (GpuScene::stack_depth)

@@ -155,6 +155,9 @@ struct Param {
   /// every: each leaving ray recorded and its lookup replayed on the host, which checks the
   /// device's answers and counts; changes (the default): only rays that may change the store.
   gpu::DeviceCache::Records records = gpu::DeviceCache::Records::changes;
+  /// Wavefront frames in chunks of at most this many pixels (0: in one piece): the lookups,
+  /// counts and records of every chunk reach the store as those of one frame.
+  std::uint32_t chunk = 0;
 };
 
 class DeviceCacheFrames : public ::testing::TestWithParam<Param> {};
@@ -178,6 +181,7 @@ int compare_frames(const Param& p, int frames, int move_at, std::uint32_t budget
   gpu_scene.update(world.layer);
   gpu::DeviceRenderer renderer(*context, gpu_scene, p.execution);
   renderer.cache().set_records(p.records);
+  renderer.set_chunk_limit(p.chunk);
   if (budget > 0) renderer.set_budget(budget);
   TraceSettings s;
   s.mode = TraceMode::Whitted;
@@ -223,6 +227,9 @@ int compare_frames(const Param& p, int frames, int move_at, std::uint32_t budget
     if (device_frame) {
       renderer.render(world.layer, scene.camera, s, device, stats, counters, &device_store);
       ++on_device;
+      if (p.chunk > 0 && p.execution == gpu::Execution::wavefront) {
+        EXPECT_GT(renderer.wave_chunks(), 1u) << "a frame in one piece: no test of chunks";
+      }
     } else {
       (void)render_frame(*world.tracer, world.layer, scene.camera, s, device, &device_store);
     }
@@ -457,11 +464,16 @@ INSTANTIATE_TEST_SUITE_P(
                       Param{LookupMode::Tau, gpu::Execution::single_kernel, CachePolicy::On,
                             gpu::DeviceCache::Records::every},
                       Param{LookupMode::March, gpu::Execution::wavefront, CachePolicy::On,
-                            gpu::DeviceCache::Records::every}),
+                            gpu::DeviceCache::Records::every},
+                      Param{LookupMode::Tau, gpu::Execution::wavefront, CachePolicy::On,
+                            gpu::DeviceCache::Records::changes, 500},
+                      Param{LookupMode::Direction, gpu::Execution::wavefront, CachePolicy::On,
+                            gpu::DeviceCache::Records::every, 500}),
     [](const auto& param_info) {
       return std::string(cache::lookup_mode_name(param_info.param.mode)) +
              (param_info.param.execution == gpu::Execution::wavefront ? "_wavefront" : "_single") +
-             (param_info.param.records == gpu::DeviceCache::Records::every ? "_every_record" : "");
+             (param_info.param.records == gpu::DeviceCache::Records::every ? "_every_record" : "") +
+             (param_info.param.chunk > 0 ? "_chunks" : "");
     });
 
 TEST(DeviceCache, ARenderJobWithCachesRendersOnTheDeviceAsOnTheCpu) {

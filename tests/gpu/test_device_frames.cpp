@@ -1,7 +1,8 @@
 // Whole frames on the device (engine/gpu/device_renderer.h) against the CPU integrators of the
 // same settings on the reference backend: cast and Whitted images within PSNR 45 dB, primary
 // visibility agreeing on 99.9% of pixels, the wavefront and the single kernel giving the same
-// image, no ray cut by the driver, resumption after a small traversal budget, a moved object
+// image, no ray cut by the driver, resumption after a small traversal budget, a frame in chunks
+// equal to the frame in one piece, a moved object
 // seen where it moved, a dynamic object seen while it exists (the top level's code compiled in
 // and out), a morphing mesh shaded with its sampled normals, each wavefront stage's device time,
 // and a lost device reported as such.
@@ -39,6 +40,7 @@ struct Device {
   std::unique_ptr<gpu::GpuScene> scene;
   std::unique_ptr<gpu::DeviceRenderer> renderer;
   gpu::GpuTraceCounters counters;
+  FrameStats stats; ///< the last frame's
 
   Device(const SceneLayer& layer, gpu::Execution execution) {
     context = gpu::Context::create();
@@ -48,7 +50,7 @@ struct Device {
   }
   Framebuffer render(const SceneLayer& layer, const Camera& camera, const TraceSettings& s) {
     Framebuffer out(kWidth, kHeight);
-    FrameStats stats;
+    stats = FrameStats{};
     renderer->render(layer, camera, s, out, stats, counters);
     return out;
   }
@@ -146,6 +148,39 @@ TEST_P(DeviceFrames, SmallBudgetResumesToTheSameImage) {
     for (std::size_t i = 0; i < a.pixels().size(); ++i) differ += a.pixels()[i] != b.pixels()[i];
     EXPECT_EQ(differ, 0u);
   }
+}
+
+// A frame whose trees would outgrow one storage buffer of nodes (1024² Whitted frames on
+// lavapipe's 128 MiB) is rendered in chunks of pixels, each with every node slot: the image, the
+// primary hits and the ray counts are those of the frame in one piece, no ray dropped.
+TEST_P(DeviceFrames, AFrameInChunksEqualsTheFrameInOnePiece) {
+  SPECULA_NEED_DEVICE();
+  ecs::Registry reg;
+  test::cornell(reg);
+  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
+  const Camera camera = test::cornell_camera();
+  const TraceSettings s = settings_for(GetParam());
+  Device whole(world.layer, gpu::Execution::wavefront),
+      chunked(world.layer, gpu::Execution::wavefront);
+  chunked.renderer->set_chunk_limit(1000); // 3072 pixels: chunks of 1000, 1000, 1000 and 72
+  const Framebuffer a = whole.render(world.layer, camera, s);
+  const Framebuffer b = chunked.render(world.layer, camera, s);
+  EXPECT_EQ(whole.renderer->wave_chunks(), 1u);
+  EXPECT_EQ(chunked.renderer->wave_chunks(), 4u);
+  std::uint32_t differ = 0;
+  for (std::size_t i = 0; i < a.pixels().size(); ++i) differ += a.pixels()[i] != b.pixels()[i];
+  EXPECT_EQ(differ, 0u) << "pixels that differ";
+  EXPECT_EQ(whole.counters.rays, chunked.counters.rays);
+  EXPECT_GE(chunked.counters.rays, std::uint64_t(kWidth) * kHeight);
+  EXPECT_EQ(whole.stats.rays.dropped, 0u);
+  EXPECT_EQ(chunked.stats.rays.dropped, 0u);
+  EXPECT_EQ(chunked.counters.cut, 0u);
+  const std::vector<std::uint32_t> pa(whole.renderer->primary_instances().begin(),
+                                      whole.renderer->primary_instances().end());
+  const std::vector<std::uint32_t> pb(chunked.renderer->primary_instances().begin(),
+                                      chunked.renderer->primary_instances().end());
+  EXPECT_EQ(pa, pb);
+  EXPECT_THROW((void)chunked.renderer->primary_hits(), Error) << "hits of the last chunk only";
 }
 
 INSTANTIATE_TEST_SUITE_P(Modes, DeviceFrames,

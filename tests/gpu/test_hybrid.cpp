@@ -71,16 +71,19 @@ struct Frame {
   gpu::GpuTraceCounters counters;
 };
 
+/// `chunk`: wavefront frames in chunks of at most this many pixels (0: in one piece; no hits).
 Frame render(const SceneLayer& layer, const Camera& camera, const TraceSettings& s,
-             gpu::PrimaryVisibility primary, gpu::Execution execution = gpu::Execution::wavefront) {
+             gpu::PrimaryVisibility primary, gpu::Execution execution = gpu::Execution::wavefront,
+             std::uint32_t chunk = 0) {
   auto context = gpu::Context::create();
   gpu::GpuScene scene(*context, gpu::GpuStructure::bvh);
   scene.update(layer);
   gpu::DeviceRenderer renderer(*context, scene, execution, primary);
+  renderer.set_chunk_limit(chunk);
   Frame f;
   FrameStats stats;
   renderer.render(layer, camera, s, f.image, stats, f.counters);
-  if (execution == gpu::Execution::wavefront) f.hits = renderer.primary_hits();
+  if (execution == gpu::Execution::wavefront && chunk == 0) f.hits = renderer.primary_hits();
   return f;
 }
 
@@ -130,6 +133,17 @@ void expect_hybrid_matches(const SceneLayer& layer, const Camera& camera, TraceM
   EXPECT_EQ(single.counters.rays, hybrid.counters.rays);
   EXPECT_EQ(single.counters.retraced, hybrid.counters.retraced);
   EXPECT_EQ(single.counters.cut, 0u);
+
+  // A wavefront frame in chunks (one raster pass, each chunk's primaries settled from it) is the
+  // frame in one piece.
+  const Frame chunked =
+      render(layer, camera, s, gpu::PrimaryVisibility::raster, gpu::Execution::wavefront, 1000);
+  std::uint32_t chunked_differs = 0;
+  for (std::size_t i = 0; i < chunked.image.pixels().size(); ++i)
+    chunked_differs += chunked.image.pixels()[i] != hybrid.image.pixels()[i] ? 1u : 0u;
+  EXPECT_EQ(chunked_differs, 0u) << "pixels where the hybrid frame in chunks differs";
+  EXPECT_EQ(chunked.counters.rays, hybrid.counters.rays);
+  EXPECT_EQ(chunked.counters.retraced, hybrid.counters.retraced);
 }
 
 class Hybrid : public ::testing::TestWithParam<TraceMode> {};
