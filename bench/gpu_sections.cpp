@@ -473,6 +473,7 @@ void section_gpu_cache(const Options& o) {
     std::vector<double> ms;
     double psnr_min = std::numeric_limits<double>::infinity(), psnr_sum = 0.0;
     std::uint64_t hits = 0, lookups = 0;
+    std::uint64_t dropped = 0; ///< rays not traced over the run (a cut tree): must be 0
   };
   std::vector<std::unique_ptr<Run>> runs;
   try {
@@ -513,6 +514,7 @@ void section_gpu_cache(const Options& o) {
     for (auto& run : runs) {
       run->scene.registry.view<Camera>().each([&](Camera& cam) { cam.position = p; });
       run->ms.push_back(time_ms([&] { run->schedule.tick(run->scene.registry, 0.0); }));
+      run->dropped += run->scene.registry.resource<RenderJob>().last.rays.dropped;
     }
     if (f < kFill) continue;
     for (auto& run : runs) {
@@ -538,18 +540,21 @@ void section_gpu_cache(const Options& o) {
   };
   const auto db = [](double v) { return std::isinf(v) ? std::string("identical") : fixed(v) + " dB"; };
   const double early = fps(*runs[0], kEarly, kEarly + 5), settled = fps(*runs[0], kFill, kFrames);
-  std::printf("| | frames/s, frames %d-%d | ratio | frames/s, frames %d-%d | ratio | PSNR vs uncached "
-              "(mean, min; frames %d-%d) | lookups served |\n|---|---:|---:|---:|---:|---|---:|\n",
-              kEarly + 1, kEarly + 5, kFill + 1, kFrames, kFill + 1, kFrames);
-  std::printf("| uncached | %s | 1.00 | %s | 1.00 | | |\n", fixed(early).c_str(),
-              fixed(settled).c_str());
+  std::printf(
+      "| | frames/s, frames %d-%d | ratio | frames/s, frames %d-%d | ratio | PSNR vs uncached "
+      "(mean, min; frames %d-%d) | lookups served | rays dropped |\n"
+      "|---|---:|---:|---:|---:|---|---:|---:|\n",
+      kEarly + 1, kEarly + 5, kFill + 1, kFrames, kFill + 1, kFrames);
+  std::printf("| uncached | %s | 1.00 | %s | 1.00 | | | %llu |\n", fixed(early).c_str(),
+              fixed(settled).c_str(), static_cast<unsigned long long>(runs[0]->dropped));
   for (std::size_t k = 1; k < runs.size(); ++k) {
     const Run& r = *runs[k];
     const double e = fps(r, kEarly, kEarly + 5), st = fps(r, kFill, kFrames);
-    std::printf("| %s | %s | %s | %s | %s | %s, %s | %.1f%% |\n", r.label, fixed(e).c_str(),
+    std::printf("| %s | %s | %s | %s | %s | %s, %s | %.1f%% | %llu |\n", r.label, fixed(e).c_str(),
                 ratio(e, early).c_str(), fixed(st).c_str(), ratio(st, settled).c_str(),
                 db(r.psnr_sum / (kFrames - kFill)).c_str(), db(r.psnr_min).c_str(),
-                r.lookups > 0 ? 100.0 * double(r.hits) / double(r.lookups) : 0.0);
+                r.lookups > 0 ? 100.0 * double(r.hits) / double(r.lookups) : 0.0,
+                static_cast<unsigned long long>(r.dropped));
   }
   std::fflush(stdout);
 }
