@@ -536,7 +536,8 @@ int run_render(const RenderOptions& options, std::ostream& out, std::ostream* pr
           << median(denoise_ms) << " ms per frame\n";
   }
   if (last.rays.dropped > 0)
-    out << "  dropped rays: " << last.rays.dropped << " (per-pixel ray budget)\n";
+    out << "  dropped rays: " << last.rays.dropped
+        << " (the per-pixel ray budget; in device frames, a ray tree past its node slots)\n";
   if (last.rays.nonfinite > 0)
     out << "  non-finite samples: " << last.rays.nonfinite << " (Inf/NaN radiance, written as 0)\n";
   if (last.accel.hidden_instances > 0)
