@@ -20,5 +20,6 @@ void main() {
   counters.queue_count[1u - pc.parity] = 0u;
   counters.shadow_queue_count[1u - pc.parity] = 0u;
   counters.state_count[1u - pc.parity] = 0u;
-  if (pc.depth < kWaveMarks) counters.wave_nodes[pc.depth] = min(counters.node_count, params.node_capacity);
+  if (pc.depth < kWaveMarks)
+    counters.wave_nodes[pc.depth] = min(counters.node_count, params.node_capacity);
 }

@@ -2,8 +2,8 @@
 // Wavefront, after the last wave, one dispatch per depth from the deepest up: a node's radiance
 // is its starting value plus its visible shadow rays in light order, then its refraction child
 // and its reflection child × their weights (the CPU's fold: children in reverse creation order).
-// The primaries (depth 0, node i = the chunk's pixel i) write the image. Each dispatch covers the nodes
-// [pc.first, pc.count) that may have its depth (kWaveMarks), not the whole buffer.
+// The primaries (depth 0, node i = the chunk's pixel i) write the image. Each dispatch covers the
+// nodes [pc.first, pc.count) that may have its depth (kWaveMarks), not the whole buffer.
 #extension GL_GOOGLE_include_directive : require
 #include "include/common.glsl"
 #include "include/frame_wavefront.glsl"
