@@ -22,8 +22,7 @@ cache::RayCacheStore* DeviceCache::store_of(RadianceHook* hook) {
 void DeviceCache::upload(cache::RayCacheStore& store, std::uint32_t slots, bool lookups) {
   const VkDeviceSize range = context_.info().max_storage_buffer_range;
   std::vector<GpuCube>& table = table_;
-  table.assign(std::max(1u, slots), GpuCube{});
-  for (GpuCube& c : table) c = GpuCube{vec3(0.0f), 0, 0, kCubeNone, 1.0f, 0, 0, 0, 0, 1.0f};
+  table.assign(std::max(1u, slots), GpuCube{vec3(0.0f), 0, 0, kCubeNone, 1.0f, 0, 0, 0, 0, 1.0f});
   std::uint64_t total = 0;
   for (std::size_t i = 0; i < store.cube_count(); ++i) total += store.cube(i).texels.size();
   if (total * sizeof(cache::Texel) > range)

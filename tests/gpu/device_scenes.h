@@ -1,6 +1,7 @@
 #pragma once
 // What the device-frame tests share (test_device_frames, test_device_path, test_device_cache,
-// test_hybrid): whether a Vulkan device is there, and a small Cornell box.
+// test_hybrid): whether a Vulkan device is there, a small Cornell box, and a count of the pixels
+// two images differ in.
 #include "../trace/scene_builder.h"
 #include "specula/core/error.h"
 #include "specula/gpu/vk_context.h"
@@ -37,6 +38,13 @@ inline bool have_device(bool drawing = false) {
   if (!::specula::test::have_device()) GTEST_SKIP() << "no Vulkan device on this machine"
 
 /// A small Cornell box: coloured walls, a block, a mirror sphere and a glass sphere (smooth
+/// Pixels whose values are not bit-identical in `a` and `b` (images of one size).
+inline std::size_t differing_pixels(const Framebuffer& a, const Framebuffer& b) {
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < a.pixels().size(); ++i) differ += a.pixels()[i] != b.pixels()[i];
+  return differ;
+}
+
 /// normals), a point light and an emitting panel (an area light); coarse spheres keep it fast on lavapipe.
 inline void cornell(ecs::Registry& reg) {
   const quat flip(0.0f, 1.0f, 0.0f, 0.0f); // 180° about x: planes facing down

@@ -233,9 +233,7 @@ int compare_frames(const Param& p, int frames, int move_at, std::uint32_t budget
     } else {
       (void)render_frame(*world.tracer, world.layer, scene.camera, s, device, &device_store);
     }
-    std::uint32_t differ = 0;
-    for (std::size_t i = 0; i < cpu.pixels().size(); ++i)
-      differ += cpu.pixels()[i] != device.pixels()[i] ? 1u : 0u;
+    const std::size_t differ = test::differing_pixels(cpu, device);
     const CacheCounts& a = cpu_store.counts();
     const CacheCounts& b = device_store.counts();
     std::cout << "frame " << f << ": " << differ << " pixels differ, PSNR " << psnr(cpu, device)
@@ -511,10 +509,7 @@ TEST(DeviceCache, ARenderJobWithCachesRendersOnTheDeviceAsOnTheCpu) {
     }
   }
   for (std::size_t f = 0; f < images[0].size(); ++f) {
-    std::uint32_t differ = 0;
-    for (std::size_t i = 0; i < images[0][f].pixels().size(); ++i)
-      differ += images[0][f].pixels()[i] != images[1][f].pixels()[i] ? 1u : 0u;
-    EXPECT_EQ(differ, 0u) << "frame " << f;
+    EXPECT_EQ(test::differing_pixels(images[0][f], images[1][f]), 0u) << "frame " << f;
   }
   EXPECT_EQ(hits[1], hits[0]);
   EXPECT_GT(hits[1], 0u);

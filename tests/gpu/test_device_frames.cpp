@@ -64,6 +64,22 @@ TraceSettings settings_for(TraceMode mode) {
   return s;
 }
 
+/// The Cornell box traced on the reference backend, its camera, and the settings of a mode.
+struct CornellBox {
+  ecs::Registry reg;
+  test::TracedWorld world;
+  Camera camera = test::cornell_camera();
+  TraceSettings settings;
+
+  explicit CornellBox(TraceMode mode)
+      : world(built(reg), reference_backend(), test::device_mirror_options()),
+        settings(settings_for(mode)) {}
+  static ecs::Registry& built(ecs::Registry& r) {
+    test::cornell(r);
+    return r;
+  }
+};
+
 /// Fraction of pixels whose primary ray hit the same instance on the CPU backend.
 double primary_agreement(const test::TracedWorld& world, const Camera& camera,
                          std::span<const std::uint32_t> device) {
@@ -79,11 +95,10 @@ class DeviceFrames : public ::testing::TestWithParam<TraceMode> {};
 
 TEST_P(DeviceFrames, MatchTheCpuImageAndPrimaryHits) {
   SPECULA_NEED_DEVICE();
-  ecs::Registry reg;
-  test::cornell(reg);
-  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
-  const Camera camera = test::cornell_camera();
-  const TraceSettings s = settings_for(GetParam());
+  const CornellBox box(GetParam());
+  const test::TracedWorld& world = box.world;
+  const Camera& camera = box.camera;
+  const TraceSettings& s = box.settings;
   Framebuffer cpu(kWidth, kHeight);
   const FrameStats cpu_stats = render_frame(*world.tracer, world.layer, camera, s, cpu);
   for (const gpu::Execution e : {gpu::Execution::wavefront, gpu::Execution::single_kernel}) {
@@ -102,18 +117,15 @@ TEST_P(DeviceFrames, MatchTheCpuImageAndPrimaryHits) {
 
 TEST_P(DeviceFrames, WavefrontAndSingleKernelGiveTheSameImage) {
   SPECULA_NEED_DEVICE();
-  ecs::Registry reg;
-  test::cornell(reg);
-  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
-  const Camera camera = test::cornell_camera();
-  const TraceSettings s = settings_for(GetParam());
+  const CornellBox box(GetParam());
+  const test::TracedWorld& world = box.world;
+  const Camera& camera = box.camera;
+  const TraceSettings& s = box.settings;
   Device wavefront(world.layer, gpu::Execution::wavefront);
   Device single(world.layer, gpu::Execution::single_kernel);
   const Framebuffer a = wavefront.render(world.layer, camera, s);
   const Framebuffer b = single.render(world.layer, camera, s);
-  std::uint32_t differ = 0;
-  for (std::size_t i = 0; i < a.pixels().size(); ++i) differ += a.pixels()[i] != b.pixels()[i];
-  EXPECT_EQ(differ, 0u) << "pixels that differ between the styles";
+  EXPECT_EQ(test::differing_pixels(a, b), 0u) << "pixels that differ between the styles";
   EXPECT_EQ(wavefront.counters.rays, single.counters.rays);
   EXPECT_EQ(wavefront.counters.cut, 0u);
   EXPECT_EQ(single.counters.cut, 0u);
@@ -125,11 +137,10 @@ TEST_P(DeviceFrames, WavefrontAndSingleKernelGiveTheSameImage) {
 // pool slot.
 TEST_P(DeviceFrames, SmallBudgetResumesToTheSameImage) {
   SPECULA_NEED_DEVICE();
-  ecs::Registry reg;
-  test::cornell(reg);
-  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
-  const Camera camera = test::cornell_camera();
-  const TraceSettings s = settings_for(GetParam());
+  const CornellBox box(GetParam());
+  const test::TracedWorld& world = box.world;
+  const Camera& camera = box.camera;
+  const TraceSettings& s = box.settings;
   for (const gpu::Execution e : {gpu::Execution::wavefront, gpu::Execution::single_kernel}) {
     SCOPED_TRACE(e == gpu::Execution::wavefront ? "wavefront" : "single kernel");
     Device full(world.layer, e), small(world.layer, e);
@@ -144,9 +155,7 @@ TEST_P(DeviceFrames, SmallBudgetResumesToTheSameImage) {
     EXPECT_EQ(small.counters.cut, 0u);
     EXPECT_EQ(full.counters.cut, 0u);
     EXPECT_EQ(full.counters.rays, small.counters.rays);
-    std::uint32_t differ = 0;
-    for (std::size_t i = 0; i < a.pixels().size(); ++i) differ += a.pixels()[i] != b.pixels()[i];
-    EXPECT_EQ(differ, 0u);
+    EXPECT_EQ(test::differing_pixels(a, b), 0u);
   }
 }
 
@@ -155,11 +164,10 @@ TEST_P(DeviceFrames, SmallBudgetResumesToTheSameImage) {
 // primary hits and the ray counts are those of the frame in one piece, no ray dropped.
 TEST_P(DeviceFrames, AFrameInChunksEqualsTheFrameInOnePiece) {
   SPECULA_NEED_DEVICE();
-  ecs::Registry reg;
-  test::cornell(reg);
-  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
-  const Camera camera = test::cornell_camera();
-  const TraceSettings s = settings_for(GetParam());
+  const CornellBox box(GetParam());
+  const test::TracedWorld& world = box.world;
+  const Camera& camera = box.camera;
+  const TraceSettings& s = box.settings;
   Device whole(world.layer, gpu::Execution::wavefront),
       chunked(world.layer, gpu::Execution::wavefront);
   chunked.renderer->set_chunk_limit(1000); // 3072 pixels: chunks of 1000, 1000, 1000 and 72
@@ -167,9 +175,7 @@ TEST_P(DeviceFrames, AFrameInChunksEqualsTheFrameInOnePiece) {
   const Framebuffer b = chunked.render(world.layer, camera, s);
   EXPECT_EQ(whole.renderer->wave_chunks(), 1u);
   EXPECT_EQ(chunked.renderer->wave_chunks(), 4u);
-  std::uint32_t differ = 0;
-  for (std::size_t i = 0; i < a.pixels().size(); ++i) differ += a.pixels()[i] != b.pixels()[i];
-  EXPECT_EQ(differ, 0u) << "pixels that differ";
+  EXPECT_EQ(test::differing_pixels(a, b), 0u) << "pixels that differ";
   EXPECT_EQ(whole.counters.rays, chunked.counters.rays);
   EXPECT_GE(chunked.counters.rays, std::uint64_t(kWidth) * kHeight);
   EXPECT_EQ(whole.stats.rays.dropped, 0u);
@@ -258,10 +264,8 @@ TEST(DeviceFramesScene, ATopLevelThatComesAndGoesRendersEveryFrameRight) {
     ASSERT_FALSE(device.scene->has_top_level());
     const Framebuffer after = device.render(world.layer, camera, s);
     matches_cpu("after the ball", after);
-    std::uint32_t differ = 0;
-    for (std::size_t i = 0; i < after.pixels().size(); ++i)
-      differ += after.pixels()[i] != before.pixels()[i] ? 1u : 0u;
-    EXPECT_EQ(differ, 0u) << "pixels that differ from the frame before the ball came";
+    EXPECT_EQ(test::differing_pixels(after, before), 0u)
+        << "pixels that differ from the frame before the ball came";
   }
 }
 
@@ -344,11 +348,10 @@ TEST(DeviceFramesScene, AMorphingMeshIsShadedWithItsSampledNormals) {
 // visibility stage none here); the single kernel has no stages.
 TEST(DeviceFramesScene, EachWavefrontStagesTimeAddsUpToTheFramesDeviceTime) {
   SPECULA_NEED_DEVICE();
-  ecs::Registry reg;
-  test::cornell(reg);
-  test::TracedWorld world(reg, reference_backend(), test::device_mirror_options());
-  const Camera camera = test::cornell_camera();
-  const TraceSettings s = settings_for(TraceMode::Whitted);
+  const CornellBox box(TraceMode::Whitted);
+  const test::TracedWorld& world = box.world;
+  const Camera& camera = box.camera;
+  const TraceSettings& s = box.settings;
   Device wavefront(world.layer, gpu::Execution::wavefront);
   (void)wavefront.render(world.layer, camera, s);
   const gpu::GpuTraceCounters& c = wavefront.counters;

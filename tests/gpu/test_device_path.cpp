@@ -102,9 +102,7 @@ Framebuffer mean_of_frames(Render&& render, std::uint32_t k, std::uint32_t spp) 
 
 /// Fraction of pixels whose values are bit-identical.
 double identical(const Framebuffer& a, const Framebuffer& b) {
-  std::size_t same = 0;
-  for (std::size_t i = 0; i < a.pixels().size(); ++i) same += a.pixels()[i] == b.pixels()[i];
-  return double(same) / double(a.pixels().size());
+  return 1.0 - double(test::differing_pixels(a, b)) / double(a.pixels().size());
 }
 
 TEST(DevicePath, SamplerPointsEqualTheCpuBitForBit) {

@@ -126,10 +126,8 @@ void expect_hybrid_matches(const SceneLayer& layer, const Camera& camera, TraceM
   // The single kernel settles the same primary hits at the root of its walks.
   const Frame single =
       render(layer, camera, s, gpu::PrimaryVisibility::raster, gpu::Execution::single_kernel);
-  std::uint32_t single_differs = 0;
-  for (std::size_t i = 0; i < single.image.pixels().size(); ++i)
-    single_differs += single.image.pixels()[i] != hybrid.image.pixels()[i] ? 1u : 0u;
-  EXPECT_EQ(single_differs, 0u) << "pixels where the single kernel's hybrid frame differs";
+  EXPECT_EQ(test::differing_pixels(single.image, hybrid.image), 0u)
+      << "pixels where the single kernel's hybrid frame differs";
   EXPECT_EQ(single.counters.rays, hybrid.counters.rays);
   EXPECT_EQ(single.counters.retraced, hybrid.counters.retraced);
   EXPECT_EQ(single.counters.cut, 0u);
@@ -138,10 +136,8 @@ void expect_hybrid_matches(const SceneLayer& layer, const Camera& camera, TraceM
   // frame in one piece.
   const Frame chunked =
       render(layer, camera, s, gpu::PrimaryVisibility::raster, gpu::Execution::wavefront, 1000);
-  std::uint32_t chunked_differs = 0;
-  for (std::size_t i = 0; i < chunked.image.pixels().size(); ++i)
-    chunked_differs += chunked.image.pixels()[i] != hybrid.image.pixels()[i] ? 1u : 0u;
-  EXPECT_EQ(chunked_differs, 0u) << "pixels where the hybrid frame in chunks differs";
+  EXPECT_EQ(test::differing_pixels(chunked.image, hybrid.image), 0u)
+      << "pixels where the hybrid frame in chunks differs";
   EXPECT_EQ(chunked.counters.rays, hybrid.counters.rays);
   EXPECT_EQ(chunked.counters.retraced, hybrid.counters.retraced);
 }
